@@ -1,0 +1,10 @@
+"""visla-edu: visual-inertial SLAM with an extended Kalman filter, for teaching.
+
+Modules (import the one you need; nothing runs at import time):
+``lie`` SE(3) kinematics, ``camera`` stereo model, ``dataset`` the Dataset class,
+``data`` loading the course files, ``simulate`` drives with ground truth, ``motion``
+IMU prediction, ``ekf`` the update steps and the SLAM filter, ``run`` the driver,
+``metrics``, ``diagnostics``, ``plotting``, ``widgets``, ``checks``, ``cli``.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,203 @@
+"""The in-memory dataset every part of visla-edu works on (one class for all formats).
+
+Observations are stored sparse and frame-major (compressed sparse rows over frames):
+frame ``t`` owns entries ``frame_ptr[t]:frame_ptr[t + 1]`` of ``obs_ids`` (landmark
+indices, increasing within a frame) and ``obs_z`` (pixels ``[uL, vL, uR, vR]``). About 1% of
+the course files' dense ``(4, M, T)`` array is valid, so this is ~100x smaller.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from visla_edu.camera import StereoCamera
+
+__all__ = ["Dataset", "GroundTruth"]
+
+
+@dataclass
+class GroundTruth:
+    """True poses and landmarks of a simulated drive.
+
+    Attributes
+    ----------
+    world_T_imu : ndarray, shape (T, 4, 4)
+        True IMU poses, ``world`` = the IMU frame at the first time stamp.
+    landmarks : ndarray, shape (M, 3)
+        True landmark positions in the world frame.
+    linear_velocity, angular_velocity : ndarray, shape (T, 3)
+        Noise-free body-frame velocities used to generate the drive.
+    outlier : ndarray of bool, shape (M,)
+        Landmarks whose tracks were corrupted on purpose (gross outliers).
+    """
+
+    world_T_imu: np.ndarray
+    landmarks: np.ndarray
+    linear_velocity: np.ndarray
+    angular_velocity: np.ndarray
+    outlier: np.ndarray
+
+
+@dataclass
+class Dataset:
+    """A stereo-inertial drive in visla-edu's time-major layout.
+
+    Attributes
+    ----------
+    name : str
+        Short name (``"03"``, ``"0022"``, ``"sim"``, ``"10-standin"``...).
+    source : str
+        Where it came from (file path, or a description of the simulation).
+    time_stamps : ndarray, shape (T,)
+        Seconds, strictly increasing.
+    linear_velocity, angular_velocity : ndarray, shape (T, 3)
+        IMU body-frame velocities (m/s, rad/s); twist at ``t`` is ``[v_t; w_t]``.
+    K : ndarray, shape (3, 3)
+        Left camera intrinsics.
+    b : float
+        Stereo baseline (m).
+    imu_T_cam : ndarray, shape (4, 4)
+        Pose of the left camera (optical frame) in the IMU frame.
+    num_landmarks : int
+        M, the number of landmark tracks.
+    frame_ptr : ndarray of int, shape (T + 1,)
+    obs_ids : ndarray of int, shape (N,)
+    obs_z : ndarray, shape (N, 4)
+        Sparse observations, see the module docstring.
+    ground_truth : GroundTruth or None
+        Present for simulated drives.
+    label : str
+        A human-readable description; stand-ins say so here.
+    """
+
+    name: str
+    source: str
+    time_stamps: np.ndarray
+    linear_velocity: np.ndarray
+    angular_velocity: np.ndarray
+    K: np.ndarray
+    b: float
+    imu_T_cam: np.ndarray
+    num_landmarks: int
+    frame_ptr: np.ndarray
+    obs_ids: np.ndarray
+    obs_z: np.ndarray
+    ground_truth: GroundTruth = None
+    label: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def num_frames(self):
+        """T, the number of time stamps."""
+        return len(self.time_stamps)
+
+    @property
+    def num_observations(self):
+        """N, the number of valid stereo observations over all frames."""
+        return len(self.obs_ids)
+
+    @property
+    def camera(self):
+        """A :class:`~visla_edu.camera.StereoCamera` built from ``K``, ``b``, ``imu_T_cam``."""
+        return StereoCamera(self.K, self.b, self.imu_T_cam)
+
+    @property
+    def twists(self):
+        """IMU twists ``u_t = [v_t; w_t]``, shape (T, 6)."""
+        return np.concatenate([self.linear_velocity, self.angular_velocity], axis=1)
+
+    @property
+    def time_steps(self):
+        """``tau_t = t_{t+1} - t_t``, shape (T - 1,)."""
+        return np.diff(self.time_stamps)
+
+    def observations(self, t):
+        """Landmark ids and pixels observed at frame ``t``.
+
+        Parameters
+        ----------
+        t : int
+            Frame index, ``0 <= t < T``.
+
+        Returns
+        -------
+        ids : ndarray of int, shape (k,)
+        z : ndarray, shape (k, 4)
+            ``[uL, vL, uR, vR]`` for each id (views into the dataset: do not modify).
+        """
+        if not 0 <= t < self.num_frames:
+            raise IndexError(f"{self.name}: frame {t} out of range [0, {self.num_frames})")
+        lo, hi = self.frame_ptr[t], self.frame_ptr[t + 1]
+        return self.obs_ids[lo:hi], self.obs_z[lo:hi]
+
+    def observation_frames(self):
+        """Frame index of every sparse observation, shape (N,)."""
+        return np.repeat(np.arange(self.num_frames), np.diff(self.frame_ptr))
+
+    def track_spans(self):
+        """First and last frame each landmark is observed at, shape (M, 2); -1 if never."""
+        frames = self.observation_frames()
+        spans = np.full((self.num_landmarks, 2), -1, dtype=np.int64)
+        first = np.full(self.num_landmarks, np.iinfo(np.int64).max)
+        last = np.full(self.num_landmarks, -1, dtype=np.int64)
+        np.minimum.at(first, self.obs_ids, frames)
+        np.maximum.at(last, self.obs_ids, frames)
+        seen = last >= 0
+        spans[seen, 0] = first[seen]
+        spans[seen, 1] = last[seen]
+        return spans
+
+    def track_lengths(self):
+        """Number of observations of each landmark, shape (M,)."""
+        return np.bincount(self.obs_ids, minlength=self.num_landmarks)
+
+    def to_dense_features(self, frames=None, landmarks=None):
+        """The course's dense layout: ``(4, M, T)`` with -1 where not observed.
+
+        Parameters
+        ----------
+        frames : slice or array of int, optional
+            Frames to include (default all). Dense arrays are large (dataset 10: 1.3 GB),
+            so exercises should select a window.
+        landmarks : slice or array of int, optional
+            Landmarks to include (default all).
+
+        Returns
+        -------
+        ndarray, shape (4, M', T')
+        """
+        frame_idx = np.arange(self.num_frames)[frames if frames is not None else slice(None)]
+        lm_idx = np.arange(self.num_landmarks)[landmarks if landmarks is not None else slice(None)]
+        lm_pos = np.full(self.num_landmarks, -1)
+        lm_pos[lm_idx] = np.arange(len(lm_idx))
+        dense = np.full((4, len(lm_idx), len(frame_idx)), -1.0)
+        for col, t in enumerate(frame_idx):
+            ids, z = self.observations(int(t))
+            rows = lm_pos[ids]
+            keep = rows >= 0
+            dense[:, rows[keep], col] = z[keep].T
+        return dense
+
+    @classmethod
+    def from_dense(cls, features, **fields):
+        """Build a dataset from dense course features ``(4, M, T)`` (-1 = not observed).
+
+        Parameters
+        ----------
+        features : array_like, shape (4, M, T)
+        **fields
+            All other :class:`Dataset` fields except the sparse ones and ``num_landmarks``.
+        """
+        features = np.asarray(features, dtype=float)
+        valid_tm = features[0].T != -1  # (T, M), frame-major order for nonzero
+        t_idx, m_idx = np.nonzero(valid_tm)
+        frame_ptr = np.zeros(features.shape[2] + 1, dtype=np.int64)
+        np.cumsum(np.bincount(t_idx, minlength=features.shape[2]), out=frame_ptr[1:])
+        obs_z = features[:, m_idx, t_idx].T.copy()
+        return cls(
+            num_landmarks=features.shape[1],
+            frame_ptr=frame_ptr,
+            obs_ids=m_idx.astype(np.int64),
+            obs_z=obs_z,
+            **fields,
+        )

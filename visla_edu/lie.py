@@ -1,0 +1,367 @@
+"""SO(3) and SE(3) kinematics: hat/vee, exponential and logarithm maps, adjoints.
+
+Conventions (used everywhere in visla-edu)
+-------------------------------------------
+* A twist is ``u = [v; w]`` with the **linear velocity first** and the angular
+  velocity second, shape ``(6,)``.
+* ``twist_hat(u) = [[hat(w), v], [0, 0]]`` (4x4).
+* ``curly_hat(u) = [[hat(w), hat(v)], [0, hat(w)]]`` (6x6), so that
+  ``expm(curly_hat(u)) == adjoint(se3_exp(u))``.
+* ``odot(s) = [[s4 * I, -hat(s_xyz)], [0, 0]]`` (4x6) for a homogeneous point
+  ``s = [s_xyz; s4]``, so that ``twist_hat(u) @ s == odot(s) @ u``.
+
+Every function accepts a single input or a stack with any leading batch
+dimensions, e.g. ``hat`` maps ``(..., 3) -> (..., 3, 3)``.
+
+The closed forms switch to Taylor series for small angles (below
+``SMALL_ANGLE`` rad), where ``1 - cos`` and ``theta - sin`` lose their digits, and
+the SO(3) logarithm uses an ``atan2`` angle and the symmetric part of ``R`` near
+``pi``, so that all maps are accurate to about 1e-12 over the whole range.
+"""
+
+import numpy as np
+
+__all__ = [
+    "hat",
+    "vee",
+    "so3_exp",
+    "so3_log",
+    "twist_hat",
+    "twist_vee",
+    "se3_exp",
+    "se3_log",
+    "se3_inv",
+    "adjoint",
+    "curly_hat",
+    "odot",
+    "SMALL_ANGLE",
+]
+
+#: Below this rotation angle (rad) the exp/log coefficients use Taylor series.
+SMALL_ANGLE = 0.1
+#: Above ``pi - NEAR_PI`` the SO(3) log takes its axis from the symmetric part of R.
+NEAR_PI = 0.1
+
+
+def _as_vectors(x, length, name):
+    """Return ``x`` as a float array whose last axis has ``length`` entries."""
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 0 or x.shape[-1] != length:
+        raise ValueError(f"{name}: expected shape (..., {length}), got {x.shape}")
+    return x
+
+
+def _as_matrices(x, rows, cols, name):
+    """Return ``x`` as a float array whose last two axes are ``rows x cols``."""
+    x = np.asarray(x, dtype=float)
+    if x.ndim < 2 or x.shape[-2:] != (rows, cols):
+        raise ValueError(f"{name}: expected shape (..., {rows}, {cols}), got {x.shape}")
+    return x
+
+
+def hat(w):
+    """Skew-symmetric matrix of a 3-vector: ``hat(w) @ x == cross(w, x)``.
+
+    Parameters
+    ----------
+    w : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``[[0, -w3, w2], [w3, 0, -w1], [-w2, w1, 0]]``.
+    """
+    w = _as_vectors(w, 3, "hat")
+    W = np.zeros(w.shape[:-1] + (3, 3))
+    W[..., 0, 1] = -w[..., 2]
+    W[..., 0, 2] = w[..., 1]
+    W[..., 1, 0] = w[..., 2]
+    W[..., 1, 2] = -w[..., 0]
+    W[..., 2, 0] = -w[..., 1]
+    W[..., 2, 1] = w[..., 0]
+    return W
+
+
+def vee(W):
+    """Inverse of :func:`hat` (3x3 -> 3) or of :func:`twist_hat` (4x4 -> 6).
+
+    Parameters
+    ----------
+    W : array_like, shape (..., 3, 3) or (..., 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 3) or (..., 6)
+        For 3x3 input ``[W32, W13, W21]``; for 4x4 input the twist ``[v; w]``.
+    """
+    W = np.asarray(W, dtype=float)
+    if W.ndim >= 2 and W.shape[-2:] == (4, 4):
+        return twist_vee(W)
+    W = _as_matrices(W, 3, 3, "vee")
+    return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
+
+
+def twist_hat(u):
+    """4x4 matrix of a twist ``u = [v; w]``: ``[[hat(w), v], [0, 0]]``.
+
+    Parameters
+    ----------
+    u : array_like, shape (..., 6)
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+    """
+    u = _as_vectors(u, 6, "twist_hat")
+    U = np.zeros(u.shape[:-1] + (4, 4))
+    U[..., :3, :3] = hat(u[..., 3:])
+    U[..., :3, 3] = u[..., :3]
+    return U
+
+
+def twist_vee(U):
+    """Inverse of :func:`twist_hat`: ``(..., 4, 4) -> (..., 6)`` as ``[v; w]``."""
+    U = _as_matrices(U, 4, 4, "twist_vee")
+    w = np.stack([U[..., 2, 1], U[..., 0, 2], U[..., 1, 0]], axis=-1)
+    return np.concatenate([U[..., :3, 3], w], axis=-1)
+
+
+def _angle(w):
+    """Rotation angle ``|w|`` and its square, shape (...,)."""
+    theta2 = np.einsum("...i,...i->...", w, w)
+    return np.sqrt(theta2), theta2
+
+
+def _series_or_closed(theta, theta2, closed, series):
+    """Evaluate ``closed(theta)`` for large angles and ``series(theta2)`` below SMALL_ANGLE."""
+    small = theta < SMALL_ANGLE
+    safe = np.where(small, 1.0, theta)  # avoid 0/0 in the branch that is not used
+    return np.where(small, series(theta2), closed(safe))
+
+
+def _sin_over_theta(theta, theta2):
+    """``A = sin(theta) / theta``."""
+    return _series_or_closed(
+        theta, theta2, lambda t: np.sin(t) / t,
+        lambda t2: 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42 * (1 - t2 / 72))),
+    )
+
+
+def _one_minus_cos_over_theta2(theta, theta2):
+    """``B = (1 - cos(theta)) / theta^2``."""
+    return _series_or_closed(
+        theta, theta2, lambda t: (1 - np.cos(t)) / t**2,
+        lambda t2: 0.5 * (1 - t2 / 12 * (1 - t2 / 30 * (1 - t2 / 56 * (1 - t2 / 90)))),
+    )
+
+
+def _theta_minus_sin_over_theta3(theta, theta2):
+    """``C = (theta - sin(theta)) / theta^3``."""
+    return _series_or_closed(
+        theta, theta2, lambda t: (t - np.sin(t)) / t**3,
+        lambda t2: (1 - t2 / 20 * (1 - t2 / 42 * (1 - t2 / 72 * (1 - t2 / 110)))) / 6,
+    )
+
+
+def so3_exp(w):
+    """Rodrigues' formula: ``exp(hat(w)) = I + A hat(w) + B hat(w)^2``.
+
+    Parameters
+    ----------
+    w : array_like, shape (..., 3)
+        Rotation vector (axis times angle, rad).
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        Rotation matrix, with ``A = sin(t)/t`` and ``B = (1 - cos(t))/t^2``.
+    """
+    w = _as_vectors(w, 3, "so3_exp")
+    theta, theta2 = _angle(w)
+    A = _sin_over_theta(theta, theta2)[..., None, None]
+    B = _one_minus_cos_over_theta2(theta, theta2)[..., None, None]
+    W = hat(w)
+    return np.eye(3) + A * W + B * (W @ W)
+
+
+def so3_log(R):
+    """Rotation vector of a rotation matrix, with angle in ``[0, pi]``.
+
+    The angle is ``atan2(|s|, c)`` with ``s = vee(R - R^T) / 2 = sin(t) a`` and
+    ``c = (trace(R) - 1) / 2 = cos(t)``. Near ``pi`` the axis ``a`` comes from the
+    symmetric part ``(R + R^T) / 2 - c I = (1 - c) a a^T`` instead of ``s``.
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+    """
+    R = _as_matrices(R, 3, 3, "so3_log")
+    s = 0.5 * np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        axis=-1,
+    )
+    c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1)
+    sin_t = np.linalg.norm(s, axis=-1)
+    theta = np.arctan2(sin_t, c)
+    theta2 = theta**2
+    # Generic and small angles: w = (theta / sin(theta)) s.
+    w = s / _sin_over_theta(theta, theta2)[..., None]
+    near_pi = theta > np.pi - NEAR_PI
+    if np.any(near_pi):
+        w = np.where(near_pi[..., None], _near_pi_log(R, s, c, theta), w)
+    return w
+
+
+def _near_pi_log(R, s, c, theta):
+    """Rotation vector from the symmetric part of R (accurate near pi)."""
+    S = 0.5 * (R + np.swapaxes(R, -1, -2)) - c[..., None, None] * np.eye(3)
+    diag = np.diagonal(S, axis1=-2, axis2=-1)
+    k = np.argmax(diag, axis=-1)
+    col = np.take_along_axis(S, k[..., None, None], axis=-1)[..., 0]
+    axis = col / np.linalg.norm(col, axis=-1, keepdims=True)
+    sign = np.where(np.einsum("...i,...i->...", axis, s) < 0, -1.0, 1.0)
+    return (sign * theta)[..., None] * axis
+
+
+def se3_exp(u):
+    """SE(3) exponential of a twist ``u = [v; w]`` in closed form.
+
+    ``exp(twist_hat(u)) = [[R, V v], [0, 1]]`` with ``R = so3_exp(w)`` and
+    ``V = I + B hat(w) + C hat(w)^2``, ``B = (1 - cos t)/t^2``, ``C = (t - sin t)/t^3``.
+
+    Parameters
+    ----------
+    u : array_like, shape (..., 6)
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+    """
+    u = _as_vectors(u, 6, "se3_exp")
+    v, w = u[..., :3], u[..., 3:]
+    theta, theta2 = _angle(w)
+    A = _sin_over_theta(theta, theta2)[..., None, None]
+    B = _one_minus_cos_over_theta2(theta, theta2)[..., None, None]
+    C = _theta_minus_sin_over_theta3(theta, theta2)[..., None, None]
+    W = hat(w)
+    W2 = W @ W
+    T = np.zeros(u.shape[:-1] + (4, 4))
+    T[..., :3, :3] = np.eye(3) + A * W + B * W2
+    V = np.eye(3) + B * W + C * W2
+    T[..., :3, 3] = np.einsum("...ij,...j->...i", V, v)
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def se3_log(T):
+    """SE(3) logarithm: the twist ``u = [v; w]`` with ``se3_exp(u) == T``.
+
+    ``w = so3_log(R)`` and ``v = V^{-1} p`` with
+    ``V^{-1} = I - hat(w)/2 + D hat(w)^2``, ``D = (1 - A / (2 B)) / t^2``.
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+    """
+    T = _as_matrices(T, 4, 4, "se3_log")
+    w = so3_log(T[..., :3, :3])
+    theta, theta2 = _angle(w)
+    D = _series_or_closed(
+        theta, theta2,
+        lambda t: (1 - t * np.sin(t) / (2 * (1 - np.cos(t)))) / t**2,
+        lambda t2: 1 / 12 + t2 / 720 + t2**2 / 30240 + t2**3 / 1209600,
+    )[..., None, None]
+    W = hat(w)
+    V_inv = np.eye(3) - 0.5 * W + D * (W @ W)
+    v = np.einsum("...ij,...j->...i", V_inv, T[..., :3, 3])
+    return np.concatenate([v, w], axis=-1)
+
+
+def se3_inv(T):
+    """Inverse of a rigid transform: ``[[R^T, -R^T p], [0, 1]]``.
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+    """
+    T = _as_matrices(T, 4, 4, "se3_inv")
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out = np.zeros(T.shape)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def adjoint(T):
+    """Adjoint of a pose for twists ``[v; w]``: ``[[R, hat(p) R], [0, R]]``.
+
+    Satisfies ``T twist_hat(u) T^{-1} = twist_hat(adjoint(T) u)``.
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 6, 6)
+    """
+    T = _as_matrices(T, 4, 4, "adjoint")
+    R = T[..., :3, :3]
+    Ad = np.zeros(T.shape[:-2] + (6, 6))
+    Ad[..., :3, :3] = R
+    Ad[..., :3, 3:] = hat(T[..., :3, 3]) @ R
+    Ad[..., 3:, 3:] = R
+    return Ad
+
+
+def curly_hat(u):
+    """The 6x6 ``ad`` matrix of a twist ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
+
+    Parameters
+    ----------
+    u : array_like, shape (..., 6)
+
+    Returns
+    -------
+    ndarray, shape (..., 6, 6)
+    """
+    u = _as_vectors(u, 6, "curly_hat")
+    out = np.zeros(u.shape[:-1] + (6, 6))
+    W = hat(u[..., 3:])
+    out[..., :3, :3] = W
+    out[..., :3, 3:] = hat(u[..., :3])
+    out[..., 3:, 3:] = W
+    return out
+
+
+def odot(s):
+    """The 4x6 matrix with ``twist_hat(u) @ s == odot(s) @ u`` for homogeneous ``s``.
+
+    ``odot([x; 1]) = [[I, -hat(x)], [0, 0]]`` (more generally ``s4 I`` in the corner).
+
+    Parameters
+    ----------
+    s : array_like, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 6)
+    """
+    s = _as_vectors(s, 4, "odot")
+    out = np.zeros(s.shape[:-1] + (4, 6))
+    out[..., :3, :3] = s[..., 3, None, None] * np.eye(3)
+    out[..., :3, 3:] = -hat(s[..., :3])
+    return out
