@@ -1,0 +1,389 @@
+"""The four filter modes as small state machines that advance one frame per ``step()``.
+
+* :class:`DeadReckoning` - IMU prediction only (mean and covariance).
+* :class:`LandmarkMapping` - poses fixed to dead reckoning, one 3x3 EKF per landmark.
+* :class:`VisualInertialOdometry` - pose EKF updated with the mapped landmarks taken as
+  known, then the landmarks updated with the corrected pose (no cross-covariance).
+* :class:`JointSlam` - the joint EKF over the pose and the landmarks. By default it keeps
+  only the *active set* (landmarks being tracked): a landmark enters at its first usable
+  observation (mean from stereo triangulation, isotropic prior, zero cross-covariance) and is
+  marginalised (its rows and columns deleted) after its last one. With ``dense=True`` it is
+  the textbook filter over all landmarks from the start. Both give the same trajectory: an
+  unobserved landmark is uncorrelated with everything, and marginalising a Gaussian in
+  covariance form is deleting rows and columns. The maps differ in one way: in the dense
+  filter a retired landmark keeps moving through its correlation with the pose, in the
+  active set it keeps the estimate it had when it left.
+
+Each ``step()`` returns a :class:`StepRecord` (what the widgets and metrics read).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from visla_edu import ekf, motion
+from visla_edu.ekf import FilterDivergedError
+
+__all__ = [
+    "StepRecord",
+    "OBS_USED",
+    "OBS_GATED",
+    "OBS_NEW",
+    "OBS_NO_DEPTH",
+    "OBS_FAR",
+    "OBS_IGNORED",
+    "STATUS_NAMES",
+    "DeadReckoning",
+    "LandmarkMapping",
+    "VisualInertialOdometry",
+    "JointSlam",
+]
+
+OBS_USED = 0  #: used in the update
+OBS_GATED = 1  #: rejected by the Mahalanobis gate (outlier)
+OBS_NEW = 2  #: first observation: the landmark entered the state here
+OBS_NO_DEPTH = 3  #: non-positive disparity: a broken stereo match, never used
+OBS_FAR = 4  #: disparity too small to initialise the landmark (not yet in the state)
+OBS_IGNORED = 5  #: not used by this mode (dead reckoning, landmark stride)
+STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored")
+
+#: The dense reference refuses covariances larger than this (bytes); use a landmark stride.
+MAX_DENSE_BYTES = 4 * 2**30
+
+
+@dataclass
+class StepRecord:
+    """What one filter step produced (copies, safe to keep).
+
+    Attributes
+    ----------
+    t : int
+        Frame index.
+    world_T_imu : ndarray, shape (4, 4)
+        Pose mean after the update.
+    pose_cov : ndarray, shape (6, 6)
+        Pose covariance (right perturbation ``[v; w]``).
+    ids : ndarray of int, shape (k,)
+        Landmarks observed at this frame.
+    z : ndarray, shape (k, 4)
+        Their stereo pixels.
+    z_pred : ndarray, shape (k, 4)
+        Predicted pixels before the update (NaN where the landmark was not in the state).
+    status : ndarray of int, shape (k,)
+        ``OBS_*`` code of each observation.
+    nis : float
+        Normalised innovation squared of the update (NaN without an update).
+    nis_dof : int
+        Its degrees of freedom (4 per used observation).
+    active_ids : ndarray of int, shape (n,)
+        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO).
+    active_means : ndarray, shape (n, 3)
+    active_covs : ndarray, shape (n, 3, 3)
+        Marginal covariance of each active landmark.
+    """
+
+    t: int
+    world_T_imu: np.ndarray
+    pose_cov: np.ndarray
+    ids: np.ndarray
+    z: np.ndarray
+    z_pred: np.ndarray
+    status: np.ndarray
+    nis: float
+    nis_dof: int
+    active_ids: np.ndarray
+    active_means: np.ndarray
+    active_covs: np.ndarray
+
+
+class _Filter:
+    """Shared bookkeeping: time, twists, observations with their status, the landmark map."""
+
+    def __init__(self, dataset, camera, config):
+        self.dataset = dataset
+        self.camera = camera
+        self.config = config
+        self.noise_var = config.pixel_variance
+        self.gate = config.gate_threshold
+        self.taus = dataset.time_steps
+        self.step_twists = motion.select_twists(dataset.twists, config.imu_lag)
+        self.t = -1
+        self.world_T_imu = np.eye(4)
+        M = dataset.num_landmarks
+        self.landmarks = np.full((M, 3), np.nan)
+        self.landmark_cov = np.full((M, 3, 3), np.nan)
+        self.last_frame = dataset.track_spans()[:, 1]
+        self.prior_cov = config.landmark_prior_sigma**2 * np.eye(3)
+
+    @property
+    def done(self):
+        """True once the last frame has been processed."""
+        return self.t >= self.dataset.num_frames - 1
+
+    def step(self):
+        """Process the next frame (predict from the previous one, then update)."""
+        if self.done:
+            raise StopIteration(f"{self.dataset.name}: all {self.dataset.num_frames} frames processed")
+        self.t += 1
+        if self.t > 0:
+            self._predict(self.step_twists[self.t - 1], self.taus[self.t - 1])
+        ids, z = self.dataset.observations(self.t)
+        status = np.full(len(ids), OBS_IGNORED)
+        z_pred = np.full((len(ids), 4), np.nan)
+        nis, dof = self._update(ids, z, status, z_pred)
+        self._check_finite()
+        return self._record(ids, z, z_pred, status, nis, dof)
+
+    # -- pieces the modes share -------------------------------------------------------
+    def _usable(self, ids, z, status):
+        """Mark stride-skipped and no-depth observations; return the mask of usable ones."""
+        in_stride = ids % self.config.landmark_stride == 0
+        disparity = z[:, 0] - z[:, 2]
+        status[in_stride & (disparity <= 0)] = OBS_NO_DEPTH
+        return in_stride & (disparity > 0)
+
+    def _new_landmarks(self, ids, z, status, candidates):
+        """Triangulate never-seen landmarks among ``candidates`` (mask) at the current pose.
+
+        Returns the mask of observations whose landmark was initialised now.
+        """
+        disparity = z[:, 0] - z[:, 2]
+        new = candidates & (disparity >= self.config.min_init_disparity)
+        status[candidates & ~new] = OBS_FAR
+        status[new] = OBS_NEW
+        if np.any(new):
+            self.landmarks[ids[new]] = self.camera.triangulate(z[new], self.world_T_imu)
+        return new
+
+    def _gate(self, S, innovation):
+        """Mask of observations inside the chi-square gate, and their squared distances."""
+        d2 = ekf.mahalanobis_squared(innovation, S)
+        return d2 <= self.gate, d2
+
+    def _check_finite(self):
+        if not np.all(np.isfinite(self.world_T_imu)):
+            raise FilterDivergedError(
+                f"{self.dataset.name}: pose became non-finite at frame {self.t}; "
+                "check the noise settings and the input velocities")
+
+    def _record(self, ids, z, z_pred, status, nis, dof):
+        active_ids, active_covs = self._active()
+        return StepRecord(
+            t=self.t, world_T_imu=self.world_T_imu.copy(), pose_cov=self.pose_cov.copy(),
+            ids=ids.copy(), z=z.copy(), z_pred=z_pred, status=status, nis=nis, nis_dof=dof,
+            active_ids=active_ids, active_means=self.landmarks[active_ids].copy(),
+            active_covs=active_covs,
+        )
+
+    def _active(self):
+        """Ids of the landmarks shown as active, and their covariances (copies)."""
+        active = np.nonzero(np.isfinite(self.landmarks[:, 0]) & (self.last_frame >= self.t))[0]
+        return active, self.landmark_cov[active].copy()
+
+
+class DeadReckoning(_Filter):
+    """IMU prediction only: ``mu <- mu exp(tau u)``, ``Sigma <- F Sigma F^T + W``."""
+
+    def __init__(self, dataset, camera, config):
+        super().__init__(dataset, camera, config)
+        self.pose_cov = config.initial_pose_sigma**2 * np.eye(6)
+
+    def _predict(self, u, tau):
+        F = motion.pose_transition(u, tau)
+        W = motion.motion_noise(tau, self.config.sigma_linear_velocity, self.config.sigma_angular_velocity)
+        self.world_T_imu = motion.predict_pose(self.world_T_imu, u, tau)
+        self.pose_cov = motion.predict_pose_covariance(self.pose_cov, F, W)
+
+    def _update(self, ids, z, status, z_pred):
+        return np.nan, 0
+
+
+class LandmarkMapping(DeadReckoning):
+    """Poses from dead reckoning, landmarks by independent 3x3 EKF updates."""
+
+    def _update(self, ids, z, status, z_pred):
+        usable = self._usable(ids, z, status)
+        known = usable & np.isfinite(self.landmarks[ids, 0])
+        accepted, nis, dof = self._gate_mapped(ids, z, status, z_pred, known, Sigma_pose=None)
+        self._map_update(ids[accepted], z[accepted])
+        self._add_new(ids, z, status, usable & ~known)
+        return nis, dof
+
+    def _gate_mapped(self, ids, z, status, z_pred, known, Sigma_pose):
+        """Predict and gate the observations of mapped landmarks.
+
+        The gate uses ``S_i = Jl Sigma_i Jl^T (+ Jp Sigma_pose Jp^T) + R``.
+        Returns the accepted mask, the sum of their squared distances and its dof.
+        """
+        accepted = np.zeros(len(ids), dtype=bool)
+        if not np.any(known):
+            return accepted, np.nan, 0
+        lm = ids[known]
+        pred, J_landmark, J_pose = self.camera.predict_with_jacobians(self.world_T_imu, self.landmarks[lm])
+        z_pred[known] = pred
+        S = ekf.innovation_covariances(J_pose, J_landmark, Sigma_pose, None, self.landmark_cov[lm], self.noise_var)
+        inside, d2 = self._gate(S, z[known] - pred)
+        where = np.nonzero(known)[0]
+        accepted[where[inside]] = True
+        status[where[inside]] = OBS_USED
+        status[where[~inside]] = OBS_GATED
+        return accepted, float(d2[inside].sum()), 4 * int(inside.sum())
+
+    def _add_new(self, ids, z, status, candidates):
+        """Initialise new landmarks, then update them with their first observation."""
+        new = self._new_landmarks(ids, z, status, candidates)
+        if np.any(new):
+            self.landmark_cov[ids[new]] = self.prior_cov
+            self._map_update(ids[new], z[new])
+
+    def _map_update(self, lm, z):
+        if len(lm):
+            self.landmarks[lm], self.landmark_cov[lm] = ekf.landmark_update(
+                self.landmarks[lm], self.landmark_cov[lm], z, self.world_T_imu, self.camera, self.noise_var)
+
+
+class VisualInertialOdometry(LandmarkMapping):
+    """Pose EKF with the mapped landmarks as known points, then mapping with the new pose."""
+
+    def _update(self, ids, z, status, z_pred):
+        usable = self._usable(ids, z, status)
+        known = usable & np.isfinite(self.landmarks[ids, 0])
+        accepted, nis, dof = self._gate_mapped(ids, z, status, z_pred, known, Sigma_pose=self.pose_cov)
+        if np.any(accepted):
+            try:
+                self.world_T_imu, self.pose_cov, _ = ekf.pose_update(
+                    self.world_T_imu, self.pose_cov, self.landmarks[ids[accepted]], z[accepted], self.camera,
+                    self.noise_var, Sigma_landmark=self.landmark_cov[ids[accepted]])
+            except np.linalg.LinAlgError as err:
+                raise FilterDivergedError(
+                    f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t}: {err}"
+                ) from err
+        self._map_update(ids[accepted], z[accepted])
+        self._add_new(ids, z, status, usable & ~known)
+        return nis, dof
+
+
+class JointSlam(_Filter):
+    """Joint EKF over ``[pose; landmarks]``, active set by default, textbook form if ``dense``.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    camera : visla_edu.camera.StereoCamera
+    config : visla_edu.ekf.FilterConfig
+    dense : bool
+        Keep every (strided) landmark in the state from the first frame.
+    """
+
+    def __init__(self, dataset, camera, config, dense=False):
+        super().__init__(dataset, camera, config)
+        self.dense = dense
+        self.slot_of = np.full(dataset.num_landmarks, -1)
+        if dense:
+            self.active_ids = np.arange(0, dataset.num_landmarks, config.landmark_stride)
+            D = 6 + 3 * len(self.active_ids)
+            if D * D * 8 > MAX_DENSE_BYTES:
+                raise ValueError(
+                    f"dense SLAM on {dataset.name}: a {D}x{D} covariance needs {D * D * 8 / 2**30:.1f} GiB "
+                    f"(limit {MAX_DENSE_BYTES / 2**30:.0f} GiB); use landmark_stride or the active set")
+            self.slot_of[self.active_ids] = np.arange(len(self.active_ids))
+            self.Sigma = np.zeros((D, D))
+            idx = np.arange(6, D)
+            self.Sigma[idx, idx] = config.landmark_prior_sigma**2
+        else:
+            self.active_ids = np.zeros(0, dtype=np.int64)
+            self.Sigma = np.zeros((6, 6))
+        self.Sigma[:6, :6] = config.initial_pose_sigma**2 * np.eye(6)
+
+    @property
+    def pose_cov(self):
+        """The pose block of the joint covariance, (6, 6) (a view)."""
+        return self.Sigma[:6, :6]
+
+    def _predict(self, u, tau):
+        F = motion.pose_transition(u, tau)
+        W = motion.motion_noise(tau, self.config.sigma_linear_velocity, self.config.sigma_angular_velocity)
+        self.world_T_imu = motion.predict_pose(self.world_T_imu, u, tau)
+        motion.predict_joint_covariance(self.Sigma, F, W)
+
+    def _update(self, ids, z, status, z_pred):
+        if not self.dense:
+            self._retire(self.last_frame[self.active_ids] < self.t)
+        usable = self._usable(ids, z, status)
+        known = usable & np.isfinite(self.landmarks[ids, 0])
+        self._gate_known(ids, z, status, z_pred, known)
+        new = self._new_landmarks(ids, z, status, usable & ~known)
+        if not self.dense and np.any(new):
+            self._enter(ids[new])
+        use = (status == OBS_USED) | (status == OBS_NEW)
+        if not np.any(use):
+            return np.nan, 0
+        try:
+            self.world_T_imu, self.landmarks[self.active_ids], nis = ekf.joint_update(
+                self.Sigma, self.world_T_imu, self.landmarks[self.active_ids], self.slot_of[ids[use]],
+                z[use], self.camera, self.noise_var)
+        except np.linalg.LinAlgError as err:
+            raise FilterDivergedError(
+                f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t} "
+                f"({int(use.sum())} observations): {err}") from err
+        return nis, 4 * int(use.sum())
+
+    def _gate_known(self, ids, z, status, z_pred, known):
+        """Predict and gate the observations of landmarks already in the state."""
+        if not np.any(known):
+            return
+        lm = ids[known]
+        cols = 6 + 3 * self.slot_of[lm][:, None] + np.arange(3)  # (k, 3)
+        pred, J_landmark, J_pose = self.camera.predict_with_jacobians(self.world_T_imu, self.landmarks[lm])
+        z_pred[known] = pred
+        S = ekf.innovation_covariances(
+            J_pose, J_landmark, self.Sigma[:6, :6],
+            np.swapaxes(self.Sigma[:6][:, cols], 0, 1),
+            self.Sigma[cols[:, :, None], cols[:, None, :]], self.noise_var)
+        inside, _ = self._gate(S, z[known] - pred)
+        where = np.nonzero(known)[0]
+        status[where[inside]] = OBS_USED
+        status[where[~inside]] = OBS_GATED
+
+    def _enter(self, new_ids):
+        """Append landmarks to the state with the prior covariance and no correlation."""
+        n_old = len(self.active_ids)
+        D_old = self.Sigma.shape[0]
+        Sigma = np.zeros((D_old + 3 * len(new_ids),) * 2)
+        Sigma[:D_old, :D_old] = self.Sigma
+        idx = np.arange(D_old, Sigma.shape[0])
+        Sigma[idx, idx] = self.config.landmark_prior_sigma**2
+        self.Sigma = Sigma
+        self.active_ids = np.concatenate([self.active_ids, new_ids])
+        self.slot_of[new_ids] = n_old + np.arange(len(new_ids))
+
+    def _retire(self, leaving):
+        """Marginalise the landmarks marked ``leaving`` (delete their rows and columns)."""
+        if not np.any(leaving):
+            return
+        self.landmark_cov[self.active_ids[leaving]] = self._slot_covs(np.nonzero(leaving)[0])
+        self.slot_of[self.active_ids[leaving]] = -1
+        keep_slots = np.nonzero(~leaving)[0]
+        keep = np.concatenate([np.arange(6), (6 + 3 * keep_slots[:, None] + np.arange(3)).ravel()])
+        self.Sigma = self.Sigma[np.ix_(keep, keep)]
+        self.active_ids = self.active_ids[keep_slots]
+        self.slot_of[self.active_ids] = np.arange(len(self.active_ids))
+
+    def _slot_covs(self, slots):
+        cols = 6 + 3 * np.asarray(slots)[:, None] + np.arange(3)
+        return self.Sigma[cols[:, :, None], cols[:, None, :]]
+
+    def _active(self):
+        ids = self.active_ids
+        active = ids[np.isfinite(self.landmarks[ids, 0]) & (self.last_frame[ids] >= self.t)]
+        return active, self._slot_covs(self.slot_of[active])
+
+    def landmark_estimates(self):
+        """Final landmark means (M, 3) and marginal covariances (M, 3, 3); NaN if never initialised.
+
+        Landmarks still in the state report their current estimate.
+        """
+        cov = self.landmark_cov.copy()
+        active, active_cov = self._active()
+        cov[active] = active_cov
+        return self.landmarks.copy(), cov

@@ -1,0 +1,121 @@
+"""IMU motion model on SE(3): dead reckoning and the EKF prediction step.
+
+Motion model (twist ``u_t = [v_t; w_t]`` in the body frame, ``tau_t = t_{t+1} - t_t``)::
+
+    world_T_imu[t+1] = world_T_imu[t] @ exp(tau_t * twist_hat(u_t))
+
+With the right perturbation ``T = mu exp(hat(delta))`` the perturbation evolves as
+``delta_{t+1} = F_t delta_t + n_t`` with the closed form (no ``expm`` needed)::
+
+    F_t = exp(-tau_t curly_hat(u_t)) = adjoint(exp(-tau_t twist_hat(u_t)))
+
+and ``n_t ~ N(0, W_t)``, ``W_t = tau_t^2 diag(sigma_v^2 I, sigma_w^2 I)`` for white noise of
+standard deviation ``sigma_v`` (m/s) and ``sigma_w`` (rad/s) on each velocity sample.
+"""
+
+import numpy as np
+
+from visla_edu import lie
+
+__all__ = [
+    "select_twists",
+    "dead_reckon",
+    "motion_noise",
+    "pose_transition",
+    "predict_pose",
+    "predict_pose_covariance",
+    "predict_joint_covariance",
+]
+
+
+def select_twists(twists, lag=0):
+    """The twist used for the step ``t -> t+1``: ``u[t + lag]`` (clipped at the ends).
+
+    Parameters
+    ----------
+    twists : ndarray, shape (T, 6)
+        ``[v; w]`` samples, one per time stamp.
+    lag : int
+        0 uses the sample at the start of the interval (the course's convention),
+        1 the sample at its end.
+
+    Returns
+    -------
+    ndarray, shape (T - 1, 6)
+    """
+    twists = np.asarray(twists, dtype=float)
+    if twists.ndim != 2 or twists.shape[1] != 6:
+        raise ValueError(f"select_twists: twists must have shape (T, 6), got {twists.shape}")
+    idx = np.clip(np.arange(len(twists) - 1) + int(lag), 0, len(twists) - 1)
+    return twists[idx]
+
+
+def dead_reckon(time_stamps, twists, world_T_imu0=None, lag=0):
+    """Integrate IMU twists into a trajectory (the prediction step's mean, nothing else).
+
+    Parameters
+    ----------
+    time_stamps : array_like, shape (T,)
+    twists : array_like, shape (T, 6)
+        ``[v; w]`` per time stamp (body frame).
+    world_T_imu0 : array_like, shape (4, 4), optional
+        Initial pose; identity by default (world = IMU frame at the first time stamp).
+    lag : int
+        See :func:`select_twists`.
+
+    Returns
+    -------
+    ndarray, shape (T, 4, 4)
+        ``world_T_imu[t+1] = world_T_imu[t] @ se3_exp(tau_t u_t)``.
+    """
+    time_stamps = np.asarray(time_stamps, dtype=float)
+    steps = lie.se3_exp(np.diff(time_stamps)[:, None] * select_twists(twists, lag))
+    poses = np.empty((len(time_stamps), 4, 4))
+    poses[0] = np.eye(4) if world_T_imu0 is None else world_T_imu0
+    for t, step in enumerate(steps):
+        poses[t + 1] = poses[t] @ step
+    return poses
+
+
+def motion_noise(tau, sigma_linear, sigma_angular):
+    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2 I3, sigma_w^2 I3)``, (6, 6)."""
+    return np.diag(np.repeat([(tau * sigma_linear) ** 2, (tau * sigma_angular) ** 2], 3))
+
+
+def pose_transition(u, tau):
+    """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6)."""
+    return lie.adjoint(lie.se3_exp(-tau * np.asarray(u, dtype=float)))
+
+
+def predict_pose(world_T_imu, u, tau):
+    """Mean prediction ``mu @ se3_exp(tau u)``, (4, 4)."""
+    return world_T_imu @ lie.se3_exp(tau * np.asarray(u, dtype=float))
+
+
+def predict_pose_covariance(Sigma_pose, F, W):
+    """Covariance prediction ``F Sigma F^T + W`` for the pose alone, (6, 6)."""
+    return F @ Sigma_pose @ F.T + W
+
+
+def predict_joint_covariance(Sigma, F, W):
+    """Covariance prediction of the joint state ``[pose (6); landmarks]``, in place.
+
+    Landmarks are static, so only the pose rows and columns change::
+
+        Sigma_pp <- F Sigma_pp F^T + W,   Sigma_pl <- F Sigma_pl,   Sigma_lp <- Sigma_lp F^T
+
+    Parameters
+    ----------
+    Sigma : ndarray, shape (D, D)
+        Modified in place.
+    F, W : ndarray, shape (6, 6)
+
+    Returns
+    -------
+    ndarray
+        ``Sigma`` (the same object).
+    """
+    Sigma[:6, 6:] = F @ Sigma[:6, 6:]
+    Sigma[6:, :6] = Sigma[:6, 6:].T
+    Sigma[:6, :6] = F @ Sigma[:6, :6] @ F.T + W
+    return Sigma

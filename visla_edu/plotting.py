@@ -1,0 +1,155 @@
+"""Matplotlib views: top-down trajectory and map, covariance ellipses, image-plane view.
+
+All functions draw into a given ``Axes`` (or a new figure) and return it; nothing is shown
+or saved unless asked, so notebooks, the CLI and the widgets share them.
+"""
+
+import numpy as np
+
+__all__ = ["covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane"]
+
+
+def _axes(ax, figsize=(8, 7)):
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(figsize=figsize)[1]
+
+
+def covariance_ellipse(mean_xy, cov_xy, n_sigma=2.0, n_points=60):
+    """Points of the ``n_sigma`` ellipse of a 2-D Gaussian.
+
+    Parameters
+    ----------
+    mean_xy : array_like, shape (2,)
+    cov_xy : array_like, shape (2, 2)
+    n_sigma : float
+    n_points : int
+
+    Returns
+    -------
+    ndarray, shape (n_points, 2)
+    """
+    vals, vecs = np.linalg.eigh(np.asarray(cov_xy, dtype=float))
+    angles = np.linspace(0, 2 * np.pi, n_points)
+    circle = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    return np.asarray(mean_xy) + n_sigma * (circle * np.sqrt(np.clip(vals, 0, None))) @ vecs.T
+
+
+def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", color="C0",
+                        landmark_color="0.55", reference=None, reference_label="dead reckoning",
+                        ground_truth=None):
+    """Top-down (x-y) view of a trajectory and a landmark map.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (T, 4, 4)
+    landmarks : ndarray, shape (M, 3), optional
+        NaN rows are skipped.
+    ax : matplotlib Axes, optional
+    reference : ndarray, shape (T, 4, 4), optional
+        A second trajectory (e.g. dead reckoning), drawn dashed.
+    ground_truth : visla_edu.dataset.GroundTruth, optional
+        True trajectory (and landmarks) drawn in black.
+
+    Returns
+    -------
+    matplotlib Axes
+    """
+    ax = _axes(ax)
+    if landmarks is not None:
+        ok = np.isfinite(landmarks[:, 0])
+        ax.scatter(landmarks[ok, 0], landmarks[ok, 1], s=2, c=landmark_color, label=f"landmarks ({ok.sum()})",
+                   zorder=1)
+    if ground_truth is not None:
+        p = ground_truth.world_T_imu[:, :3, 3]
+        ax.plot(p[:, 0], p[:, 1], "k-", lw=1.5, label="ground truth", zorder=2)
+    if reference is not None:
+        p = reference[:, :3, 3]
+        ax.plot(p[:, 0], p[:, 1], "--", color="C3", lw=1.5, label=reference_label, zorder=3)
+    p = world_T_imu[:, :3, 3]
+    ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=2, label=label, zorder=4)
+    ax.plot(p[0, 0], p[0, 1], "o", color="k", ms=5, zorder=5)
+    ax.set_xlabel("x (m, world = first IMU frame)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    _limit_to_path(ax, [p] + ([reference[:, :3, 3]] if reference is not None else []))
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(True, alpha=0.3)
+    return ax
+
+
+def _limit_to_path(ax, paths, margin=0.15):
+    """Zoom on the trajectories so a few far landmarks do not shrink the view."""
+    pts = np.concatenate([p[:, :2] for p in paths])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = margin * max(hi - lo) + 20
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+
+
+def plot_result(result, path=None, ground_truth=None, title=None):
+    """Figure of a :class:`visla_edu.run.RunResult`: trajectory and map, with dead reckoning.
+
+    Parameters
+    ----------
+    result : visla_edu.run.RunResult
+    path : str or Path, optional
+        Save the figure there (PNG, 120 dpi).
+    ground_truth : visla_edu.dataset.GroundTruth, optional
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 7))
+    plot_trajectory_map(result.world_T_imu, result.landmarks, ax=ax, label=f"{result.mode} estimate",
+                        reference=result.dead_reckoning if result.mode != "deadreckon" else None,
+                        ground_truth=ground_truth)
+    ax.set_title(title or f"{result.name}: {result.mode}{' (dense)' if result.dense else ''}")
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=None):
+    """Left-image pixels of one frame: observed, predicted, innovations, gated outliers.
+
+    Parameters
+    ----------
+    z : ndarray, shape (k, 4)
+        Observed ``[uL, vL, uR, vR]``.
+    z_pred : ndarray, shape (k, 4), optional
+        Predicted pixels (NaN rows skipped); a line joins each prediction to its observation.
+    status : ndarray of int, shape (k,), optional
+        ``visla_edu.filters.OBS_*`` codes; gated observations are drawn as red crosses.
+    image_size : (width, height)
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib Axes
+    """
+    from visla_edu.filters import OBS_GATED
+
+    ax = _axes(ax, figsize=(10, 4))
+    gated = np.zeros(len(z), dtype=bool) if status is None else status == OBS_GATED
+    ax.scatter(z[~gated, 0], z[~gated, 1], s=14, facecolors="none", edgecolors="C0", label="observed")
+    if np.any(gated):
+        ax.scatter(z[gated, 0], z[gated, 1], s=30, marker="x", c="C3", label="gated (outlier)")
+    if z_pred is not None:
+        ok = np.isfinite(z_pred[:, 0])
+        ax.scatter(z_pred[ok, 0], z_pred[ok, 1], s=6, c="C1", label="predicted")
+        for (u0, v0), (u1, v1) in zip(z_pred[ok, :2], z[ok, :2]):
+            ax.plot([u0, u1], [v0, v1], "-", color="C1", lw=0.8)
+    ax.set_xlim(0, image_size[0])
+    ax.set_ylim(image_size[1], 0)
+    ax.set_xlabel("u (px, left image)")
+    ax.set_ylabel("v (px)")
+    ax.legend(loc="upper right", fontsize="small")
+    return ax
