@@ -26,8 +26,20 @@ __all__ = [
     "projection_jacobian",
     "triangulate_disparity",
     "triangulate_bearing",
+    "triangulation_jacobian",
     "StereoCamera",
 ]
+
+
+def _check_calibration(K, b, name):
+    """Return ``K`` as a (3, 3) float array and ``b`` as a positive float, or raise ValueError."""
+    K = np.asarray(K, dtype=float)
+    if K.shape != (3, 3):
+        raise ValueError(f"{name}: K must have shape (3, 3), got {K.shape}")
+    b = float(b)
+    if not np.isfinite(b) or b <= 0:
+        raise ValueError(f"{name}: baseline b must be a positive number, got {b}")
+    return K, b
 
 
 def stereo_matrix(K, b):
@@ -44,12 +56,7 @@ def stereo_matrix(K, b):
     -------
     ndarray, shape (4, 4)
     """
-    K = np.asarray(K, dtype=float)
-    if K.shape != (3, 3):
-        raise ValueError(f"stereo_matrix: K must have shape (3, 3), got {K.shape}")
-    b = float(b)
-    if not np.isfinite(b) or b <= 0:
-        raise ValueError(f"stereo_matrix: baseline b must be a positive number, got {b}")
+    K, b = _check_calibration(K, b, "stereo_matrix")
     fsu, fsv, cu, cv = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     return np.array(
         [
@@ -117,6 +124,7 @@ def triangulate_disparity(z, K, b):
 
     ``depth = fsu b / (uL - uR)``, ``x = (uL - cu) depth / fsu``, ``y = (vL - cv) depth / fsv``.
     Pixels with non-positive disparity have no finite depth: their rows are NaN.
+    Raises ValueError unless ``K`` is 3x3 and ``b`` is positive.
 
     Parameters
     ----------
@@ -130,11 +138,11 @@ def triangulate_disparity(z, K, b):
     ndarray, shape (..., 3)
     """
     z = _check_pixels(z, "triangulate_disparity")
-    K = np.asarray(K, dtype=float)
+    K, b = _check_calibration(K, b, "triangulate_disparity")
     fsu, fsv, cu, cv = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     disparity = z[..., 0] - z[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        depth = np.where(disparity > 0, fsu * float(b) / disparity, np.nan)
+        depth = np.where(disparity > 0, fsu * b / disparity, np.nan)
     x = (z[..., 0] - cu) * depth / fsu
     y = (z[..., 1] - cv) * depth / fsv
     return np.stack([x, y, depth], axis=-1)
@@ -149,7 +157,8 @@ def triangulate_bearing(z, K, b):
     ``lambda1 = a^T c / a^T a`` with ``a = R^T z1 - (e3^T R^T z1) z2`` and
     ``c = R^T p - (e3^T R^T p) z2``; then ``m = lambda1 z1``.
     On noise-free rectified pixels it equals :func:`triangulate_disparity`.
-    Rows with non-positive ``lambda1`` are NaN.
+    Rows with non-positive ``lambda1`` are NaN. Raises ValueError unless ``K`` is 3x3 and
+    ``b`` is positive.
 
     Parameters
     ----------
@@ -162,17 +171,58 @@ def triangulate_bearing(z, K, b):
     ndarray, shape (..., 3)
     """
     z = _check_pixels(z, "triangulate_bearing")
-    K_inv = np.linalg.inv(np.asarray(K, dtype=float))
+    K, b = _check_calibration(K, b, "triangulate_bearing")
+    K_inv = np.linalg.inv(K)
     ones = np.ones(z.shape[:-1] + (1,))
     z1 = np.concatenate([z[..., 0:2], ones], axis=-1) @ K_inv.T
     z2 = np.concatenate([z[..., 2:4], ones], axis=-1) @ K_inv.T
-    p = np.array([float(b), 0.0, 0.0])
+    p = np.array([b, 0.0, 0.0])
     a = z1 - z1[..., 2:3] * z2  # R = I
     c = p - p[2] * z2
     with np.errstate(divide="ignore", invalid="ignore"):
         lam1 = np.einsum("...i,...i->...", a, c) / np.einsum("...i,...i->...", a, a)
     lam1 = np.where(lam1 > 0, lam1, np.nan)
     return lam1[..., None] * z1
+
+
+def triangulation_jacobian(z, K, b):
+    """Jacobian of :func:`triangulate_disparity` with respect to ``[uL, vL, uR, vR]``.
+
+    With disparity ``d = uL - uR`` and ``p = [X, Y, Z]``::
+
+        dZ/duL = -Z/d              dZ/duR = Z/d
+        dX/duL = Z/fsu - X/d       dX/duR = X/d
+        dY/duL = -Y/d              dY/duR = Y/d        dY/dvL = Z/fsv
+
+    (``vR`` is not used by the disparity form.) Propagating pixel noise gives the
+    triangulation covariance ``J (sigma^2 I) J^T``, which grows with depth squared.
+
+    Parameters
+    ----------
+    z : array_like, shape (..., 4)
+    K : array_like, shape (3, 3)
+    b : float
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 4)
+        NaN where the disparity is not positive.
+    """
+    z = _check_pixels(z, "triangulation_jacobian")
+    K = np.asarray(K, dtype=float)
+    p = triangulate_disparity(z, K, b)
+    X, Y, Z = p[..., 0], p[..., 1], p[..., 2]
+    d = z[..., 0] - z[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        J = np.zeros(z.shape[:-1] + (3, 4))
+        J[..., 0, 0] = Z / K[0, 0] - X / d
+        J[..., 0, 2] = X / d
+        J[..., 1, 0] = -Y / d
+        J[..., 1, 1] = Z / K[1, 1]
+        J[..., 1, 2] = Y / d
+        J[..., 2, 0] = -Z / d
+        J[..., 2, 2] = Z / d
+    return J
 
 
 class StereoCamera:
@@ -300,3 +350,27 @@ class StereoCamera:
             return p_cam
         world_T_cam = np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam
         return p_cam @ world_T_cam[:3, :3].T + world_T_cam[:3, 3]
+
+    def triangulation_covariance(self, z, noise_var, world_T_imu=None):
+        """Covariance of triangulated points from pixel noise ``noise_var I4``.
+
+        ``J (noise_var I) J^T`` with ``J`` from :func:`triangulation_jacobian`, rotated into the
+        world frame (``R Sigma_cam R^T`` with ``R`` the rotation of ``world_T_imu @ imu_T_cam``)
+        when a pose is given.
+
+        Parameters
+        ----------
+        z : array_like, shape (M, 4)
+        noise_var : float
+        world_T_imu : array_like, shape (4, 4), optional
+
+        Returns
+        -------
+        ndarray, shape (M, 3, 3)
+        """
+        J = triangulation_jacobian(z, self.K, self.b)
+        cov = noise_var * J @ np.swapaxes(J, -1, -2)
+        if world_T_imu is None:
+            return cov
+        R = (np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam)[:3, :3]
+        return R @ cov @ R.T

@@ -11,7 +11,7 @@ integrated motion ``exp(tau u)`` reveals
 * a gyro bias: :func:`imu_noise_and_bias`.
 
 The data alone also shows frames whose features exactly repeat the previous frame
-(:func:`repeated_frames`) and stereo matches that break the rectified geometry
+(:func:`visla_edu.data.repeated_frames`) and stereo matches that break the rectified geometry
 (:func:`outlier_indicators`). :func:`diagnose` runs them all and formats a report.
 """
 
@@ -21,6 +21,7 @@ import numpy as np
 
 from visla_edu import lie
 from visla_edu.camera import triangulate_disparity
+from visla_edu.data import repeated_frames
 
 __all__ = [
     "CORRECTIONS",
@@ -31,7 +32,6 @@ __all__ = [
     "resolve_extrinsics",
     "check_time_alignment",
     "imu_noise_and_bias",
-    "repeated_frames",
     "outlier_indicators",
     "diagnose",
 ]
@@ -148,8 +148,11 @@ def _imu_step_twists(dataset, lag=0):
 
 
 def _slope(vo, imu):
-    """Least-squares slope ``s`` of ``vo ~ s imu`` over all rows and columns (1 = agreement)."""
-    return float(np.sum(vo * imu) / max(np.sum(imu * imu), 1e-300))
+    """Least-squares slope ``s`` of ``vo ~ s imu`` over all entries, and its standard error."""
+    power = max(float(np.sum(imu * imu)), 1e-300)
+    s = float(np.sum(vo * imu)) / power
+    resid = vo - s * imu
+    return s, float(np.sqrt(np.mean(resid**2) / power))
 
 
 def _rms(x):
@@ -166,11 +169,15 @@ class ExtrinsicCheck:
         Correction name -> least-squares slope of the VO motion against the IMU motion
         (rotation vectors, translations). Near +1 when the axes agree; a flipped axis pair
         turns the rotation slope negative.
+    rotation_slope_error : float
+        Standard error of the rotation slope (the same for every candidate): a drive with
+        little turning cannot tell the candidates apart.
     rotation_rms : dict
         Correction name -> RMS of the per-frame rotation disagreement (rad).
     recommended : str
-        ``"none"`` if the file's calibration agrees (both slopes above ``MIN_SLOPE``), else
-        the agreeing correction with the largest slopes, else ``"none"`` (no evidence).
+        A correction only on strong evidence: the file's calibration gives a slope below
+        ``-MIN_SLOPE`` at least ``MIN_SIGNIFICANCE`` standard errors from zero, and the
+        correction's slopes are both above ``MIN_SLOPE``; otherwise ``"none"``.
     pairs : int
         Frame pairs with valid visual odometry.
     """
@@ -178,6 +185,7 @@ class ExtrinsicCheck:
     rotation_slope: dict
     translation_slope: dict
     rotation_rms: dict
+    rotation_slope_error: float
     recommended: str
     pairs: int
 
@@ -188,7 +196,8 @@ class ExtrinsicCheck:
     def report(self, name=""):
         """Readable evidence, one line per candidate."""
         lines = [f"extrinsic check{' of ' + name if name else ''}: visual odometry on {self.pairs} frame pairs "
-                 "against the IMU motion through imu_T_cam (slope 1 = agreement)"]
+                 f"against the IMU motion through imu_T_cam (slope 1 = agreement, "
+                 f"rotation slope standard error {self.rotation_slope_error:.2f})"]
         for key in CORRECTIONS:
             mark = "  <- used" if key == self.recommended else ""
             lines.append(f"  {key:8s} rotation slope {self.rotation_slope[key]:+6.2f} "
@@ -199,6 +208,8 @@ class ExtrinsicCheck:
 
 #: A calibration agrees with the IMU when both VO-vs-IMU slopes exceed this.
 MIN_SLOPE = 0.5
+#: ... and disagrees when a slope is below -MIN_SLOPE by this many standard errors.
+MIN_SIGNIFICANCE = 5.0
 
 
 def check_extrinsics(dataset, lag=0):
@@ -221,13 +232,16 @@ def check_extrinsics(dataset, lag=0):
     vo = _vo(dataset)
     imu = _imu_step_twists(dataset, lag)[vo.valid]
     rot_slope, trans_slope, rot_rms = {}, {}, {}
+    error = np.inf
     for key, C in CORRECTIONS.items():
         vo_imu = _vo_in_imu_frame(vo, C @ dataset.imu_T_cam)[vo.valid]
-        rot_slope[key] = _slope(vo_imu[:, 3:], imu[:, 3:])
-        trans_slope[key] = _slope(vo_imu[:, :3], imu[:, :3])
+        rot_slope[key], err = _slope(vo_imu[:, 3:], imu[:, 3:])
+        error = min(error, err)
+        trans_slope[key], _ = _slope(vo_imu[:, :3], imu[:, :3])
         rot_rms[key] = _rms(vo_imu[:, 3:] - imu[:, 3:])
-    check = ExtrinsicCheck(rot_slope, trans_slope, rot_rms, "none", int(vo.valid.sum()))
-    if check.pairs >= 20 and not check.agrees("none"):
+    check = ExtrinsicCheck(rot_slope, trans_slope, rot_rms, error, "none", int(vo.valid.sum()))
+    worst = min(rot_slope["none"], trans_slope["none"])
+    if worst < -MIN_SLOPE and -worst > MIN_SIGNIFICANCE * error:
         agreeing = [k for k in CORRECTIONS if check.agrees(k)]
         if agreeing:
             check.recommended = max(agreeing, key=lambda k: rot_slope[k] + trans_slope[k])
@@ -319,24 +333,6 @@ def imu_noise_and_bias(dataset, imu_T_cam=None):
     }
 
 
-def repeated_frames(dataset):
-    """Frames whose observations (ids and pixels) exactly repeat the previous frame's.
-
-    Returns
-    -------
-    ndarray of int
-        Frame indices t (each equal to frame t - 1).
-    """
-    out = []
-    prev_ids, prev_z = dataset.observations(0)
-    for t in range(1, dataset.num_frames):
-        ids, z = dataset.observations(t)
-        if len(ids) and np.array_equal(ids, prev_ids) and np.array_equal(z, prev_z):
-            out.append(t)
-        prev_ids, prev_z = ids, z
-    return np.array(out, dtype=np.int64)
-
-
 def outlier_indicators(dataset, epipolar_px=3.0):
     """Shares of observations that break the rectified stereo geometry.
 
@@ -375,7 +371,7 @@ def diagnose(dataset):
                  f"angular {np.round(imu['angular_noise'], 5)} rad/s")
     lines.append(f"gyro bias vs visual odometry: {np.round(imu['gyro_bias'], 5)} rad/s "
                  f"(+- {np.round(imu['gyro_bias_stderr'], 5)})")
-    lines.append(f"frames repeating the previous frame exactly: {rep.tolist() if len(rep) else 'none'}")
+    lines.append(f"frames repeating the previous frame exactly: {rep if len(rep) else 'none'}")
     lines.append(f"observations with non-positive disparity: {100 * out['non_positive_disparity']:.2f}%, "
                  f"breaking the epipolar line by > 3 px: {100 * out['epipolar']:.2f}%, "
                  f"near points rejected by visual odometry: {100 * out['vo_rejected']:.1f}%")

@@ -26,6 +26,7 @@ __all__ = [
     "cholesky_update",
     "innovation_covariances",
     "mahalanobis_squared",
+    "initialize_landmarks",
     "landmark_update",
     "pose_update",
     "joint_update",
@@ -52,9 +53,15 @@ class FilterConfig:
         White noise on each linear-velocity sample (m/s); ``W`` scales it by the time step.
     sigma_angular_velocity : float
         White noise on each angular-velocity sample (rad/s).
+    landmark_prior_inflation : float
+        A landmark enters the state at its first observation (which it consumes) with its mean
+        at the stereo triangulation and the covariance ``inflation^2 C_tri + sigma^2 I`` from
+        the pixels, plus, in SLAM, the pose's uncertainty and correlation carried through the
+        triangulation (see :func:`initialize_landmarks`). ``C_tri`` is long along the viewing
+        ray and grows with depth squared; the inflation allows for the linearisation error of
+        far points.
     landmark_prior_sigma : float
-        Standard deviation (m, isotropic) of a landmark's prior when it enters the state at its
-        first observation, centred on the stereo triangulation.
+        Isotropic part of a new landmark's covariance (m).
     initial_pose_sigma : float
         Standard deviation of the first pose; 0 because ``world`` is the first IMU frame.
     gate_probability : float
@@ -70,6 +77,9 @@ class FilterConfig:
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
         finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
         of a correction (``"flip_yz"``, ...), see :data:`visla_edu.diagnostics.CORRECTIONS`.
+    skip_repeated_frames : bool
+        Make no update at frames whose observations exactly repeat the previous frame's
+        (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
     landmark_stride : int
         Use only landmarks whose index is a multiple of this (the textbook workaround for the
         dense filter's memory; 1 = every landmark).
@@ -78,21 +88,23 @@ class FilterConfig:
         None leaves numpy's setting alone.
     """
 
-    sigma_pixel: float = 2.0
-    sigma_linear_velocity: float = 0.5
+    sigma_pixel: float = 1.5
+    sigma_linear_velocity: float = 0.3
     sigma_angular_velocity: float = 0.02
-    landmark_prior_sigma: float = 5.0
+    landmark_prior_inflation: float = 1.0
+    landmark_prior_sigma: float = 0.1
     initial_pose_sigma: float = 0.0
     gate_probability: float = 0.999
     min_init_disparity: float = 2.0
     imu_lag: int = 0
     extrinsic_correction: str = "auto"
+    skip_repeated_frames: bool = True
     landmark_stride: int = 1
     blas_threads: int = 1
 
     def __post_init__(self):
         positive = ["sigma_pixel", "landmark_prior_sigma"]
-        non_negative = ["sigma_linear_velocity", "sigma_angular_velocity", "initial_pose_sigma",
+        non_negative = ["landmark_prior_inflation", "sigma_linear_velocity", "sigma_angular_velocity", "initial_pose_sigma",
                         "min_init_disparity"]
         for name in positive:
             if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
@@ -154,7 +166,11 @@ def cholesky_update(Sigma, H, cols, innovation, R):
         If the innovation covariance is not positive definite.
     """
     Sigma_Ht = Sigma[:, cols] @ H.T  # (D, m)
-    S = H @ Sigma_Ht[cols] + R
+    return _gain_update(Sigma, Sigma_Ht, H @ Sigma_Ht[cols] + R, innovation)
+
+
+def _gain_update(Sigma, Sigma_Ht, S, innovation):
+    """``Sigma -= A^T A`` and ``delta = A^T L^{-1} r`` with ``S = L L^T``, ``A = L^{-1} H Sigma``."""
     L = linalg.cholesky(S, lower=True, check_finite=False)
     A = linalg.solve_triangular(L, Sigma_Ht.T, lower=True, check_finite=False)  # (m, D)
     white = linalg.solve_triangular(L, innovation, lower=True, check_finite=False)
@@ -199,6 +215,43 @@ def innovation_covariances(J_pose, J_landmark, Sigma_pose, Sigma_pose_landmark, 
 def mahalanobis_squared(innovation, S):
     """``r_i^T S_i^{-1} r_i`` for each observation; innovation (k, 4), S (k, 4, 4) -> (k,)."""
     return np.einsum("ki,ki->k", innovation, np.linalg.solve(S, innovation[..., None])[..., 0])
+
+
+def initialize_landmarks(world_T_imu, z, camera, noise_var):
+    """Triangulate new landmarks and linearise the triangulation for their covariance.
+
+    ``m = world_T_imu exp(hat(delta)) imu_T_cam p_cam(z)`` with ``p_cam`` the disparity
+    triangulation, so to first order::
+
+        m ~ m0 + G_pose delta + G_z dz,   G_pose = R [I, -hat(p_imu)],   G_z = R R_ic J_tri
+
+    with ``R`` the rotation of ``world_T_imu``, ``R_ic`` that of ``imu_T_cam`` and ``p_imu`` the
+    point in the IMU frame. In joint SLAM the new block is ``G_pose Sigma_pp G_pose^T + C_tri``
+    and its correlation with every other state entry ``x`` is ``G_pose Sigma_px``: a landmark
+    placed from an uncertain pose inherits that uncertainty. Dropping this correlation (the
+    textbook shortcut) makes the filter overconfident.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (4, 4)
+    z : ndarray, shape (k, 4)
+    camera : visla_edu.camera.StereoCamera
+    noise_var : float
+        Pixel noise variance.
+
+    Returns
+    -------
+    p_world : ndarray, shape (k, 3)
+    G_pose : ndarray, shape (k, 3, 6)
+    C_tri : ndarray, shape (k, 3, 3)
+        Triangulation covariance in the world frame, ``noise_var G_z G_z^T``.
+    """
+    p_cam = camera.triangulate(z)
+    p_imu = p_cam @ camera.imu_T_cam[:3, :3].T + camera.imu_T_cam[:3, 3]
+    R = world_T_imu[:3, :3]
+    p_world = p_imu @ R.T + world_T_imu[:3, 3]
+    G_pose = np.concatenate([np.broadcast_to(R, (len(z), 3, 3)), -R @ lie.hat(p_imu)], axis=2)
+    return p_world, G_pose, camera.triangulation_covariance(z, noise_var, world_T_imu)
 
 
 def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var):
@@ -267,6 +320,13 @@ def pose_update(world_T_imu, Sigma_pose, p_world, z, camera, noise_var, Sigma_la
     return world_T_imu @ lie.se3_exp(delta), 0.5 * (Sigma + Sigma.T), nis
 
 
+#: Stereo rows ``[uL, vL, uR, vR]`` -> ``[uL, (vL + vR)/sqrt(2), uR]``. Rows 2 and 4 of ``Ks``
+#: are equal, so ``vL`` and ``vR`` have the same prediction and Jacobian: with noise
+#: ``sigma^2 I`` their difference carries no information about the state. Rotating the pair
+#: orthonormally and dropping the difference row is an exact reduction from 4 to 3 rows.
+STEREO_ROWS = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)], [0.0, 0.0, 1.0, 0.0]])
+
+
 def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
     """Joint EKF update of the pose and all landmarks in the state, covariance in place.
 
@@ -275,8 +335,10 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
 
         H_i = [J_pose_i (4x6), 0, ..., J_landmark_i (4x3) at columns 6+3s.., ..., 0]
 
-    Every landmark in the state moves (unobserved ones through their correlation with the
-    pose), so the whole ``p_active`` is corrected.
+    so ``Sigma H^T`` and ``H Sigma H^T`` are assembled block by block instead of with the
+    mostly-zero ``H``, and each observation's rows are reduced exactly from 4 to 3
+    (:data:`STEREO_ROWS`). Every landmark in the state moves (unobserved ones through their
+    correlation with the pose), so the whole ``p_active`` is corrected.
 
     Parameters
     ----------
@@ -298,18 +360,23 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
     world_T_imu_new : ndarray, shape (4, 4)
     p_active_new : ndarray, shape (n, 3)
     nis : float
-        ``r^T S^{-1} r`` with ``4 k`` degrees of freedom.
+        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
     """
     k = len(obs_slots)
     z_pred, J_landmark, J_pose = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
-    landmark_cols = (6 + 3 * np.asarray(obs_slots)[:, None] + np.arange(3)).ravel()
-    cols = np.concatenate([np.arange(6), landmark_cols])
-    H = np.zeros((4 * k, 6 + 3 * k))
-    H[:, :6] = J_pose.reshape(4 * k, 6)
-    rows = np.arange(4 * k).reshape(k, 4)
-    H[rows[:, :, None], 6 + 3 * np.arange(k)[:, None, None] + np.arange(3)] = J_landmark
-    delta, nis = cholesky_update(Sigma, H, cols, (z - z_pred).ravel(), noise_var * np.eye(4 * k))
+    r4 = z - z_pred
+    J_pose3 = (STEREO_ROWS @ J_pose).reshape(3 * k, 6)  # (m, 6), m = 3k
+    J_lm3 = STEREO_ROWS @ J_landmark  # (k, 3, 3)
+    lm_cols = (6 + 3 * np.asarray(obs_slots)[:, None] + np.arange(3)).ravel()
+    D = Sigma.shape[0]
+    Sigma_lm = Sigma[:, lm_cols].reshape(D, k, 3)
+    Sigma_Ht = Sigma[:, :6] @ J_pose3.T + np.einsum("dkj,kij->dki", Sigma_lm, J_lm3).reshape(D, 3 * k)
+    S = J_pose3 @ Sigma_Ht[:6] + np.einsum("kij,kjm->kim", J_lm3, Sigma_Ht[lm_cols].reshape(k, 3, 3 * k)).reshape(
+        3 * k, 3 * k)
+    S[np.diag_indices(3 * k)] += noise_var
+    delta, nis = _gain_update(Sigma, Sigma_Ht, S, (r4 @ STEREO_ROWS.T).ravel())
     Sigma += Sigma.T
     Sigma *= 0.5
+    nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
     p_new = p_active + delta[6:].reshape(-1, 3)
     return world_T_imu @ lie.se3_exp(delta[:6]), p_new, nis

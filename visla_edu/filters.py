@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from visla_edu import ekf, motion
+from visla_edu.data import repeated_frames
 from visla_edu.ekf import FilterDivergedError
 
 __all__ = [
@@ -46,6 +47,10 @@ OBS_NO_DEPTH = 3  #: non-positive disparity: a broken stereo match, never used
 OBS_FAR = 4  #: disparity too small to initialise the landmark (not yet in the state)
 OBS_IGNORED = 5  #: not used by this mode (dead reckoning, landmark stride)
 STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored")
+
+#: Variance on the diagonal of a landmark the dense filter has not observed yet (its mean is
+#: not set either); replaced by the real prior at the first observation.
+DENSE_PLACEHOLDER_VARIANCE = 1e6
 
 #: The dense reference refuses covariances larger than this (bytes); use a landmark stride.
 MAX_DENSE_BYTES = 4 * 2**30
@@ -113,7 +118,7 @@ class _Filter:
         self.landmarks = np.full((M, 3), np.nan)
         self.landmark_cov = np.full((M, 3, 3), np.nan)
         self.last_frame = dataset.track_spans()[:, 1]
-        self.prior_cov = config.landmark_prior_sigma**2 * np.eye(3)
+        self.skip_frames = set(repeated_frames(dataset)) if config.skip_repeated_frames else set()
 
     @property
     def done(self):
@@ -130,7 +135,7 @@ class _Filter:
         ids, z = self.dataset.observations(self.t)
         status = np.full(len(ids), OBS_IGNORED)
         z_pred = np.full((len(ids), 4), np.nan)
-        nis, dof = self._update(ids, z, status, z_pred)
+        nis, dof = (np.nan, 0) if self.t in self.skip_frames else self._update(ids, z, status, z_pred)
         self._check_finite()
         return self._record(ids, z, z_pred, status, nis, dof)
 
@@ -145,15 +150,25 @@ class _Filter:
     def _new_landmarks(self, ids, z, status, candidates):
         """Triangulate never-seen landmarks among ``candidates`` (mask) at the current pose.
 
-        Returns the mask of observations whose landmark was initialised now.
+        Their first observation is consumed by the initialisation (status ``OBS_NEW``).
+
+        Returns
+        -------
+        new : ndarray of bool, shape (k,)
+            Observations whose landmark was initialised now.
+        G_pose : ndarray, shape (k_new, 3, 6)
+            Sensitivity of the new landmarks to the pose perturbation.
+        C_new : ndarray, shape (k_new, 3, 3)
+            Their covariance from the pixels: ``inflation^2 C_tri + sigma^2 I``.
         """
+        cfg = self.config
         disparity = z[:, 0] - z[:, 2]
-        new = candidates & (disparity >= self.config.min_init_disparity)
+        new = candidates & (disparity >= cfg.min_init_disparity)
         status[candidates & ~new] = OBS_FAR
         status[new] = OBS_NEW
-        if np.any(new):
-            self.landmarks[ids[new]] = self.camera.triangulate(z[new], self.world_T_imu)
-        return new
+        p_world, G_pose, C_tri = ekf.initialize_landmarks(self.world_T_imu, z[new], self.camera, self.noise_var)
+        self.landmarks[ids[new]] = p_world
+        return new, G_pose, cfg.landmark_prior_inflation**2 * C_tri + cfg.landmark_prior_sigma**2 * np.eye(3)
 
     def _gate(self, S, innovation):
         """Mask of observations inside the chi-square gate, and their squared distances."""
@@ -229,12 +244,12 @@ class LandmarkMapping(DeadReckoning):
         status[where[~inside]] = OBS_GATED
         return accepted, float(d2[inside].sum()), 4 * int(inside.sum())
 
-    def _add_new(self, ids, z, status, candidates):
-        """Initialise new landmarks, then update them with their first observation."""
-        new = self._new_landmarks(ids, z, status, candidates)
-        if np.any(new):
-            self.landmark_cov[ids[new]] = self.prior_cov
-            self._map_update(ids[new], z[new])
+    def _add_new(self, ids, z, status, candidates, Sigma_pose=None):
+        """Initialise new landmarks; with an uncertain pose, its uncertainty is added."""
+        new, G_pose, C_new = self._new_landmarks(ids, z, status, candidates)
+        if Sigma_pose is not None:
+            C_new = C_new + G_pose @ Sigma_pose @ np.swapaxes(G_pose, 1, 2)
+        self.landmark_cov[ids[new]] = C_new
 
     def _map_update(self, lm, z):
         if len(lm):
@@ -259,7 +274,7 @@ class VisualInertialOdometry(LandmarkMapping):
                     f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t}: {err}"
                 ) from err
         self._map_update(ids[accepted], z[accepted])
-        self._add_new(ids, z, status, usable & ~known)
+        self._add_new(ids, z, status, usable & ~known, Sigma_pose=self.pose_cov)
         return nis, dof
 
 
@@ -289,7 +304,7 @@ class JointSlam(_Filter):
             self.slot_of[self.active_ids] = np.arange(len(self.active_ids))
             self.Sigma = np.zeros((D, D))
             idx = np.arange(6, D)
-            self.Sigma[idx, idx] = config.landmark_prior_sigma**2
+            self.Sigma[idx, idx] = DENSE_PLACEHOLDER_VARIANCE
         else:
             self.active_ids = np.zeros(0, dtype=np.int64)
             self.Sigma = np.zeros((6, 6))
@@ -312,20 +327,22 @@ class JointSlam(_Filter):
         usable = self._usable(ids, z, status)
         known = usable & np.isfinite(self.landmarks[ids, 0])
         self._gate_known(ids, z, status, z_pred, known)
-        new = self._new_landmarks(ids, z, status, usable & ~known)
-        if not self.dense and np.any(new):
-            self._enter(ids[new])
-        use = (status == OBS_USED) | (status == OBS_NEW)
-        if not np.any(use):
-            return np.nan, 0
-        try:
-            self.world_T_imu, self.landmarks[self.active_ids], nis = ekf.joint_update(
-                self.Sigma, self.world_T_imu, self.landmarks[self.active_ids], self.slot_of[ids[use]],
-                z[use], self.camera, self.noise_var)
-        except np.linalg.LinAlgError as err:
-            raise FilterDivergedError(
-                f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t} "
-                f"({int(use.sum())} observations): {err}") from err
+        use = status == OBS_USED
+        nis = np.nan
+        if np.any(use):
+            try:
+                self.world_T_imu, self.landmarks[self.active_ids], nis = ekf.joint_update(
+                    self.Sigma, self.world_T_imu, self.landmarks[self.active_ids], self.slot_of[ids[use]],
+                    z[use], self.camera, self.noise_var)
+            except np.linalg.LinAlgError as err:
+                raise FilterDivergedError(
+                    f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t} "
+                    f"({int(use.sum())} observations): {err}") from err
+        new, G_pose, C_new = self._new_landmarks(ids, z, status, usable & ~known)
+        if np.any(new):
+            if not self.dense:
+                self._enter(ids[new])
+            self._augment(ids[new], G_pose, C_new)
         return nis, 4 * int(use.sum())
 
     def _gate_known(self, ids, z, status, z_pred, known):
@@ -346,16 +363,32 @@ class JointSlam(_Filter):
         status[where[~inside]] = OBS_GATED
 
     def _enter(self, new_ids):
-        """Append landmarks to the state with the prior covariance and no correlation."""
+        """Append slots for new landmarks (zero rows and columns, filled by :meth:`_augment`)."""
         n_old = len(self.active_ids)
         D_old = self.Sigma.shape[0]
         Sigma = np.zeros((D_old + 3 * len(new_ids),) * 2)
         Sigma[:D_old, :D_old] = self.Sigma
-        idx = np.arange(D_old, Sigma.shape[0])
-        Sigma[idx, idx] = self.config.landmark_prior_sigma**2
         self.Sigma = Sigma
         self.active_ids = np.concatenate([self.active_ids, new_ids])
         self.slot_of[new_ids] = n_old + np.arange(len(new_ids))
+
+    def _augment(self, new_ids, G_pose, C_new):
+        """Fill the covariance of newly initialised landmarks (see ``ekf.initialize_landmarks``).
+
+        ``Sigma_new,x = G_pose Sigma_pose,x`` for every state entry x, and
+        ``Sigma_new,new = G_pose Sigma_pp G_pose^T + C_new`` (C_new block diagonal). In the
+        dense form their rows held the placeholder prior and no correlation (never observed),
+        so overwriting them is the same as appending them now.
+        """
+        k = len(new_ids)
+        cols = (6 + 3 * self.slot_of[new_ids][:, None] + np.arange(3)).ravel()
+        G = G_pose.reshape(3 * k, 6)
+        cross = G @ self.Sigma[:6]  # (3k, D)
+        self.Sigma[cols] = cross
+        self.Sigma[:, cols] = cross.T
+        block = G @ self.Sigma[:6, :6] @ G.T
+        block.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += C_new
+        self.Sigma[np.ix_(cols, cols)] = block
 
     def _retire(self, leaving):
         """Marginalise the landmarks marked ``leaving`` (delete their rows and columns)."""

@@ -212,7 +212,9 @@ def so3_log(R):
     w = s / _sin_over_theta(theta, theta2)[..., None]
     near_pi = theta > np.pi - NEAR_PI
     if np.any(near_pi):
-        w = np.where(near_pi[..., None], _near_pi_log(R, s, c, theta), w)
+        # Only on the near-pi entries: for small angles the symmetric part is ~0 and
+        # normalising it would raise 0/0 RuntimeWarnings in mixed batches.
+        w[near_pi] = _near_pi_log(R[near_pi], s[near_pi], c[near_pi], theta[near_pi])
     return w
 
 
