@@ -255,15 +255,33 @@ def _find_file(path, data_dir):
     )
 
 
+def _standin_dataset10(directory):
+    """The stand-in for dataset 10, with the same calibration quirk as the course files.
+
+    Dataset 3 comes from the same vehicle. Its file's ``imu_T_cam`` has axes that disagree
+    with its IMU (found by :func:`visla_edu.diagnostics.check_extrinsics`), and the real
+    ``10.npz`` carries the same calibration. So the stand-in's cameras are simulated with the
+    corrected extrinsic (the physical rig), and the dataset reports the file's uncorrected
+    one, exactly as a user holding the real ``10.npz`` would see it.
+    """
+    from visla_edu import diagnostics, simulate
+
+    calibration = _load_npz(directory / "03.npz")
+    physical_imu_T_cam, _ = diagnostics.resolve_extrinsics(calibration, "auto")
+    dataset = simulate.standin_dataset10(directory / "10_imu_only.npz", directory / "03.npz",
+                                         imu_T_cam=physical_imu_T_cam)
+    dataset.imu_T_cam = calibration.imu_T_cam.copy()
+    dataset.extra["simulated_imu_T_cam"] = physical_imu_T_cam
+    return dataset
+
+
 def _load_dataset10(directory, how):
     """The real ``10.npz`` if present, else the stand-in built from its IMU drive."""
     full = directory / "10.npz"
     if full.is_file():
         return _load_npz(full)
     if _has_standin_inputs(directory):
-        from visla_edu import simulate
-
-        return simulate.standin_dataset10(directory / "10_imu_only.npz", directory / "03.npz")
+        return _standin_dataset10(directory)
     missing = [f for f in _STANDIN_INPUTS if not (directory / f).is_file()]
     raise FileNotFoundError(
         f"dataset 10: the course file 10.npz is not in {directory} (the data directory from {how}), "

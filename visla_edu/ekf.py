@@ -170,7 +170,11 @@ def cholesky_update(Sigma, H, cols, innovation, R):
 
 
 def _gain_update(Sigma, Sigma_Ht, S, innovation):
-    """``Sigma -= A^T A`` and ``delta = A^T L^{-1} r`` with ``S = L L^T``, ``A = L^{-1} H Sigma``."""
+    """``Sigma -= A^T A`` and ``delta = A^T L^{-1} r`` with ``S = L L^T``, ``A = L^{-1} H Sigma``.
+
+    ``A.T @ A`` is computed as a symmetric rank-m product, so a symmetric ``Sigma`` stays
+    exactly symmetric.
+    """
     L = linalg.cholesky(S, lower=True, check_finite=False)
     A = linalg.solve_triangular(L, Sigma_Ht.T, lower=True, check_finite=False)  # (m, D)
     white = linalg.solve_triangular(L, innovation, lower=True, check_finite=False)
@@ -375,8 +379,6 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
         3 * k, 3 * k)
     S[np.diag_indices(3 * k)] += noise_var
     delta, nis = _gain_update(Sigma, Sigma_Ht, S, (r4 @ STEREO_ROWS.T).ravel())
-    Sigma += Sigma.T
-    Sigma *= 0.5
     nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
     p_new = p_active + delta[6:].reshape(-1, 3)
     return world_T_imu @ lie.se3_exp(delta[:6]), p_new, nis

@@ -398,7 +398,7 @@ class JointSlam(_Filter):
         self.slot_of[self.active_ids[leaving]] = -1
         keep_slots = np.nonzero(~leaving)[0]
         keep = np.concatenate([np.arange(6), (6 + 3 * keep_slots[:, None] + np.arange(3)).ravel()])
-        self.Sigma = self.Sigma[np.ix_(keep, keep)]
+        self.Sigma = self.Sigma.take(keep, axis=0).take(keep, axis=1)
         self.active_ids = self.active_ids[keep_slots]
         self.slot_of[self.active_ids] = np.arange(len(self.active_ids))
 

@@ -117,5 +117,6 @@ def predict_joint_covariance(Sigma, F, W):
     """
     Sigma[:6, 6:] = F @ Sigma[:6, 6:]
     Sigma[6:, :6] = Sigma[:6, 6:].T
-    Sigma[:6, :6] = F @ Sigma[:6, :6] @ F.T + W
+    Sigma_pp = F @ Sigma[:6, :6] @ F.T + W
+    Sigma[:6, :6] = 0.5 * (Sigma_pp + Sigma_pp.T)  # keep the joint covariance exactly symmetric
     return Sigma

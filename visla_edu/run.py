@@ -143,7 +143,7 @@ class RunResult:
         return "\n".join(lines)
 
 
-def run_filter(dataset, mode="slam", config=None, dense=False, progress=None):
+def run_filter(dataset, mode="slam", config=None, dense=False, progress=None, verbose=False):
     """Run a filter over the whole dataset.
 
     Parameters
@@ -155,13 +155,15 @@ def run_filter(dataset, mode="slam", config=None, dense=False, progress=None):
         Textbook dense joint filter (``mode="slam"`` only).
     progress : bool, optional
         Show a tqdm progress bar; by default only for runs longer than 500 frames.
+    verbose : bool
+        Print the evidence of an automatic extrinsic correction.
 
     Returns
     -------
     RunResult
     """
     config = config or FilterConfig()
-    flt = make_filter(dataset, mode, config, dense)
+    flt = make_filter(dataset, mode, config, dense, verbose=verbose)
     T = dataset.num_frames
     out = _allocate(T)
     show = T > 500 if progress is None else progress
