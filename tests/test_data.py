@@ -434,7 +434,11 @@ def fake_simulate(monkeypatch):
     calls = []
     module = types.ModuleType("visla_edu.simulate")
     module.simulate_drive = lambda **kw: calls.append(("simulate_drive", kw)) or "drive"
-    module.standin_dataset10 = lambda *a, **kw: calls.append(("standin_dataset10", a)) or "standin"
+    def standin_dataset10(*args, **kwargs):
+        calls.append(("standin_dataset10", args))
+        return types.SimpleNamespace(imu_T_cam=kwargs["imu_T_cam"], extra={}, name="standin")
+
+    module.standin_dataset10 = standin_dataset10
     monkeypatch.setitem(sys.modules, "visla_edu.simulate", module)
     monkeypatch.setattr(visla_edu, "simulate", module, raising=False)
     return calls
@@ -453,8 +457,12 @@ def test_dataset10_real_file_then_standin_then_error(tmp_path, fake_simulate):
     with pytest.raises(FileNotFoundError, match=r"but 10_imu_only.npz is missing"):
         data.load("10", data_dir=tmp_path)
     write(tmp_path, {"time_stamps": np.zeros((1, 2))}, "10_imu_only.npz")
-    assert data.load("10", data_dir=tmp_path) == "standin"
+    standin = data.load("10", data_dir=tmp_path)
+    assert standin.name == "standin"
     assert fake_simulate == [("standin_dataset10", (tmp_path / "10_imu_only.npz", tmp_path / "03.npz"))]
+    # simulated with the physical (diagnosed) rig, reported with the file's calibration like 10.npz
+    np.testing.assert_array_equal(standin.imu_T_cam, data.load("03", data_dir=tmp_path).imu_T_cam)
+    assert standin.extra["simulated_imu_T_cam"].shape == (4, 4)
     write(tmp_path, course_dict(), "10.npz")
     real = data.load("10", data_dir=tmp_path)
     assert real.name == "10" and "not on record" in real.label

@@ -140,6 +140,12 @@ class _Filter:
         return self._record(ids, z, z_pred, status, nis, dof)
 
     # -- pieces the modes share -------------------------------------------------------
+    def _predict(self, u, tau):
+        """IMU prediction: ``mu <- mu exp(tau u)``, covariance through ``F`` and ``W``."""
+        step, F, W = motion.imu_step(u, tau, self.config.sigma_linear_velocity, self.config.sigma_angular_velocity)
+        self.world_T_imu = self.world_T_imu @ step
+        self._predict_covariance(F, W)
+
     def _usable(self, ids, z, status):
         """Mark stride-skipped and no-depth observations; return the mask of usable ones."""
         in_stride = ids % self.config.landmark_stride == 0
@@ -176,10 +182,13 @@ class _Filter:
         return d2 <= self.gate, d2
 
     def _check_finite(self):
-        if not np.all(np.isfinite(self.world_T_imu)):
-            raise FilterDivergedError(
-                f"{self.dataset.name}: pose became non-finite at frame {self.t}; "
-                "check the noise settings and the input velocities")
+        # The covariance too: a huge but finite velocity keeps the pose finite while
+        # F Sigma F^T overflows, after which every observation is silently gated.
+        for what, value in (("pose", self.world_T_imu), ("pose covariance", self.pose_cov)):
+            if not np.all(np.isfinite(value)):
+                raise FilterDivergedError(
+                    f"{self.dataset.name}: {what} became non-finite at frame {self.t}; "
+                    "check the noise settings and the input velocities")
 
     def _record(self, ids, z, z_pred, status, nis, dof):
         active_ids, active_covs = self._active()
@@ -203,10 +212,7 @@ class DeadReckoning(_Filter):
         super().__init__(dataset, camera, config)
         self.pose_cov = config.initial_pose_sigma**2 * np.eye(6)
 
-    def _predict(self, u, tau):
-        F = motion.pose_transition(u, tau)
-        W = motion.motion_noise(tau, self.config.sigma_linear_velocity, self.config.sigma_angular_velocity)
-        self.world_T_imu = motion.predict_pose(self.world_T_imu, u, tau)
+    def _predict_covariance(self, F, W):
         self.pose_cov = motion.predict_pose_covariance(self.pose_cov, F, W)
 
     def _update(self, ids, z, status, z_pred):
@@ -315,10 +321,7 @@ class JointSlam(_Filter):
         """The pose block of the joint covariance, (6, 6) (a view)."""
         return self.Sigma[:6, :6]
 
-    def _predict(self, u, tau):
-        F = motion.pose_transition(u, tau)
-        W = motion.motion_noise(tau, self.config.sigma_linear_velocity, self.config.sigma_angular_velocity)
-        self.world_T_imu = motion.predict_pose(self.world_T_imu, u, tau)
+    def _predict_covariance(self, F, W):
         motion.predict_joint_covariance(self.Sigma, F, W)
 
     def _update(self, ids, z, status, z_pred):
@@ -414,9 +417,10 @@ class JointSlam(_Filter):
     def landmark_estimates(self):
         """Final landmark means (M, 3) and marginal covariances (M, 3, 3); NaN if never initialised.
 
-        Landmarks still in the state report their current estimate.
+        Landmarks still in the state report their current estimate (in the dense form that
+        is every initialised landmark, retired or not).
         """
         cov = self.landmark_cov.copy()
-        active, active_cov = self._active()
-        cov[active] = active_cov
+        in_state = self.active_ids[np.isfinite(self.landmarks[self.active_ids, 0])]
+        cov[in_state] = self._slot_covs(self.slot_of[in_state])
         return self.landmarks.copy(), cov

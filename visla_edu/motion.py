@@ -22,6 +22,7 @@ __all__ = [
     "dead_reckon",
     "motion_noise",
     "pose_transition",
+    "imu_step",
     "predict_pose",
     "predict_pose_covariance",
     "predict_joint_covariance",
@@ -85,6 +86,22 @@ def motion_noise(tau, sigma_linear, sigma_angular):
 def pose_transition(u, tau):
     """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6)."""
     return lie.adjoint(lie.se3_exp(-tau * np.asarray(u, dtype=float)))
+
+
+def imu_step(u, tau, sigma_linear, sigma_angular):
+    """Everything one prediction step needs, with a single exponential.
+
+    Returns
+    -------
+    step : ndarray, shape (4, 4)
+        ``se3_exp(tau u)``; the mean moves as ``mu <- mu @ step``.
+    F : ndarray, shape (6, 6)
+        ``adjoint(inv(step))`` (the same as :func:`pose_transition`).
+    W : ndarray, shape (6, 6)
+        :func:`motion_noise`.
+    """
+    step = lie.se3_exp(tau * np.asarray(u, dtype=float))
+    return step, lie.adjoint(lie.se3_inv(step)), motion_noise(tau, sigma_linear, sigma_angular)
 
 
 def predict_pose(world_T_imu, u, tau):

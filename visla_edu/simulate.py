@@ -175,8 +175,8 @@ class SimulationConfig:
     roll_pitch_amplitude: float = 0.01
     roll_pitch_timescale: float = 2.0
     side_velocity_sigma: float = 0.02
-    linear_velocity_sigma: float = 0.1
-    angular_velocity_sigma: float = 0.01
+    linear_velocity_sigma: float = 0.2
+    angular_velocity_sigma: float = 0.02
     gyro_bias: tuple = (0.0, 0.0, 0.0)
     K: object = None
     b: object = None
