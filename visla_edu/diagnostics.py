@@ -149,6 +149,8 @@ def _imu_step_twists(dataset, lag=0):
 
 def _slope(vo, imu):
     """Least-squares slope ``s`` of ``vo ~ s imu`` over all entries, and its standard error."""
+    if len(imu) == 0:
+        return float("nan"), float("inf")
     power = max(float(np.sum(imu * imu)), 1e-300)
     s = float(np.sum(vo * imu)) / power
     resid = vo - s * imu
@@ -329,7 +331,8 @@ def imu_noise_and_bias(dataset, imu_T_cam=None):
     diff = dataset.angular_velocity[:-1][vo.valid] - w_vo
     return {
         "linear_noise": noise[:3], "angular_noise": noise[3:],
-        "gyro_bias": diff.mean(axis=0), "gyro_bias_stderr": diff.std(axis=0) / np.sqrt(max(len(diff), 1)),
+        "gyro_bias": diff.mean(axis=0) if len(diff) else np.full(3, np.nan),
+        "gyro_bias_stderr": diff.std(axis=0) / np.sqrt(len(diff)) if len(diff) else np.full(3, np.inf),
     }
 
 
