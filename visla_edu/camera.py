@@ -225,6 +225,13 @@ def triangulation_jacobian(z, K, b):
     return J
 
 
+def _check_points(p_world, name):
+    p_world = np.asarray(p_world, dtype=float)
+    if p_world.ndim != 2 or p_world.shape[1] != 3:
+        raise ValueError(f"{name}: landmarks must have shape (M, 3) in world coordinates, got {p_world.shape}")
+    return p_world
+
+
 class StereoCamera:
     """A calibrated stereo rig mounted on the IMU.
 
@@ -270,7 +277,7 @@ class StereoCamera:
         ndarray, shape (M, 4)
         """
         cam_T_world = self.cam_T_imu @ lie.se3_inv(world_T_imu)
-        p_world = np.asarray(p_world, dtype=float)
+        p_world = _check_points(p_world, "points_in_camera")
         return p_world @ cam_T_world[:, :3].T + cam_T_world[:, 3]
 
     def predict(self, world_T_imu, p_world):
@@ -306,7 +313,7 @@ class StereoCamera:
             ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` for the right perturbation.
         """
         imu_T_world = lie.se3_inv(world_T_imu)
-        p_world = np.asarray(p_world, dtype=float)
+        p_world = _check_points(p_world, "predict_with_jacobians")
         p_imu = p_world @ imu_T_world[:3, :3].T + imu_T_world[:3, 3]
         q = p_imu @ self.cam_T_imu[:, :3].T + self.cam_T_imu[:, 3]
         z = projection(q) @ self.Ks.T

@@ -272,7 +272,7 @@ def initialize_landmarks(world_T_imu, z, camera, noise_var):
     return p_world, G_pose, camera.triangulation_covariance(z, noise_var, world_T_imu)
 
 
-def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var):
+def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var, extra_noise=None):
     """Landmark-mapping update with the pose held fixed, one 3x3 EKF per landmark (batched).
 
     With the pose known, observations of different landmarks are independent, so the joint
@@ -290,6 +290,8 @@ def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var):
     world_T_imu : ndarray, shape (4, 4)
     camera : visla_edu.camera.StereoCamera
     noise_var : float
+    extra_noise : ndarray, shape (k, 4, 4), optional
+        Added to each ``R`` (e.g. the pose's own uncertainty seen through ``J_pose``).
 
     Returns
     -------
@@ -298,6 +300,8 @@ def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var):
     """
     z_pred, J_landmark, _ = camera.predict_with_jacobians(world_T_imu, p_world)
     S = innovation_covariances(None, J_landmark, None, None, Sigma_landmark, noise_var)
+    if extra_noise is not None:
+        S = S + extra_noise
     PHt = Sigma_landmark @ np.swapaxes(J_landmark, 1, 2)  # (k, 3, 4)
     gain = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, 1, 2)), 1, 2)  # (k, 3, 4)
     p_new = p_world + np.einsum("kij,kj->ki", gain, z - z_pred)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from visla_edu import ekf, motion
+from visla_edu import ekf, lie, motion
 from visla_edu.data import repeated_frames
 from visla_edu.ekf import FilterDivergedError
 
@@ -47,6 +47,9 @@ OBS_NO_DEPTH = 3  #: non-positive disparity: a broken stereo match, never used
 OBS_FAR = 4  #: disparity too small to initialise the landmark (not yet in the state)
 OBS_IGNORED = 5  #: not used by this mode (dead reckoning, landmark stride)
 STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored")
+
+#: Landmark estimates closer to the camera than this (m) are not linearised (see ``_gate``).
+MIN_DEPTH = 0.1
 
 #: Variance on the diagonal of a landmark the dense filter has not observed yet (its mean is
 #: not set either); replaced by the real prior at the first observation.
@@ -176,9 +179,19 @@ class _Filter:
         self.landmarks[ids[new]] = p_world
         return new, G_pose, cfg.landmark_prior_inflation**2 * C_tri + cfg.landmark_prior_sigma**2 * np.eye(3)
 
-    def _gate(self, S, innovation):
-        """Mask of observations inside the chi-square gate, and their squared distances."""
-        d2 = ekf.mahalanobis_squared(innovation, S)
+    def _gate(self, S, innovation, z_pred):
+        """Mask of observations inside the chi-square gate, and their squared distances.
+
+        A landmark whose estimate lies behind the camera or closer than ``MIN_DEPTH`` (its
+        predicted disparity ``fsu b / depth`` is not in ``(0, fsu b / MIN_DEPTH)``) has no
+        usable linearisation: its observation is rejected with distance ``inf``.
+        """
+        fsu_b = self.camera.K[0, 0] * self.camera.b
+        disparity = z_pred[:, 0] - z_pred[:, 2]
+        valid = (disparity > 0) & (disparity < fsu_b / MIN_DEPTH) & np.isfinite(S).all(axis=(1, 2))
+        d2 = np.full(len(S), np.inf)
+        if np.any(valid):
+            d2[valid] = ekf.mahalanobis_squared(innovation[valid], S[valid])
         return d2 <= self.gate, d2
 
     def _check_finite(self):
@@ -189,6 +202,11 @@ class _Filter:
                 raise FilterDivergedError(
                     f"{self.dataset.name}: {what} became non-finite at frame {self.t}; "
                     "check the noise settings and the input velocities")
+        variances = np.diag(self.pose_cov)
+        if np.any(variances < 0):
+            raise FilterDivergedError(
+                f"{self.dataset.name}: pose covariance lost positive definiteness at frame {self.t} "
+                f"(diagonal {np.array2string(variances, precision=3)})")
 
     def _record(self, ids, z, z_pred, status, nis, dof):
         active_ids, active_covs = self._active()
@@ -220,20 +238,47 @@ class DeadReckoning(_Filter):
 
 
 class LandmarkMapping(DeadReckoning):
-    """Poses from dead reckoning, landmarks by independent 3x3 EKF updates."""
+    """Poses from dead reckoning, landmarks by independent 3x3 EKF updates.
+
+    The poses are held fixed, but they are not exact: between a landmark's first sighting at
+    ``t0`` and frame ``t`` the dead-reckoned motion accumulates the process noise
+    ``Q = Sigma_t - Phi Sigma_t0 Phi^T`` with ``Phi = Ad(inv(T_t) T_t0)`` (the part of the pose
+    covariance that is not shared with the pose the landmark was placed from). Each
+    observation's noise becomes ``R + J_pose Q J_pose^T``, in the gate and in the update, so
+    a drifting IMU widens the gate instead of rejecting the observations.
+    """
+
+    def __init__(self, dataset, camera, config):
+        super().__init__(dataset, camera, config)
+        T = dataset.num_frames
+        self.pose_history = np.empty((T, 4, 4))
+        self.pose_cov_history = np.empty((T, 6, 6))
+        self.init_frame = np.full(dataset.num_landmarks, -1)
 
     def _update(self, ids, z, status, z_pred):
+        self.pose_history[self.t] = self.world_T_imu
+        self.pose_cov_history[self.t] = self.pose_cov
         usable = self._usable(ids, z, status)
         known = usable & np.isfinite(self.landmarks[ids, 0])
-        accepted, nis, dof = self._gate_mapped(ids, z, status, z_pred, known, Sigma_pose=None)
-        self._map_update(ids[accepted], z[accepted])
+        accepted, nis, dof = self._gate_mapped(ids, z, status, z_pred, known)
+        if np.any(accepted):
+            lm = ids[accepted]
+            self.landmarks[lm], self.landmark_cov[lm] = ekf.landmark_update(
+                self.landmarks[lm], self.landmark_cov[lm], z[accepted], self.world_T_imu, self.camera,
+                self.noise_var, extra_noise=self._accepted_pose_noise)
         self._add_new(ids, z, status, usable & ~known)
         return nis, dof
 
-    def _gate_mapped(self, ids, z, status, z_pred, known, Sigma_pose):
+    def _relative_motion_noise(self, lm, J_pose):
+        """``J_pose Q J_pose^T`` per observation, Q the motion noise since each landmark's first sighting."""
+        t0 = self.init_frame[lm]
+        Phi = lie.adjoint(lie.se3_inv(self.world_T_imu) @ self.pose_history[t0])
+        Q = self.pose_cov - Phi @ self.pose_cov_history[t0] @ np.swapaxes(Phi, 1, 2)
+        return J_pose @ Q @ np.swapaxes(J_pose, 1, 2)
+
+    def _gate_mapped(self, ids, z, status, z_pred, known):
         """Predict and gate the observations of mapped landmarks.
 
-        The gate uses ``S_i = Jl Sigma_i Jl^T (+ Jp Sigma_pose Jp^T) + R``.
         Returns the accepted mask, the sum of their squared distances and its dof.
         """
         accepted = np.zeros(len(ids), dtype=bool)
@@ -242,13 +287,18 @@ class LandmarkMapping(DeadReckoning):
         lm = ids[known]
         pred, J_landmark, J_pose = self.camera.predict_with_jacobians(self.world_T_imu, self.landmarks[lm])
         z_pred[known] = pred
-        S = ekf.innovation_covariances(J_pose, J_landmark, Sigma_pose, None, self.landmark_cov[lm], self.noise_var)
-        inside, d2 = self._gate(S, z[known] - pred)
+        pose_noise = self._pose_noise(lm, J_pose)
+        S = ekf.innovation_covariances(None, J_landmark, None, None, self.landmark_cov[lm], self.noise_var)
+        inside, d2 = self._gate(S + pose_noise, z[known] - pred, pred)
         where = np.nonzero(known)[0]
         accepted[where[inside]] = True
         status[where[inside]] = OBS_USED
         status[where[~inside]] = OBS_GATED
+        self._accepted_pose_noise = pose_noise[inside]
         return accepted, float(d2[inside].sum()), 4 * int(inside.sum())
+
+    def _pose_noise(self, lm, J_pose):
+        return self._relative_motion_noise(lm, J_pose)
 
     def _add_new(self, ids, z, status, candidates, Sigma_pose=None):
         """Initialise new landmarks; with an uncertain pose, its uncertainty is added."""
@@ -256,20 +306,25 @@ class LandmarkMapping(DeadReckoning):
         if Sigma_pose is not None:
             C_new = C_new + G_pose @ Sigma_pose @ np.swapaxes(G_pose, 1, 2)
         self.landmark_cov[ids[new]] = C_new
-
-    def _map_update(self, lm, z):
-        if len(lm):
-            self.landmarks[lm], self.landmark_cov[lm] = ekf.landmark_update(
-                self.landmarks[lm], self.landmark_cov[lm], z, self.world_T_imu, self.camera, self.noise_var)
+        self.init_frame[ids[new]] = self.t
 
 
 class VisualInertialOdometry(LandmarkMapping):
-    """Pose EKF with the mapped landmarks as known points, then mapping with the new pose."""
+    """Pose EKF against landmarks fixed where they were first triangulated.
+
+    A landmark is placed once, from its first observation and the pose at that time (its
+    covariance includes that pose's uncertainty, ``G_pose Sigma_pose G_pose^T``); later
+    observations update the pose alone, with ``R_i = sigma^2 I + J_landmark Sigma_i
+    J_landmark^T``. The landmarks are not re-estimated: updating them with the same
+    observations that just corrected the pose would count each observation twice and drag
+    pose and map along together (on the simulated drive that makes the trajectory error 60x
+    larger). The joint filter (``JointSlam``) is the consistent way to refine both.
+    """
 
     def _update(self, ids, z, status, z_pred):
         usable = self._usable(ids, z, status)
         known = usable & np.isfinite(self.landmarks[ids, 0])
-        accepted, nis, dof = self._gate_mapped(ids, z, status, z_pred, known, Sigma_pose=self.pose_cov)
+        accepted, nis, dof = self._gate_mapped(ids, z, status, z_pred, known)
         if np.any(accepted):
             try:
                 self.world_T_imu, self.pose_cov, _ = ekf.pose_update(
@@ -279,9 +334,12 @@ class VisualInertialOdometry(LandmarkMapping):
                 raise FilterDivergedError(
                     f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t}: {err}"
                 ) from err
-        self._map_update(ids[accepted], z[accepted])
         self._add_new(ids, z, status, usable & ~known, Sigma_pose=self.pose_cov)
         return nis, dof
+
+    def _pose_noise(self, lm, J_pose):
+        """The gate sees the current pose uncertainty ``J_pose Sigma_pose J_pose^T``."""
+        return J_pose @ self.pose_cov @ np.swapaxes(J_pose, 1, 2)
 
 
 class JointSlam(_Filter):
@@ -360,7 +418,7 @@ class JointSlam(_Filter):
             J_pose, J_landmark, self.Sigma[:6, :6],
             np.swapaxes(self.Sigma[:6][:, cols], 0, 1),
             self.Sigma[cols[:, :, None], cols[:, None, :]], self.noise_var)
-        inside, _ = self._gate(S, z[known] - pred)
+        inside, _ = self._gate(S, z[known] - pred, pred)
         where = np.nonzero(known)[0]
         status[where[inside]] = OBS_USED
         status[where[~inside]] = OBS_GATED

@@ -6,7 +6,8 @@ or saved unless asked, so notebooks, the CLI and the widgets share them.
 
 import numpy as np
 
-__all__ = ["covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane"]
+__all__ = ["covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
+           "covariance_ellipses", "plot_nis"]
 
 
 def _axes(ax, figsize=(8, 7)):
@@ -73,7 +74,7 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     ax.plot(p[0, 0], p[0, 1], "o", color="k", ms=5, zorder=5)
     ax.set_xlabel("x (m, world = first IMU frame)")
     ax.set_ylabel("y (m)")
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     _limit_to_path(ax, [p] + ([reference[:, :3, 3]] if reference is not None else []))
     ax.legend(loc="best", fontsize="small")
     ax.grid(True, alpha=0.3)
@@ -152,4 +153,80 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     ax.set_xlabel("u (px, left image)")
     ax.set_ylabel("v (px)")
     ax.legend(loc="upper right", fontsize="small")
+    return ax
+
+
+def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
+    """Points of the ``n_sigma`` ellipses of many 2-D Gaussians at once (batched
+    :func:`covariance_ellipse`, e.g. for a ``LineCollection``).
+
+    Parameters
+    ----------
+    means_xy : array_like, shape (n, 2)
+    covs_xy : array_like, shape (n, 2, 2)
+    n_sigma : float
+    n_points : int
+
+    Returns
+    -------
+    ndarray, shape (n, n_points, 2)
+    """
+    means_xy = np.asarray(means_xy, dtype=float).reshape(-1, 2)
+    covs_xy = np.asarray(covs_xy, dtype=float).reshape(-1, 2, 2)
+    if len(means_xy) != len(covs_xy):
+        raise ValueError(f"covariance_ellipses: {len(means_xy)} means but {len(covs_xy)} covariances")
+    if len(means_xy) == 0:
+        return np.zeros((0, n_points, 2))
+    vals, vecs = np.linalg.eigh(0.5 * (covs_xy + np.swapaxes(covs_xy, 1, 2)))
+    angles = np.linspace(0, 2 * np.pi, n_points)
+    circle = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (p, 2)
+    scaled = circle[None] * (n_sigma * np.sqrt(np.clip(vals, 0, None)))[:, None, :]  # (n, p, 2)
+    return means_xy[:, None, :] + scaled @ np.swapaxes(vecs, 1, 2)
+
+
+def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
+    """NIS per degree of freedom over time, with the ``probability`` band of ``chi2(dof)/dof``.
+
+    A consistent filter keeps NIS/dof inside the band about ``probability`` of the time;
+    above it the filter is over-confident (noise too small), below it too cautious.
+
+    Parameters
+    ----------
+    nis : array_like, shape (T,)
+        NaN where there was no update.
+    dof : array_like of int, shape (T,)
+    time : array_like, shape (T,), optional
+        x values (default: frame index).
+    probability : float
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib Axes
+    """
+    from scipy.stats import chi2
+
+    ax = _axes(ax, figsize=(8, 3))
+    nis = np.asarray(nis, dtype=float)
+    dof = np.asarray(dof, dtype=float)
+    x = np.arange(len(nis)) if time is None else np.asarray(time)
+    ok = dof > 0
+    ratio = np.full(len(nis), np.nan)
+    ratio[ok] = nis[ok] / dof[ok]
+    tail = (1 - probability) / 2
+    lo = np.full(len(nis), np.nan)
+    hi = np.full(len(nis), np.nan)
+    lo[ok] = chi2.ppf(tail, dof[ok]) / dof[ok]
+    hi[ok] = chi2.ppf(1 - tail, dof[ok]) / dof[ok]
+    ax.fill_between(x, lo, hi, color="C2", alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
+    ax.plot(x, ratio, ".-", color="C0", ms=3, lw=0.8, label="NIS / dof")
+    ax.axhline(1.0, color="0.4", lw=0.8, ls=":")
+    if np.any(ok):
+        inside = np.mean((ratio[ok] >= lo[ok]) & (ratio[ok] <= hi[ok]))
+        ax.set_title(f"NIS/dof: {100 * inside:.0f}% of updates inside the band", fontsize="medium")
+    ax.set_yscale("log")
+    ax.set_xlabel("frame" if time is None else "time (s)")
+    ax.set_ylabel("NIS / dof")
+    ax.legend(loc="upper right", fontsize="small")
+    ax.grid(True, alpha=0.3)
     return ax

@@ -229,17 +229,19 @@ def save_result(result, path):
     Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
     initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
-    ``config_<name>`` for every setting used.
+    ``config_<name>`` for every setting used (a setting of None, e.g. ``blas_threads``, is
+    stored as an empty array: the file must load without pickle).
     """
     arrays = {k: v for k, v in vars(result).items() if k != "config"}
-    arrays.update({f"config_{k}": v for k, v in result.config.items()})
+    arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
     np.savez_compressed(path, **arrays)
 
 
 def load_result(path):
     """Load a :class:`RunResult` written by :func:`save_result`."""
     with np.load(path, allow_pickle=False) as f:
-        config = {k[len("config_"):]: f[k].item() for k in f.files if k.startswith("config_")}
+        config = {k[len("config_"):]: (None if f[k].size == 0 else f[k].item())
+                  for k in f.files if k.startswith("config_")}
         fields = {k: f[k] for k in f.files if not k.startswith("config_")}
     for key in ("name", "mode"):
         fields[key] = str(fields[key])

@@ -1,0 +1,476 @@
+"""The filter stepper: a filter you can move through in time, forwards and backwards.
+
+A :class:`Stepper` owns one filter object (see :func:`visla_edu.run.make_filter`) and the
+history of what it produced: the :class:`~visla_edu.filters.StepRecord` of every frame
+processed so far (each record is a small snapshot: pose, pose covariance, the frame's
+observations and the active landmarks). The *frontier* is the last frame processed.
+
+* ``goto(t)`` with ``t <= frontier`` only reads the history (no filter work);
+* ``goto(t)`` with ``t > frontier`` steps the filter from the frontier to ``t`` and no
+  further, so a step forward costs one filter step, never a re-run;
+* changing the dataset, the mode or the noise settings resets the filter to frame 0.
+
+This module is the model behind :mod:`visla_edu.widgets`; it has no ipywidgets or
+matplotlib dependency, so it can be scripted and tested on its own::
+
+    >>> from visla_edu.stepper import Stepper
+    >>> s = Stepper("sim-tiny", mode="slam")
+    >>> rec = s.goto(12)            # processes frames 0..12
+    >>> s.t, s.frontier, rec.t
+    (12, 12, 12)
+    >>> s.trajectory.shape         # poses 0..t
+    (13, 4, 4)
+    >>> s.goto(3) is s.records[3]  # stepping back reads the history
+    True
+"""
+
+import contextlib
+import time
+from dataclasses import fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from visla_edu import filters, motion, run
+from visla_edu.ekf import FilterConfig
+
+__all__ = [
+    "MODE_LABELS",
+    "NOISE_FIELDS",
+    "Stepper",
+    "dataset_choices",
+    "world_position_covariance",
+    "nis_band",
+]
+
+#: Human-readable names of the filter modes (keys: :data:`visla_edu.run.MODES`).
+MODE_LABELS = {
+    "deadreckon": "dead reckoning (IMU only)",
+    "mapping": "landmark mapping (poses from IMU)",
+    "vio": "visual-inertial odometry",
+    "slam": "SLAM (joint EKF)",
+}
+
+#: The FilterConfig fields the stepper's noise and initialisation controls change (those
+#: this version of FilterConfig has).
+NOISE_FIELDS = tuple(
+    name for name in ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity",
+                      "landmark_prior_sigma", "landmark_prior_inflation", "gate_probability")
+    if name in {f.name for f in fields(FilterConfig)})
+
+#: Simulated drives offered besides what :func:`visla_edu.data.available` lists.
+_EXTRA_SIMULATED = ("sim-small", "sim-tiny")
+
+
+def dataset_choices(data_dir=None):
+    """Dataset names to offer in a menu, each with a label: ``[(label, name), ...]``.
+
+    Everything :func:`visla_edu.data.available` lists (course files found in the data
+    directory, ``"10"`` also as its labelled stand-in, ``"sim"``), then the smaller
+    simulated drives ``"sim-small"`` and ``"sim-tiny"``.
+
+    Parameters
+    ----------
+    data_dir : str or os.PathLike, optional
+        Folder of the course files (default: ``VISLA_EDU_DATA``, see :func:`visla_edu.data.data_dir`).
+
+    Returns
+    -------
+    list of (str, str)
+    """
+    from visla_edu import data
+
+    names = list(data.available(data_dir))
+    names += [n for n in _EXTRA_SIMULATED if n not in names]
+    directory = Path(data.data_dir(data_dir))
+    labels = {
+        "03": "03 (KITTI-360 drive 0003)",
+        "0022": "0022 (KITTI drive 0022, 2019 format)",
+        "10": "10 (KITTI-360 drive 0010)" if (directory / "10.npz").is_file()
+        else "10 (STAND-IN: simulated tracks on its real IMU drive)",
+        "sim": "sim (simulated, ground truth)",
+        "sim-small": "sim-small (simulated, ground truth)",
+        "sim-tiny": "sim-tiny (simulated, 60 frames)",
+    }
+    return [(labels.get(n, n), n) for n in names]
+
+
+def world_position_covariance(world_T_imu, pose_cov):
+    """Covariance of the IMU position in the world frame, shape (3, 3).
+
+    With the right perturbation ``T = mu exp(delta^)``, ``delta = [v; w]``, the position is
+    ``p = p_mu + R_mu v`` to first order, so its covariance is ``R Sigma_vv R^T``.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (4, 4)
+    pose_cov : ndarray, shape (6, 6)
+    """
+    R = np.asarray(world_T_imu)[:3, :3]
+    return R @ np.asarray(pose_cov)[:3, :3] @ R.T
+
+
+def nis_band(dof, probability=0.95):
+    """Two-sided ``probability`` band of ``chi2(dof) / dof`` (what NIS/dof should stay in).
+
+    Parameters
+    ----------
+    dof : int or array_like of int
+        Degrees of freedom; entries ``<= 0`` give NaN.
+    probability : float
+
+    Returns
+    -------
+    lower, upper : ndarray (same shape as ``dof``)
+    """
+    from scipy.stats import chi2
+
+    dof = np.asarray(dof, dtype=float)
+    ok = dof > 0
+    lower = np.full(dof.shape, np.nan)
+    upper = np.full(dof.shape, np.nan)
+    tail = (1 - probability) / 2
+    lower[ok] = chi2.ppf(tail, dof[ok]) / dof[ok]
+    upper[ok] = chi2.ppf(1 - tail, dof[ok]) / dof[ok]
+    return lower, upper
+
+
+_CONTROLLER = []
+
+
+def _blas_threads(n):
+    """Like :func:`visla_edu.run.blas_threads`, with the BLAS libraries looked up only once.
+
+    Looking them up costs ~1.5 ms, as much as a filter step; the stepper enters the limit
+    once per :meth:`Stepper.goto`, so it keeps one controller.
+    """
+    if n is None:
+        return contextlib.nullcontext()
+    if not _CONTROLLER:
+        from threadpoolctl import ThreadpoolController
+
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0].limit(limits=int(n), user_api="blas")
+
+
+class Stepper:
+    """A filter run you can step through: the filter, its history, and the current time.
+
+    Parameters
+    ----------
+    dataset : str or visla_edu.dataset.Dataset
+        A name :func:`visla_edu.data.load` understands (``"sim-tiny"``, ``"03"``, ``"10"``...)
+        or a loaded dataset.
+    mode : {"deadreckon", "mapping", "vio", "slam"}
+    config : FilterConfig, optional
+    data_dir : str or os.PathLike, optional
+        Folder of the course files when ``dataset`` is a name.
+
+    Attributes
+    ----------
+    records : list of StepRecord
+        ``records[k]`` is frame ``k``'s snapshot, for ``k = 0 .. frontier``.
+    filter : filters.DeadReckoning or subclass, or filters.JointSlam
+        The filter object; its state is at the frontier.
+    steps_computed : int
+        Filter steps run since the last reset (each frame is computed once).
+    last_update_seconds : float
+        Wall time of the last :meth:`goto`.
+    generation : int
+        Counts the resets (0 after construction); views redraw their static parts when it changes.
+    """
+
+    def __init__(self, dataset="sim-tiny", mode="slam", config=None, data_dir=None):
+        self.data_dir = data_dir
+        self._cache = {}
+        self._dataset = self._load(dataset)
+        self._mode = self._check_mode(mode)
+        self._config = self._check_config(config)
+        self.last_update_seconds = 0.0
+        self.reset()
+
+    # ------------------------------------------------------------------ configuration
+    @property
+    def dataset(self):
+        """The :class:`~visla_edu.dataset.Dataset` being filtered."""
+        return self._dataset
+
+    @property
+    def mode(self):
+        """The filter mode (one of :data:`visla_edu.run.MODES`)."""
+        return self._mode
+
+    @property
+    def config(self):
+        """The :class:`~visla_edu.ekf.FilterConfig` in use (replace it via :meth:`configure`)."""
+        return self._config
+
+    def configure(self, dataset=None, mode=None, config=None, **settings):
+        """Change the dataset, mode or noise settings; the filter restarts at frame 0.
+
+        Parameters
+        ----------
+        dataset : str or Dataset, optional
+        mode : str, optional
+        config : FilterConfig, optional
+            Replaces the whole configuration.
+        **settings
+            Single :class:`FilterConfig` fields, e.g. ``sigma_pixel=4.0`` (applied after ``config``).
+
+        Returns
+        -------
+        bool
+            True if anything changed (and the filter was reset).
+        """
+        new_dataset = self._dataset if dataset is None else self._load(dataset)
+        new_mode = self._mode if mode is None else self._check_mode(mode)
+        new_config = self._config if config is None else self._check_config(config)
+        if settings:
+            known = {f.name for f in fields(FilterConfig)}
+            unknown = sorted(set(settings) - known)
+            if unknown:
+                raise ValueError(f"Stepper.configure: unknown FilterConfig field(s) {unknown}; known: {sorted(known)}")
+            new_config = replace(new_config, **settings)
+        changed = (new_dataset is not self._dataset or new_mode != self._mode
+                   or new_config.to_dict() != self._config.to_dict())
+        if changed:
+            self._dataset, self._mode, self._config = new_dataset, new_mode, new_config
+            self.reset()
+        return changed
+
+    def reset(self):
+        """Build a fresh filter and forget the history; the time goes back to frame 0."""
+        ds = self._dataset
+        T = ds.num_frames
+        self.filter = run.make_filter(ds, self._mode, self._config)
+        self.generation = getattr(self, "generation", -1) + 1
+        self.records = []
+        self.steps_computed = 0
+        self._poses = np.empty((T, 4, 4))
+        self._nis = np.full(T, np.nan)
+        self._nis_dof = np.zeros(T, dtype=np.int64)
+        self._status_counts = np.zeros((T, len(filters.STATUS_NAMES)), dtype=np.int64)
+        # Landmarks that left the active set: their estimate when they left, and the frame.
+        self._retired_frame = np.full(ds.num_landmarks, np.iinfo(np.int64).max)
+        self._retired_means = np.full((ds.num_landmarks, 3), np.nan)
+        self._retired_order = []  # ids in the order they retired (for "map so far" lookups)
+        self._retired_count = np.zeros(T, dtype=np.int64)  # retired landmarks at each frame
+        self._dead_reckoning = None
+        self._bands = {}
+        self._t = 0
+        self.goto(0)
+
+    # ------------------------------------------------------------------ time
+    @property
+    def num_frames(self):
+        """T, the number of frames of the dataset."""
+        return self._dataset.num_frames
+
+    @property
+    def frontier(self):
+        """The last frame processed by the filter (-1 before the first step)."""
+        return len(self.records) - 1
+
+    @property
+    def t(self):
+        """The current frame."""
+        return self._t
+
+    @t.setter
+    def t(self, value):
+        self.goto(value)
+
+    def goto(self, t):
+        """Move to frame ``t`` and return its record.
+
+        Frames up to the frontier are read from the history; beyond it the filter is stepped
+        from the frontier to ``t`` (only the missing frames are computed).
+
+        Parameters
+        ----------
+        t : int
+            ``0 <= t < num_frames``.
+
+        Returns
+        -------
+        StepRecord
+
+        Raises
+        ------
+        IndexError
+            ``t`` out of range.
+        visla_edu.ekf.FilterDivergedError
+            The filter diverged on the way; the stepper stays at the last good frame.
+        """
+        if isinstance(t, (bool, np.bool_)) or int(t) != t:
+            raise TypeError(f"Stepper.goto: t must be an integer frame index, got {t!r}")
+        t = int(t)
+        if not 0 <= t < self.num_frames:
+            raise IndexError(f"Stepper.goto: frame {t} out of range [0, {self.num_frames}) of {self._dataset.name}")
+        start = time.perf_counter()
+        try:
+            if t > self.frontier:
+                with _blas_threads(self._config.blas_threads):
+                    while self.frontier < t:
+                        self._append(self.filter.step())
+        except Exception:
+            self._t = max(self.frontier, 0)
+            raise
+        finally:
+            self.last_update_seconds = time.perf_counter() - start
+        self._t = t
+        return self.records[t]
+
+    def step(self, n=1):
+        """Move ``n`` frames (negative: back), clipped to the run; return the record."""
+        return self.goto(int(np.clip(self._t + int(n), 0, self.num_frames - 1)))
+
+    def back(self, n=1):
+        """Move ``n`` frames back (clipped at 0); return the record."""
+        return self.step(-int(n))
+
+    def _append(self, rec):
+        self.steps_computed += 1
+        t = rec.t
+        if t != len(self.records):
+            raise RuntimeError(f"Stepper: the filter returned frame {t}, expected {len(self.records)}")
+        self._poses[t] = rec.world_T_imu
+        self._nis[t] = rec.nis
+        self._nis_dof[t] = rec.nis_dof
+        self._status_counts[t] = np.bincount(rec.status, minlength=len(filters.STATUS_NAMES))
+        if self.records:
+            prev = self.records[-1]
+            gone = ~np.isin(prev.active_ids, rec.active_ids, assume_unique=True)
+            if np.any(gone):
+                ids = prev.active_ids[gone]
+                fresh = self._retired_frame[ids] > t  # not retired before (a landmark may come back)
+                self._retired_frame[ids[fresh]] = t
+                self._retired_means[ids[fresh]] = prev.active_means[gone][fresh]
+                self._retired_order.extend(ids[fresh].tolist())
+        self._retired_count[t] = len(self._retired_order)
+        self.records.append(rec)
+
+    # ------------------------------------------------------------------ what views read
+    @property
+    def record(self):
+        """The :class:`~visla_edu.filters.StepRecord` of the current frame."""
+        return self.records[self._t]
+
+    @property
+    def trajectory(self):
+        """Estimated poses of frames ``0..t``, shape (t + 1, 4, 4) (read-only view)."""
+        return self._readonly(self._poses[: self._t + 1])
+
+    @property
+    def nis(self):
+        """NIS of frames ``0..t`` (NaN where there was no update), shape (t + 1,)."""
+        return self._readonly(self._nis[: self._t + 1])
+
+    @property
+    def nis_dof(self):
+        """Degrees of freedom of each NIS value, shape (t + 1,) (0 where there was no update)."""
+        return self._readonly(self._nis_dof[: self._t + 1])
+
+    def nis_band_series(self, probability=0.95):
+        """The ``probability`` band of ``chi2(dof)/dof`` for frames ``0..t``: lower, upper (t + 1,).
+
+        NaN where there was no update. NIS/dof of a consistent filter stays inside it about
+        ``probability`` of the time.
+        """
+        if probability not in self._bands:
+            self._bands[probability] = [0, np.full(self.num_frames, np.nan), np.full(self.num_frames, np.nan)]
+        band = self._bands[probability]
+        done, stop = band[0], self.frontier + 1
+        if stop > done:  # computed once per frame, when first asked for
+            band[1][done:stop], band[2][done:stop] = nis_band(self._nis_dof[done:stop], probability)
+            band[0] = stop
+        return self._readonly(band[1][: self._t + 1]), self._readonly(band[2][: self._t + 1])
+
+    @property
+    def status_counts(self):
+        """Observations per frame by status (:data:`visla_edu.filters.STATUS_NAMES`), (t + 1, 6)."""
+        return self._readonly(self._status_counts[: self._t + 1])
+
+    @property
+    def time_stamps(self):
+        """Seconds since the first frame, shape (T,) (the whole run)."""
+        ts = self._dataset.time_stamps
+        return ts - ts[0]
+
+    @property
+    def ground_truth(self):
+        """The dataset's :class:`~visla_edu.dataset.GroundTruth`, or None (course data)."""
+        return self._dataset.ground_truth
+
+    @property
+    def dead_reckoning(self):
+        """IMU-only trajectory of the whole run, shape (T, 4, 4) (computed once per reset)."""
+        if self._dead_reckoning is None:
+            ds = self._dataset
+            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self._config.imu_lag)
+        return self._dead_reckoning
+
+    def position_covariance(self):
+        """World-frame covariance of the current IMU position, (3, 3): ``R Sigma_vv R^T``."""
+        rec = self.record
+        return world_position_covariance(rec.world_T_imu, rec.pose_cov)
+
+    def retired_landmarks(self):
+        """Landmarks that left the active set by the current frame: ids (k,) and means (k, 3).
+
+        Each keeps the estimate it had in its last active frame; together with the current
+        record's active landmarks this is the map built so far.
+        """
+        ids = np.asarray(self._retired_order[: self._retired_count[self._t]], dtype=np.int64)
+        return ids, self._retired_means[ids]
+
+    def ground_truth_pose(self):
+        """True pose of the current frame, (4, 4), or None."""
+        gt = self.ground_truth
+        return None if gt is None else gt.world_T_imu[self._t]
+
+    def summary(self):
+        """One line about the current frame: time, observations by status, NIS, active set."""
+        rec = self.record
+        counts = self._status_counts[self._t]
+        obs = ", ".join(f"{name} {c}" for name, c in zip(filters.STATUS_NAMES, counts) if c)
+        nis = f"NIS/dof {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof})" if rec.nis_dof else "no update"
+        return (f"t = {self._t} / {self.num_frames - 1} ({self.time_stamps[self._t]:.2f} s): "
+                f"{len(rec.ids)} observations{' (' + obs + ')' if obs else ''}; {nis}; "
+                f"{len(rec.active_ids)} active landmarks")
+
+    # ------------------------------------------------------------------ helpers
+    @staticmethod
+    def _readonly(view):
+        view = view.view()
+        view.flags.writeable = False
+        return view
+
+    def _load(self, dataset):
+        if not isinstance(dataset, str):
+            if not hasattr(dataset, "num_frames") or not hasattr(dataset, "observations"):
+                raise TypeError(f"Stepper: dataset must be a name or a Dataset, got {type(dataset).__name__}")
+            return dataset
+        if dataset not in self._cache:
+            from visla_edu import data
+
+            self._cache[dataset] = data.load(dataset, data_dir=self.data_dir)
+        return self._cache[dataset]
+
+    @staticmethod
+    def _check_mode(mode):
+        if mode not in run.MODES:
+            raise ValueError(f"Stepper: mode must be one of {run.MODES}, got {mode!r}")
+        return mode
+
+    @staticmethod
+    def _check_config(config):
+        if config is None:
+            return FilterConfig()
+        if not isinstance(config, FilterConfig):
+            raise TypeError(f"Stepper: config must be a FilterConfig, got {type(config).__name__}")
+        return config
+
+    def __repr__(self):
+        return (f"Stepper({self._dataset.name!r}, mode={self._mode!r}, t={self._t}, "
+                f"frontier={self.frontier}, frames={self.num_frames})")
