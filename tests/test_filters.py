@@ -435,11 +435,28 @@ def test_non_finite_state_raises_naming_the_frame(tiny, mode, value):
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
-@pytest.mark.parametrize("mode", ["vio", "slam"])
+def test_vio_rejects_an_observation_with_no_finite_distance(tiny):
+    """Even with the gate off, an innovation whose Mahalanobis distance overflows is not used."""
+    obs_z = tiny.obs_z.copy()
+    lo, hi = tiny.frame_ptr[20], tiny.frame_ptr[21]
+    first_frame = tiny.track_spans()[:, 0]
+    index = lo + np.nonzero(first_frame[tiny.obs_ids[lo:hi]] < 15)[0][0]
+    obs_z[index] = [1e200, 0.0, 1e200 - 1e190, 0.0]
+    flt = run.make_filter(_replace(tiny, obs_z=obs_z), "vio",
+                          FilterConfig(extrinsic_correction="none", gate_probability=1.0))
+    records = [flt.step() for _ in range(21)]
+    assert records[20].status[index - lo] == filters.OBS_GATED
+    assert np.all(np.isfinite(records[20].world_T_imu)) and np.all(np.isfinite(records[20].pose_cov))
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("mode", ["slam"])
 def test_absurd_observation_without_gate_raises(tiny, mode):
     obs_z = tiny.obs_z.copy()
-    lo = tiny.frame_ptr[20]
-    obs_z[lo] = [1e200, 0.0, 1e200 - 1e190, 0.0]
+    lo, hi = tiny.frame_ptr[20], tiny.frame_ptr[21]
+    first_frame = tiny.track_spans()[:, 0]
+    seen_before = lo + np.nonzero(first_frame[tiny.obs_ids[lo:hi]] < 15)[0]  # a landmark already mapped
+    obs_z[seen_before[0]] = [1e200, 0.0, 1e200 - 1e190, 0.0]
     bad = _replace(tiny, obs_z=obs_z)
     with pytest.raises(FilterDivergedError, match="frame 20"):
         run.run_filter(bad, mode, FilterConfig(extrinsic_correction="none", gate_probability=1.0))

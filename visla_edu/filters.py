@@ -48,6 +48,9 @@ OBS_FAR = 4  #: disparity too small to initialise the landmark (not yet in the s
 OBS_IGNORED = 5  #: not used by this mode (dead reckoning, landmark stride)
 STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored")
 
+#: A pose farther than this from the start (m) has diverged (no course drive goes near it).
+MAX_DISTANCE = 1e7
+
 #: Landmark estimates closer to the camera than this (m) are not linearised (see ``_gate``).
 MIN_DEPTH = 0.1
 
@@ -202,6 +205,10 @@ class _Filter:
                 raise FilterDivergedError(
                     f"{self.dataset.name}: {what} became non-finite at frame {self.t}; "
                     "check the noise settings and the input velocities")
+        distance = float(np.linalg.norm(self.world_T_imu[:3, 3]))
+        if distance > MAX_DISTANCE:
+            raise FilterDivergedError(
+                f"{self.dataset.name}: the pose diverged at frame {self.t} ({distance:.3g} m from the start)")
         variances = np.diag(self.pose_cov)
         if np.any(variances < 0):
             raise FilterDivergedError(
