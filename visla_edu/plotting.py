@@ -65,12 +65,12 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
                    zorder=1)
     if ground_truth is not None:
         p = ground_truth.world_T_imu[:, :3, 3]
-        ax.plot(p[:, 0], p[:, 1], "k-", lw=1.5, label="ground truth", zorder=2)
+        ax.plot(p[:, 0], p[:, 1], "-", color="0.1", lw=4, alpha=0.35, label="ground truth", zorder=2)
     if reference is not None:
         p = reference[:, :3, 3]
         ax.plot(p[:, 0], p[:, 1], "--", color="C3", lw=1.5, label=reference_label, zorder=3)
     p = world_T_imu[:, :3, 3]
-    ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=2, label=label, zorder=4)
+    ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
     ax.plot(p[0, 0], p[0, 1], "o", color="k", ms=5, zorder=5)
     ax.set_xlabel("x (m, world = first IMU frame)")
     ax.set_ylabel("y (m)")
