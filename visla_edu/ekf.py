@@ -42,18 +42,19 @@ class FilterConfig:
     """Noise, initialisation and gating parameters of every filter mode.
 
     The defaults work without per-dataset tuning on the simulated drives, datasets 03 and
-    0022 and the dataset-10 stand-in. They were chosen from evidence, not guessed:
+    0022 and the dataset-10 stand-in. They were chosen from evidence, not guessed (notebook 07
+    recomputes each figure):
 
     * ``visla-edu info`` measures the IMU noise from second differences of the velocities:
       up to 0.5 m/s and 0.05 rad/s (dataset 0022, the noisiest file), so those are the
-      velocity noise settings. Smaller angular noise (0.02 rad/s) leaves 20% of 0022's and
-      16% of 03's observations outside the gate; with 0.05 rad/s it is 4.4% and 7.5%, and the
-      estimated trajectories stay level (03 ends 1.8 m from its start height after 1.3 km).
-    * Without gating, the Mahalanobis distances on 03 are heavy-tailed (median 1.6, but 3% above
-      100 for a chi-square(4) variable): tracker drift, as the gated share grows with track
-      age (1.8% at the second observation, over 20% after ten frames). So gating stays on.
-    * ``sigma_pixel`` 1.5 puts the median normalised innovation of 03 near its chi-square
-      value; on the simulated drives (1 px noise) it is a little conservative.
+      velocity noise settings. With 0.02 rad/s instead, 13.7% of 03's and 16.1% of 0022's
+      observations fall outside the gate; with 0.05 rad/s, 7.5% and 4.4%, and the 03
+      trajectory ends 3.4 m below its start height after 1.3 km.
+    * The gated share grows with a track's age (tracker drift: about 11% after ten frames on
+      03), and the distances are heavy-tailed (1% of them above 100 for a chi-square(4)
+      variable), so gating stays on.
+    * ``sigma_pixel`` 1.5 gives accepted observations a NIS per degree of freedom of about
+      0.8 on 03 (1.4 at 1 px): slightly conservative, as it should be with drifting tracks.
     * The extrinsic check finds dataset 03's ``imu_T_cam`` axes flipped (rotation slope -0.78,
       +0.83 after the ``flip_yz`` correction), hence ``extrinsic_correction="auto"``.
     * The time-alignment check prefers ``imu_lag=+1`` by only 0.2% (03) and 1% (0022) of

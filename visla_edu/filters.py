@@ -1,18 +1,23 @@
 """The four filter modes as small state machines that advance one frame per ``step()``.
 
 * :class:`DeadReckoning` - IMU prediction only (mean and covariance).
-* :class:`LandmarkMapping` - poses fixed to dead reckoning, one 3x3 EKF per landmark.
-* :class:`VisualInertialOdometry` - pose EKF updated with the mapped landmarks taken as
-  known, then the landmarks updated with the corrected pose (no cross-covariance).
+* :class:`LandmarkMapping` - poses fixed to dead reckoning, one 3x3 EKF per landmark; each
+  observation's noise includes the motion noise accumulated since the landmark's first
+  sighting.
+* :class:`VisualInertialOdometry` - pose EKF against landmarks fixed where they were first
+  triangulated (their covariance includes the pose's uncertainty at that time); only the
+  pose is updated.
 * :class:`JointSlam` - the joint EKF over the pose and the landmarks. By default it keeps
   only the *active set* (landmarks being tracked): a landmark enters at its first usable
-  observation (mean from stereo triangulation, isotropic prior, zero cross-covariance) and is
-  marginalised (its rows and columns deleted) after its last one. With ``dense=True`` it is
-  the textbook filter over all landmarks from the start. Both give the same trajectory: an
-  unobserved landmark is uncorrelated with everything, and marginalising a Gaussian in
-  covariance form is deleting rows and columns. The maps differ in one way: in the dense
-  filter a retired landmark keeps moving through its correlation with the pose, in the
-  active set it keeps the estimate it had when it left.
+  observation, which it consumes (mean from stereo triangulation; covariance from the pixels
+  and, through ``G_pose``, from the pose, with the matching cross-covariance to the rest of
+  the state), and is marginalised (its rows and columns deleted) after its last one. With
+  ``dense=True`` it is the textbook filter over all landmarks from the start. Both give the
+  same trajectory: a landmark not yet observed is uncorrelated with everything (its rows are
+  filled at its first observation exactly as the active set appends them), and marginalising
+  a Gaussian in covariance form is deleting rows and columns. The maps differ in one way: in
+  the dense filter a retired landmark keeps moving through its correlation with the pose, in
+  the active set it keeps the estimate it had when it left.
 
 Each ``step()`` returns a :class:`StepRecord` (what the widgets and metrics read).
 """
