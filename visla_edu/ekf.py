@@ -393,9 +393,10 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
     lm_cols = (6 + 3 * np.asarray(obs_slots)[:, None] + np.arange(3)).ravel()
     D = Sigma.shape[0]
     Sigma_lm = Sigma[:, lm_cols].reshape(D, k, 3)
-    Sigma_Ht = Sigma[:, :6] @ J_pose3.T + np.einsum("dkj,kij->dki", Sigma_lm, J_lm3).reshape(D, 3 * k)
-    S = J_pose3 @ Sigma_Ht[:6] + np.einsum("kij,kjm->kim", J_lm3, Sigma_Ht[lm_cols].reshape(k, 3, 3 * k)).reshape(
-        3 * k, 3 * k)
+    # per observation i: Sigma[:, cols_i] @ J_lm3_i^T, batched as matmuls (einsum is 10x slower here)
+    lm_part = (Sigma_lm.transpose(1, 0, 2) @ J_lm3.transpose(0, 2, 1)).transpose(1, 0, 2)
+    Sigma_Ht = Sigma[:, :6] @ J_pose3.T + lm_part.reshape(D, 3 * k)
+    S = J_pose3 @ Sigma_Ht[:6] + (J_lm3 @ Sigma_Ht[lm_cols].reshape(k, 3, 3 * k)).reshape(3 * k, 3 * k)
     S[np.diag_indices(3 * k)] += noise_var
     delta, nis = _gain_update(Sigma, Sigma_Ht, S, (r4 @ STEREO_ROWS.T).ravel())
     nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
