@@ -350,7 +350,7 @@ def pose_update(world_T_imu, Sigma_pose, p_world, z, camera, noise_var, Sigma_la
 STEREO_ROWS = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)], [0.0, 0.0, 1.0, 0.0]])
 
 
-def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
+def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, prediction=None):
     """Joint EKF update of the pose and all landmarks in the state, covariance in place.
 
     The state is ``[pose perturbation (6); landmark slot 0 (3); slot 1 (3); ...]``. The
@@ -378,6 +378,10 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
     camera : visla_edu.camera.StereoCamera
     noise_var : float
 
+    prediction : tuple of ndarray, optional
+        ``camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])`` if already computed
+        (the filter has it from gating).
+
     Returns
     -------
     world_T_imu_new : ndarray, shape (4, 4)
@@ -386,7 +390,9 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var):
         ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
     """
     k = len(obs_slots)
-    z_pred, J_landmark, J_pose = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
+    if prediction is None:
+        prediction = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
+    z_pred, J_landmark, J_pose = prediction
     r4 = z - z_pred
     J_pose3 = (STEREO_ROWS @ J_pose).reshape(3 * k, 6)  # (m, 6), m = 3k
     J_lm3 = STEREO_ROWS @ J_landmark  # (k, 3, 3)

@@ -406,7 +406,7 @@ class JointSlam(_Filter):
             try:
                 self.world_T_imu, self.landmarks[self.active_ids], nis = ekf.joint_update(
                     self.Sigma, self.world_T_imu, self.landmarks[self.active_ids], self.slot_of[ids[use]],
-                    z[use], self.camera, self.noise_var)
+                    z[use], self.camera, self.noise_var, prediction=self._prediction(known, use))
             except np.linalg.LinAlgError as err:
                 raise FilterDivergedError(
                     f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t} "
@@ -434,6 +434,12 @@ class JointSlam(_Filter):
         where = np.nonzero(known)[0]
         status[where[inside]] = OBS_USED
         status[where[~inside]] = OBS_GATED
+        self._known_prediction = (pred, J_landmark, J_pose)
+
+    def _prediction(self, known, use):
+        """The gate's predictions and Jacobians restricted to the observations in use."""
+        keep = use[known]
+        return tuple(a[keep] for a in self._known_prediction)
 
     def _enter(self, new_ids):
         """Append slots for new landmarks (zero rows and columns, filled by :meth:`_augment`)."""
