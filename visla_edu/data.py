@@ -870,6 +870,11 @@ def _mean_min_max(values):
     return {"mean": float(np.mean(values)), "min": float(np.min(values)), "max": float(np.max(values))}
 
 
+def _shorten(text, limit=160):
+    """``text`` cut to ``limit`` characters (a simulated drive's source lists its whole config)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def format_summary(dataset):
     """The readable text of :func:`summarize` (what ``visla-edu info DATASET`` prints).
 
@@ -882,7 +887,7 @@ def format_summary(dataset):
     str
     """
     s = summarize(dataset)
-    lines = [f"{s['name']}: {s['label']}" if s["label"] else s["name"], f"  source        {s['source']}"]
+    lines = [f"{s['name']}: {s['label']}" if s["label"] else s["name"], f"  source        {_shorten(s['source'])}"]
     lines += _time_lines(s) + _observation_lines(s) + _track_lines(s) + _disparity_lines(s)
     lines += _motion_lines(s)
     return "\n".join(lines)
