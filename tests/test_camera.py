@@ -13,6 +13,7 @@ import pytest
 
 from visla_edu import camera, lie
 from visla_edu.camera import StereoCamera
+from fdiff import fd_jacobian  # tests/fdiff.py
 
 FSU, FSV, CU, CV, B = 550.0, 550.0, 680.0, 240.0, 0.6
 K = np.array([[FSU, 0.0, CU], [0.0, FSV, CV], [0.0, 0.0, 1.0]])
@@ -30,15 +31,6 @@ def cam():
     return StereoCamera(K, B, IMU_T_CAM)
 
 
-def fd_jacobian(f, x, h):
-    """Five-point central difference ``df/dx``; output shape ``f(x).shape + (len(x),)``."""
-    x = np.asarray(x, float)
-    cols = []
-    for i in range(x.size):
-        e = np.zeros_like(x)
-        e[i] = h
-        cols.append((f(x - 2 * e) - 8 * f(x - e) + 8 * f(x + e) - f(x + 2 * e)) / (12 * h))
-    return np.stack(cols, axis=-1)
 
 
 def rel(a, b):

@@ -18,6 +18,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
 from visla_edu import lie
+from fdiff import fd_jacobian  # tests/fdiff.py
 
 TOL = 1e-9
 PI = np.pi
@@ -83,15 +84,6 @@ def assert_in_se3(T, tol=1e-12):
     assert np.array_equal(T[..., 3, :], np.broadcast_to([0.0, 0.0, 0.0, 1.0], T.shape[:-2] + (4,)))
 
 
-def fd_jacobian(f, x, h):
-    """Five-point central difference ``df/dx``; output shape ``f(x).shape + (len(x),)``."""
-    x = np.asarray(x, float)
-    cols = []
-    for i in range(x.size):
-        e = np.zeros_like(x)
-        e[i] = h
-        cols.append((f(x - 2 * e) - 8 * f(x - e) + 8 * f(x + e) - f(x + 2 * e)) / (12 * h))
-    return np.stack(cols, axis=-1)
 
 
 def random_pose(rng, angle=None, scale=5.0):
