@@ -522,3 +522,50 @@ def test_slam_nees_within_bounds_when_triangulation_is_nearly_linear():
     lo, hi = metrics.average_nees_bounds(6, len(final))
     assert lo < final.mean() < hi, (final.mean(), lo, hi)
     assert 0.9 < nis_per_dof < 1.1, nis_per_dof
+
+
+# ----------------------------------------------------------- comparison switches of FilterConfig
+
+
+def test_landmark_cross_covariance_switch(tiny):
+    """True: a new landmark's rows are G_pose Sigma_pose,x; False: zero (the textbook shortcut)."""
+    for correlated in (True, False):
+        flt = run.make_filter(tiny, "slam", FilterConfig(extrinsic_correction="none",
+                                                         landmark_cross_covariance=correlated))
+        entered = []
+        while not entered:
+            before = set(flt.active_ids.tolist())
+            rec = flt.step()
+            entered = [lm for lm in rec.ids[rec.status == filters.OBS_NEW] if lm not in before]
+            if rec.t == 0:
+                entered = []  # the pose is exactly known at frame 0: every cross-covariance is zero
+        cols = 6 + 3 * flt.slot_of[entered[0]] + np.arange(3)
+        cross = flt.Sigma[np.ix_(cols, np.arange(6))]
+        if correlated:
+            assert np.abs(cross).max() > 1e-9
+        else:
+            np.testing.assert_array_equal(cross, 0.0)
+
+
+def test_mapping_motion_noise_switch_widens_the_gate():
+    ds = simulate.simulate_drive("small", 0)
+    gated = [run.run_filter(ds, "mapping", FilterConfig(mapping_motion_noise=widen)).status_totals()["gated"]
+             for widen in (True, False)]
+    assert gated[0] * 5 < gated[1], gated
+
+
+def test_vio_refine_landmarks_switch(tiny):
+    """By default VIO keeps landmarks where they were triangulated; the switch re-estimates them."""
+    first = {}
+    results = {}
+    for refine in (False, True):
+        flt = run.make_filter(tiny, "vio", FilterConfig(extrinsic_correction="none", vio_refine_landmarks=refine))
+        while not flt.done:
+            rec = flt.step()
+            for lm in rec.ids[rec.status == filters.OBS_NEW]:
+                first.setdefault(refine, {})[lm] = flt.landmarks[lm].copy()
+        results[refine] = flt.landmarks
+    fixed = np.array([results[False][lm] - p for lm, p in first[False].items()])
+    moved = np.array([results[True][lm] - p for lm, p in first[True].items()])
+    np.testing.assert_array_equal(fixed, 0.0)
+    assert np.abs(moved).max() > 1e-3

@@ -99,6 +99,16 @@ class FilterConfig:
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
         finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
         of a correction (``"flip_yz"``, ...), see :data:`visla_edu.diagnostics.CORRECTIONS`.
+    landmark_cross_covariance : bool
+        Joint SLAM: a new landmark enters correlated with the state (``G_pose Sigma_pose,x``).
+        False is the textbook shortcut (pixel covariance only, no correlation), which makes
+        the filter overconfident; kept for comparison.
+    mapping_motion_noise : bool
+        Mapping: widen each observation's noise by the dead-reckoning motion noise since the
+        landmark's first sighting. False takes the dead-reckoned poses as exact.
+    vio_refine_landmarks : bool
+        VIO: also update the landmarks with the observations that just corrected the pose.
+        This counts each observation twice (kept for comparison; off by default).
     skip_repeated_frames : bool
         Make no update at frames whose observations exactly repeat the previous frame's
         (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
@@ -120,6 +130,9 @@ class FilterConfig:
     min_init_disparity: float = 3.0
     imu_lag: int = 0
     extrinsic_correction: str = "auto"
+    landmark_cross_covariance: bool = True
+    mapping_motion_noise: bool = True
+    vio_refine_landmarks: bool = False
     skip_repeated_frames: bool = True
     landmark_stride: int = 1
     blas_threads: int = 1

@@ -310,6 +310,8 @@ class LandmarkMapping(DeadReckoning):
         return accepted, float(d2[inside].sum()), 4 * int(inside.sum())
 
     def _pose_noise(self, lm, J_pose):
+        if not self.config.mapping_motion_noise:
+            return np.zeros((len(lm), 4, 4))
         return self._relative_motion_noise(lm, J_pose)
 
     def _add_new(self, ids, z, status, candidates, Sigma_pose=None):
@@ -346,6 +348,11 @@ class VisualInertialOdometry(LandmarkMapping):
                 raise FilterDivergedError(
                     f"{self.dataset.name}: innovation covariance not positive definite at frame {self.t}: {err}"
                 ) from err
+            if self.config.vio_refine_landmarks:
+                lm = ids[accepted]
+                self.landmarks[lm], self.landmark_cov[lm] = ekf.landmark_update(
+                    self.landmarks[lm], self.landmark_cov[lm], z[accepted], self.world_T_imu, self.camera,
+                    self.noise_var)
         self._add_new(ids, z, status, usable & ~known, Sigma_pose=self.pose_cov)
         return nis, dof
 
@@ -461,6 +468,8 @@ class JointSlam(_Filter):
         """
         k = len(new_ids)
         cols = (6 + 3 * self.slot_of[new_ids][:, None] + np.arange(3)).ravel()
+        if not self.config.landmark_cross_covariance:  # the textbook shortcut, for comparison
+            G_pose = np.zeros_like(G_pose)
         G = G_pose.reshape(3 * k, 6)
         cross = G @ self.Sigma[:6]  # (3k, D)
         self.Sigma[cols] = cross
