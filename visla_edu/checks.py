@@ -217,6 +217,11 @@ def _rig():
     return default_rig()
 
 
+def _camera():
+    """The :class:`~visla_edu.camera.StereoCamera` of :func:`_rig`."""
+    return cam.StereoCamera(*_rig())
+
+
 def _points_in_view(rng, world_T_imu, imu_T_cam, n, depth=(2.0, 60.0)):
     """World points the left camera sees at depths in ``depth`` (m)."""
     d = rng.uniform(*depth, size=n)
@@ -486,9 +491,7 @@ def check_stereo_matrix(stereo_matrix):
 def check_project(project):
     """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``."""
     name = "project"
-    rng = _rng()
-    K, b, imu_T_cam = _rig()
-    rig = cam.StereoCamera(K, b, imu_T_cam)
+    rng, (K, b, imu_T_cam), rig = _rng(), _rig(), _camera()
     for trial in range(4):
         world_T_imu = np.eye(4) if trial == 0 else _random_pose(rng)
         p_world = _points_in_view(rng, world_T_imu, imu_T_cam, 12, depth=(2.0, 300.0 if trial == 3 else 60.0))
@@ -624,9 +627,7 @@ def _pose_jacobian_left(rig, mu, m):
 def check_pose_jacobian(pose_jacobian):
     """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``."""
     name = "pose_jacobian"
-    rng = _rng()
-    K, b, imu_T_cam = _rig()
-    rig = cam.StereoCamera(K, b, imu_T_cam)
+    rng, (K, b, imu_T_cam), rig = _rng(), _rig(), _camera()
     for trial in range(4):
         mu = np.eye(4) if trial == 0 else _random_pose(rng)
         m = _points_in_view(rng, mu, imu_T_cam, 1)[0]
@@ -650,9 +651,7 @@ def check_pose_jacobian(pose_jacobian):
 def check_landmark_jacobian(landmark_jacobian):
     """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``."""
     name = "landmark_jacobian"
-    rng = _rng()
-    K, b, imu_T_cam = _rig()
-    rig = cam.StereoCamera(K, b, imu_T_cam)
+    rng, (K, b, imu_T_cam), rig = _rng(), _rig(), _camera()
     for trial in range(4):
         T = np.eye(4) if trial == 0 else _random_pose(rng)
         m = _points_in_view(rng, T, imu_T_cam, 1)[0]
@@ -676,9 +675,7 @@ def check_landmark_jacobian(landmark_jacobian):
 def check_init_landmark(init_landmark):
     """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point."""
     name = "init_landmark"
-    rng = _rng()
-    K, b, imu_T_cam = _rig()
-    rig = cam.StereoCamera(K, b, imu_T_cam)
+    rng, (K, b, imu_T_cam), rig = _rng(), _rig(), _camera()
     for trial in range(4):
         T = np.eye(4) if trial == 0 else _random_pose(rng)
         m = _points_in_view(rng, T, imu_T_cam, 1)[0]
@@ -701,9 +698,7 @@ def check_init_landmark(init_landmark):
 def check_landmark_update(landmark_update):
     """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``."""
     name = "landmark_update"
-    rng = _rng()
-    K, b, imu_T_cam = _rig()
-    rig = cam.StereoCamera(K, b, imu_T_cam)
+    rng, (K, b, imu_T_cam), rig = _rng(), _rig(), _camera()
     for trial in range(4):
         T = _random_pose(rng)
         m_true = _points_in_view(rng, T, imu_T_cam, 1, depth=(4.0, 40.0))[0]
@@ -801,9 +796,7 @@ def _pose_update_reference(mu, Sigma, z, p_world, rig, noise_var, side="right", 
 def check_pose_update(pose_update):
     """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``."""
     name = "pose_update"
-    rng = _rng()
-    K, b, imu_T_cam = _rig()
-    rig = cam.StereoCamera(K, b, imu_T_cam)
+    rng, (K, b, imu_T_cam), rig = _rng(), _rig(), _camera()
     for trial in range(3):
         T_true = _random_pose(rng)
         p_world = _points_in_view(rng, T_true, imu_T_cam, 8, depth=(4.0, 40.0))
