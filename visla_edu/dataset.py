@@ -12,7 +12,7 @@ import numpy as np
 
 from visla_edu.camera import StereoCamera
 
-__all__ = ["Dataset", "GroundTruth"]
+__all__ = ["Dataset", "GroundTruth", "repeated_frames"]
 
 
 @dataclass
@@ -201,3 +201,29 @@ class Dataset:
             obs_z=obs_z,
             **fields,
         )
+
+
+def repeated_frames(dataset):
+    """Frames whose observations repeat the previous frame's exactly (same ids and pixels).
+
+    A repeated frame usually means the camera frame was duplicated while the IMU kept
+    going: the filter then sees the landmarks "move" with the vehicle.
+
+    Parameters
+    ----------
+    dataset : Dataset
+
+    Returns
+    -------
+    list of int
+        Frame indices ``t >= 1`` with at least one observation, equal to frame ``t - 1``.
+    """
+    counts = np.diff(dataset.frame_ptr)
+    candidates = np.flatnonzero((counts[1:] == counts[:-1]) & (counts[1:] > 0)) + 1
+    repeats = []
+    for t in candidates:
+        ids_prev, z_prev = dataset.observations(int(t) - 1)
+        ids, z = dataset.observations(int(t))
+        if np.array_equal(ids, ids_prev) and np.array_equal(z, z_prev):
+            repeats.append(int(t))
+    return repeats

@@ -11,7 +11,7 @@ integrated motion ``exp(tau u)`` reveals
 * a gyro bias: :func:`imu_noise_and_bias`.
 
 The data alone also shows frames whose features exactly repeat the previous frame
-(:func:`visla_edu.data.repeated_frames`) and stereo matches that break the rectified geometry
+(:func:`visla_edu.dataset.repeated_frames`) and stereo matches that break the rectified geometry
 (:func:`outlier_indicators`). :func:`diagnose` runs them all and formats a report.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from visla_edu import lie
 from visla_edu.camera import triangulate_disparity
-from visla_edu.data import repeated_frames
+from visla_edu.dataset import repeated_frames
 
 __all__ = [
     "CORRECTIONS",

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from visla_edu import ekf, lie, motion
-from visla_edu.data import repeated_frames
+from visla_edu.dataset import repeated_frames
 from visla_edu.ekf import FilterDivergedError
 
 __all__ = [
