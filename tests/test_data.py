@@ -15,7 +15,7 @@ import pytest
 
 import visla_edu
 from visla_edu import data, lie
-from visla_edu.dataset import Dataset, GroundTruth
+from visla_edu.dataset import Dataset, GroundTruth, frame_major_order
 
 T, M = 12, 9
 
@@ -107,6 +107,22 @@ def test_sparse_store_equals_dense_input(tmp_path, monkeypatch, rows_per_chunk):
 
 
 _OTHER_FIELDS = ("name", "source", "time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam")
+
+
+def test_frame_major_order_sorts_by_frame_then_id():
+    rng = np.random.default_rng(7)
+    pairs = rng.permutation([(m, t) for m in range(6) for t in range(5) if rng.random() < 0.6])
+    ids, frames = pairs[:, 0], pairs[:, 1]
+    order, frame_ptr = frame_major_order(ids, frames, 7)  # frames 5 and 6 have no observations
+    assert [tuple(p) for p in zip(frames[order], ids[order])] == sorted(zip(frames, ids))
+    np.testing.assert_array_equal(np.diff(frame_ptr), np.bincount(frames, minlength=7))
+    assert frame_ptr[0] == 0 and frame_ptr.dtype == np.int64
+    with pytest.raises(ValueError, match=r"frames must lie in \[0, 4\)"):
+        frame_major_order(ids, frames, 4)
+    with pytest.raises(ValueError, match="same shape"):
+        frame_major_order(ids, frames[:-1], 7)
+
+
 
 
 @pytest.mark.parametrize(
