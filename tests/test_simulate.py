@@ -23,6 +23,7 @@ from visla_edu.simulate import (
     default_rig,
     make_config,
     place_landmarks,
+    simulate_along_drive,
     simulate_drive,
     simulate_tracks,
 )
@@ -492,3 +493,30 @@ def test_standin_input_errors(tmp_path):
         standin_dataset10(not_npz, calib_path)
     with pytest.raises(ValueError, match="num_frames"):
         standin_dataset10(imu_path, calib_path, num_frames=10)
+
+
+def test_standin_calibration_is_checked_like_a_course_file(tmp_path):
+    imu_path, _, _ = _fake_inputs(tmp_path, T=20)
+    K, b, imu_T_cam = default_rig()
+    cases = {
+        "lower_K": (dict(K=K + np.tril(np.ones((3, 3)), -1), b=b, imu_T_cam=imu_T_cam), "'K' must be upper triangular"),
+        "reflection": (dict(K=K, b=b, imu_T_cam=imu_T_cam @ np.diag([-1.0, 1, 1, 1])), "'imu_T_cam' is not a rigid"),
+        "string_b": (dict(K=K, b="0.6", imu_T_cam=imu_T_cam), "'b' must hold real numbers"),
+        "zero_b": (dict(K=K, b=0.0, imu_T_cam=imu_T_cam), "'b' .* must be positive"),
+    }
+    for name, (arrays, message) in cases.items():
+        np.savez(tmp_path / f"{name}.npz", **arrays)
+        with pytest.raises(ValueError, match=f"{name}.npz: key {message}"):
+            standin_dataset10(imu_path, tmp_path / f"{name}.npz")
+    np.savez(tmp_path / "b_as_vector.npz", K=K, b=[b], imu_T_cam=imu_T_cam)  # accepted, as before
+    d = standin_dataset10(imu_path, tmp_path / "b_as_vector.npz", num_landmarks=20)
+    assert d.b == b
+
+
+def test_simulate_along_drive_checks_the_drive():
+    config, rig = make_config("tiny"), default_rig()
+    t, v = np.arange(5) * 0.1, np.zeros((5, 3))
+    with pytest.raises(ValueError, match=r"angular_velocity must be finite with shape \(5, 3\)"):
+        simulate_along_drive(t, v, np.zeros((4, 3)), config, rig, name="x", source="test")
+    with pytest.raises(ValueError, match="time_stamps must be strictly increasing"):
+        simulate_along_drive(t[::-1], v, v, config, rig, name="x", source="test")
