@@ -1,5 +1,8 @@
-"""Whole simulated drives: :func:`simulate_drive` (invented motion) and
-:func:`simulate_along_drive` (a given true motion, e.g. a real IMU drive)."""
+"""Whole simulated drives with ground truth.
+
+:func:`simulate_drive` invents the motion; :func:`simulate_along_drive` takes a given true
+motion (e.g. a real IMU drive). Both place landmarks, simulate tracks and add IMU noise.
+"""
 
 import math
 

@@ -17,6 +17,7 @@ def scene_change(world_T_imu, time_stamps, config):
 
 
 def default_time_stamps(time_stamps, T, config):
+    """``time_stamps`` checked to have shape (T,), or uniform steps of ``config.time_step`` if None."""
     if time_stamps is None:
         return config.time_step * np.arange(T)
     stamps = np.asarray(time_stamps, dtype=float)
@@ -103,6 +104,7 @@ def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):
 
 
 def check_poses(world_T_imu, where):
+    """``world_T_imu`` as a float array of shape (T, 4, 4), T >= 2; ``where`` names the caller."""
     poses = np.asarray(world_T_imu, dtype=float)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) < 2:
         raise ValueError(f"{where}: world_T_imu must have shape (T, 4, 4) with T >= 2, got {poses.shape}")
