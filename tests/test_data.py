@@ -15,7 +15,8 @@ import pytest
 
 import visla_edu
 from visla_edu import data, lie
-from visla_edu.dataset import Dataset, GroundTruth
+from visla_edu.data import _features, _npz, _standin
+from visla_edu.dataset import Dataset, GroundTruth, frame_major_order
 
 T, M = 12, 9
 
@@ -96,7 +97,7 @@ def test_arrays_are_time_major(tmp_path):
 @pytest.mark.parametrize("rows_per_chunk", [None, 1, 2, 4])
 def test_sparse_store_equals_dense_input(tmp_path, monkeypatch, rows_per_chunk):
     if rows_per_chunk is not None:
-        monkeypatch.setattr(data, "_CHUNK_BYTES", rows_per_chunk * T * 8)
+        monkeypatch.setattr(_features, "_CHUNK_BYTES", rows_per_chunk * T * 8)
     arrays = course_dict(seed=3)
     ds = data.load(write(tmp_path, arrays))
     np.testing.assert_array_equal(ds.to_dense_features(), arrays["features"])
@@ -107,6 +108,20 @@ def test_sparse_store_equals_dense_input(tmp_path, monkeypatch, rows_per_chunk):
 
 
 _OTHER_FIELDS = ("name", "source", "time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam")
+
+
+def test_frame_major_order_sorts_by_frame_then_id():
+    rng = np.random.default_rng(7)
+    pairs = rng.permutation([(m, t) for m in range(6) for t in range(5) if rng.random() < 0.6])
+    ids, frames = pairs[:, 0], pairs[:, 1]
+    order, frame_ptr = frame_major_order(ids, frames, 7)  # frames 5 and 6 have no observations
+    assert [tuple(p) for p in zip(frames[order], ids[order])] == sorted(zip(frames, ids))
+    np.testing.assert_array_equal(np.diff(frame_ptr), np.bincount(frames, minlength=7))
+    assert frame_ptr[0] == 0 and frame_ptr.dtype == np.int64
+    with pytest.raises(ValueError, match=r"frames must lie in \[0, 4\)"):
+        frame_major_order(ids, frames, 4)
+    with pytest.raises(ValueError, match="same shape"):
+        frame_major_order(ids, frames[:-1], 7)
 
 
 @pytest.mark.parametrize(
@@ -142,7 +157,7 @@ def test_source_name_and_unknown_label(tmp_path):
 
 def test_known_file_recognised_by_sha256(tmp_path, monkeypatch):
     path = write(tmp_path, course_dict(), "renamed.npz")
-    sha = data._sha256(path)
+    sha = _npz.file_sha256(path)
     entry = {"sha256": sha, "format": "2021+", "description": "dataset 99: a test drive"}
     monkeypatch.setitem(data.REGISTRY, "99", entry)
     ds = data.load(path)
@@ -285,7 +300,7 @@ def test_bad_2019_file_raises_a_clear_value_error(tmp_path, change, message):
 
 
 def test_partial_observation_found_in_a_later_chunk(tmp_path, monkeypatch):
-    monkeypatch.setattr(data, "_CHUNK_BYTES", 2 * T * 8)
+    monkeypatch.setattr(_features, "_CHUNK_BYTES", 2 * T * 8)
     arrays = course_dict()
     m, t = observed_entry(arrays["features"], skip=-1)
     arrays["features"][3, m, t] = -1
@@ -430,7 +445,7 @@ def test_bad_names(tmp_path):
 
 @pytest.fixture
 def fake_simulate(monkeypatch):
-    """A stand-in for visla_edu.simulate that records its calls."""
+    """Stand-ins for visla_edu.simulate and the dataset-10 stand-in builder that record their calls."""
     calls = []
     module = types.ModuleType("visla_edu.simulate")
     module.simulate_drive = lambda **kw: calls.append(("simulate_drive", kw)) or "drive"
@@ -438,7 +453,7 @@ def fake_simulate(monkeypatch):
         calls.append(("standin_dataset10", args))
         return types.SimpleNamespace(imu_T_cam=kwargs["imu_T_cam"], extra={}, name="standin")
 
-    module.standin_dataset10 = standin_dataset10
+    monkeypatch.setattr(_standin, "standin_dataset10", standin_dataset10)
     monkeypatch.setitem(sys.modules, "visla_edu.simulate", module)
     monkeypatch.setattr(visla_edu, "simulate", module, raising=False)
     return calls

@@ -1,7 +1,8 @@
-"""Tests of visla_edu.simulate: determinism, ground truth, track model, noise, scale, stand-in.
+"""Tests of visla_edu.simulate (determinism, ground truth, track model, noise, scale) and of the
+dataset-10 stand-in built with it (visla_edu.data.standin_dataset10).
 
-The stand-in tests need the course data (``VISLA_EDU_DATA``, e.g. ``/work/shared/data``)
-and are skipped with a reason otherwise.
+The stand-in tests on the real drive need the course data (``VISLA_EDU_DATA``, e.g.
+``/work/shared/data``) and are skipped with a reason otherwise.
 """
 
 import os
@@ -14,17 +15,17 @@ from hypothesis import strategies as st
 
 from visla_edu import lie
 from visla_edu.camera import StereoCamera
+from visla_edu.data import STANDIN_LABEL, standin_dataset10
+from visla_edu.motion import dead_reckon
 from visla_edu.simulate import (
     PRESETS,
-    STANDIN_LABEL,
     SimulationConfig,
     default_rig,
-    integrate_poses,
     make_config,
     place_landmarks,
+    simulate_along_drive,
     simulate_drive,
     simulate_tracks,
-    standin_dataset10,
 )
 
 NOISE_FREE = dict(pixel_sigma=0.0, outlier_share=0.0, nonpositive_disparity_share=0.0,
@@ -161,11 +162,11 @@ def test_true_velocities_integrate_to_true_poses(small):
         np.testing.assert_allclose(g.world_T_imu[k + 1], pose, rtol=0, atol=1e-9)
 
 
-def test_integrate_poses_matches_stepwise_exp():
+def test_dead_reckoned_velocities_match_stepwise_exp():
     rng = np.random.default_rng(0)
     t = np.cumsum(rng.uniform(0.05, 0.15, 20))
     v, w = rng.normal(size=(20, 3)), 0.3 * rng.normal(size=(20, 3))
-    poses = integrate_poses(t, v, w)
+    poses = dead_reckon(t, np.hstack([v, w]))
     for k in range(19):
         step = lie.se3_exp((t[k + 1] - t[k]) * np.concatenate([v[k], w[k]]))
         np.testing.assert_allclose(poses[k + 1], poses[k] @ step, atol=1e-12)
@@ -418,7 +419,7 @@ def test_standin_ground_truth_and_noise(standin):
     d = standin
     g = d.ground_truth
     np.testing.assert_allclose(
-        g.world_T_imu, integrate_poses(d.time_stamps, g.linear_velocity, g.angular_velocity), atol=1e-12)
+        g.world_T_imu, dead_reckon(d.time_stamps, np.hstack([g.linear_velocity, g.angular_velocity])), atol=1e-12)
     np.testing.assert_allclose((d.linear_velocity - g.linear_velocity).std(), 0.2, rtol=0.05)
     gyro_error = d.angular_velocity - g.angular_velocity
     np.testing.assert_allclose(gyro_error.mean(axis=0), d.extra["level_gyro_bias"], atol=3e-4)
@@ -455,7 +456,7 @@ def test_standin_pipeline_on_synthetic_files(tmp_path):
     np.testing.assert_array_equal(d.time_stamps, drive.time_stamps)
     bias = np.array(d.extra["level_gyro_bias"])
     g = drive.ground_truth
-    expected = integrate_poses(drive.time_stamps, g.linear_velocity, g.angular_velocity - bias)
+    expected = dead_reckon(drive.time_stamps, np.hstack([g.linear_velocity, g.angular_velocity - bias]))
     np.testing.assert_allclose(d.ground_truth.world_T_imu, expected, atol=1e-12)
     assert 250 <= d.num_landmarks <= 300
     _assert_valid_store(d)
@@ -492,3 +493,30 @@ def test_standin_input_errors(tmp_path):
         standin_dataset10(not_npz, calib_path)
     with pytest.raises(ValueError, match="num_frames"):
         standin_dataset10(imu_path, calib_path, num_frames=10)
+
+
+def test_standin_calibration_is_checked_like_a_course_file(tmp_path):
+    imu_path, _, _ = _fake_inputs(tmp_path, T=20)
+    K, b, imu_T_cam = default_rig()
+    cases = {
+        "lower_K": (dict(K=K + np.tril(np.ones((3, 3)), -1), b=b, imu_T_cam=imu_T_cam), "'K' must be upper triangular"),
+        "reflection": (dict(K=K, b=b, imu_T_cam=imu_T_cam @ np.diag([-1.0, 1, 1, 1])), "'imu_T_cam' is not a rigid"),
+        "string_b": (dict(K=K, b="0.6", imu_T_cam=imu_T_cam), "'b' must hold real numbers"),
+        "zero_b": (dict(K=K, b=0.0, imu_T_cam=imu_T_cam), "'b' .* must be positive"),
+    }
+    for name, (arrays, message) in cases.items():
+        np.savez(tmp_path / f"{name}.npz", **arrays)
+        with pytest.raises(ValueError, match=f"{name}.npz: key {message}"):
+            standin_dataset10(imu_path, tmp_path / f"{name}.npz")
+    np.savez(tmp_path / "b_as_vector.npz", K=K, b=[b], imu_T_cam=imu_T_cam)  # accepted, as before
+    d = standin_dataset10(imu_path, tmp_path / "b_as_vector.npz", num_landmarks=20)
+    assert d.b == b
+
+
+def test_simulate_along_drive_checks_the_drive():
+    config, rig = make_config("tiny"), default_rig()
+    t, v = np.arange(5) * 0.1, np.zeros((5, 3))
+    with pytest.raises(ValueError, match=r"angular_velocity must be finite with shape \(5, 3\)"):
+        simulate_along_drive(t, v, np.zeros((4, 3)), config, rig, name="x", source="test")
+    with pytest.raises(ValueError, match="time_stamps must be strictly increasing"):
+        simulate_along_drive(t[::-1], v, v, config, rig, name="x", source="test")

@@ -4,6 +4,8 @@ Observations are stored sparse and frame-major (compressed sparse rows over fram
 frame ``t`` owns entries ``frame_ptr[t]:frame_ptr[t + 1]`` of ``obs_ids`` (landmark
 indices, increasing within a frame) and ``obs_z`` (pixels ``[uL, vL, uR, vR]``). About 1% of
 the course files' dense ``(4, M, T)`` array is valid, so this is ~100x smaller.
+:func:`frame_major_order` builds that layout from observations in any order (the loader, the
+simulator and :meth:`Dataset.from_dense` all use it).
 """
 
 from dataclasses import dataclass, field
@@ -12,7 +14,7 @@ import numpy as np
 
 from visla_edu.camera import StereoCamera
 
-__all__ = ["Dataset", "GroundTruth", "repeated_frames"]
+__all__ = ["Dataset", "GroundTruth", "frame_major_order", "repeated_frames"]
 
 
 @dataclass
@@ -185,23 +187,57 @@ class Dataset:
         Parameters
         ----------
         features : array_like, shape (4, M, T)
+            An entry ``(landmark m, frame t)`` is an observation where ``features[0, m, t] != -1``.
         **fields
             All other :class:`Dataset` fields except the sparse ones and ``num_landmarks``.
         """
         features = np.asarray(features, dtype=float)
-        valid_tm = features[0].T != -1  # (T, M), frame-major order for nonzero
-        t_idx, m_idx = np.nonzero(valid_tm)
-        frame_ptr = np.zeros(features.shape[2] + 1, dtype=np.int64)
-        np.cumsum(np.bincount(t_idx, minlength=features.shape[2]), out=frame_ptr[1:])
-        obs_z = features[:, m_idx, t_idx].T.copy()
+        landmark_ids, frames = np.nonzero(features[0] != -1)
+        order, frame_ptr = frame_major_order(landmark_ids, frames, features.shape[2])
+        landmark_ids, frames = landmark_ids[order], frames[order]
         return cls(
             num_landmarks=features.shape[1],
             frame_ptr=frame_ptr,
-            obs_ids=m_idx.astype(np.int64),
-            obs_z=obs_z,
+            obs_ids=landmark_ids.astype(np.int64),
+            obs_z=features[:, landmark_ids, frames].T.copy(),
             **fields,
         )
 
+
+def frame_major_order(obs_ids, obs_frames, num_frames):
+    """The permutation to the frame-major sparse layout of :class:`Dataset`, and ``frame_ptr``.
+
+    Observations given in any order (e.g. landmark by landmark) are sorted by frame, and by
+    landmark id within a frame; ``frame_ptr`` is the prefix sum of the per-frame counts, so
+    frame ``t`` owns the sorted entries ``frame_ptr[t]:frame_ptr[t + 1]``.
+
+    Parameters
+    ----------
+    obs_ids : array_like of int, shape (N,)
+        Landmark id of each observation.
+    obs_frames : array_like of int, shape (N,)
+        Frame of each observation, ``0 <= frame < num_frames``; each ``(frame, id)`` pair once.
+    num_frames : int
+        T.
+
+    Returns
+    -------
+    order : ndarray of int, shape (N,)
+        ``obs_ids[order]``, ``obs_frames[order]`` (and any per-observation array indexed by
+        ``order``) are frame-major with ids increasing within a frame.
+    frame_ptr : ndarray of int64, shape (T + 1,)
+    """
+    obs_ids, obs_frames = np.asarray(obs_ids), np.asarray(obs_frames)
+    if obs_ids.shape != obs_frames.shape or obs_ids.ndim != 1:
+        raise ValueError(f"frame_major_order: obs_ids and obs_frames must have the same shape (N,), "
+                         f"got {obs_ids.shape} and {obs_frames.shape}")
+    if obs_frames.size and not 0 <= obs_frames.min() <= obs_frames.max() < num_frames:
+        raise ValueError(f"frame_major_order: frames must lie in [0, {num_frames}), got "
+                         f"{obs_frames.min()}..{obs_frames.max()}")
+    order = np.lexsort((obs_ids, obs_frames))
+    frame_ptr = np.zeros(num_frames + 1, dtype=np.int64)
+    np.cumsum(np.bincount(obs_frames, minlength=num_frames), out=frame_ptr[1:])
+    return order, frame_ptr
 
 def repeated_frames(dataset):
     """Frames whose observations repeat the previous frame's exactly (same ids and pixels).

@@ -22,6 +22,8 @@ import numpy as np
 from visla_edu import lie
 from visla_edu.camera import triangulate_disparity
 from visla_edu.dataset import repeated_frames
+from visla_edu.metrics import align_se3
+from visla_edu.motion import select_twists
 
 __all__ = [
     "CORRECTIONS",
@@ -68,25 +70,25 @@ class VisualOdometry:
     tracked: np.ndarray
 
 
-def _kabsch(P, Q):
-    """Rotation R and translation p minimising ``sum |P - (R Q + p)|^2``."""
-    P_mean, Q_mean = P.mean(axis=0), Q.mean(axis=0)
-    U, _, Vt = np.linalg.svd((Q - Q_mean).T @ (P - P_mean))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
-    return R, P_mean - R @ Q_mean
+def _rigid_fit(P, Q):
+    """Rotation R (3, 3) and translation p (3,) minimising ``sum |P - (R Q + p)|^2`` (Kabsch).
+
+    P, Q are (n, 3) matching points; :func:`visla_edu.metrics.align_se3` does the fit.
+    """
+    P_T_Q = align_se3(Q, P)
+    return P_T_Q[:3, :3], P_T_Q[:3, 3]
 
 
 def _robust_alignment(P, Q, min_points, iterations=4):
     """Kabsch with iterative rejection of points far from the fitted motion."""
     keep = np.ones(len(P), dtype=bool)
-    R, p = _kabsch(P, Q)
+    R, p = _rigid_fit(P, Q)
     for _ in range(iterations):
         residual = np.linalg.norm(P - (Q @ R.T + p), axis=1)
         keep = residual < max(0.2, 2.5 * np.median(residual))
         if keep.sum() < min_points:
             return R, p, keep
-        R, p = _kabsch(P[keep], Q[keep])
+        R, p = _rigid_fit(P[keep], Q[keep])
     return R, p, keep
 
 
@@ -142,9 +144,8 @@ def _vo_in_imu_frame(vo, imu_T_cam):
 
 
 def _imu_step_twists(dataset, lag=0):
-    """IMU motion over each frame interval as twists ``tau u[t + lag]``, (T-1, 6)."""
-    idx = np.clip(np.arange(dataset.num_frames - 1) + lag, 0, dataset.num_frames - 1)
-    return dataset.time_steps[:, None] * dataset.twists[idx]
+    """IMU motion over each frame interval as twists ``tau_t u[t + lag]`` (:func:`select_twists`), (T-1, 6)."""
+    return dataset.time_steps[:, None] * select_twists(dataset.twists, lag)
 
 
 def _slope(vo, imu):

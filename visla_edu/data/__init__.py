@@ -1,0 +1,74 @@
+"""Load, check, save and summarise the course data files.
+
+Where the files are
+-------------------
+The data directory is, in this order: the ``data_dir`` argument, the environment
+variable ``VISLA_EDU_DATA``, or ``./data`` under the current working directory.
+Course files are never copied into the project: point ``VISLA_EDU_DATA`` at them.
+
+    >>> from visla_edu import data
+    >>> ds = data.load("03")                # <data dir>/03.npz
+    >>> print(data.format_summary(ds))      # what ``visla-edu info 03`` prints
+    >>> sim = data.load("sim")              # a simulated drive with ground truth
+
+The two course formats
+----------------------
+Both store ``time_stamps`` (1, T), ``features`` (4, M, T) with ``[uL, vL, uR, vR]``
+pixels (all four -1 where landmark i is not seen at frame t), ``linear_velocity``
+(3, T), ``K`` (3, 3) and ``b`` (). The 2021+ format adds ``angular_velocity`` (3, T)
+and ``imu_T_cam`` (4, 4); the 2019/2020 format has ``rotational_velocity`` (3, T)
+and ``cam_T_imu`` (4, 4), the inverse transform. :func:`load` converts both to the
+time-major :class:`~visla_edu.dataset.Dataset` once, and keeps the features sparse:
+the dense array is streamed from the file in chunks of landmark rows (dataset 10's
+is 1.3 GB), never held in memory as a whole.
+
+When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
+dataset 10's real IMU drive with simulated stereo tracks.
+
+Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError``
+whose message names the file, the key, and the expected and actual shape or value.
+
+Modules (private; everything public is re-exported here): ``_registry`` (data directory,
+names, known files), ``_format`` (the keys of the course formats and the checks of the small
+arrays), ``_features`` (the dense features streamed into the sparse layout), ``_npz`` (the
+one ``.npz`` reader: course files to Datasets, named arrays of any archive), ``_standin``
+(the dataset-10 stand-in), ``_load`` (:func:`load`), ``_save`` (:func:`save`), ``_summary``
+(:func:`summarize`, :func:`format_summary`).
+"""
+
+from visla_edu.data._format import (
+    FORMAT_2019,
+    FORMAT_2021,
+    FORMAT_KEYS,
+    GROUND_TRUTH_KEYS,
+    RIGID_TOL,
+    TEXT_KEYS,
+)
+from visla_edu.data._load import load
+from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir
+from visla_edu.data._save import save
+from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, standin_dataset10
+from visla_edu.data._summary import format_summary, summarize
+from visla_edu.dataset import repeated_frames
+
+__all__ = [
+    "ENV_VAR",
+    "FORMAT_2021",
+    "FORMAT_2019",
+    "FORMAT_KEYS",
+    "REGISTRY",
+    "SIMULATED",
+    "GROUND_TRUTH_KEYS",
+    "TEXT_KEYS",
+    "RIGID_TOL",
+    "STANDIN_LABEL",
+    "STANDIN_NUM_LANDMARKS",
+    "data_dir",
+    "load",
+    "save",
+    "available",
+    "repeated_frames",
+    "standin_dataset10",
+    "summarize",
+    "format_summary",
+]

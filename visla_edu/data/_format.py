@@ -1,0 +1,176 @@
+"""The course file format: its keys, and the checks of every array but the features.
+
+Both course formats store ``time_stamps`` (1, T), ``features`` (4, M, T), ``linear_velocity``
+(3, T), ``K`` (3, 3) and ``b`` (); the 2021+ format adds ``angular_velocity`` (3, T) and
+``imu_T_cam`` (4, 4), the 2019/2020 format ``rotational_velocity`` (3, T) and ``cam_T_imu``
+(4, 4). Files written by :func:`~visla_edu.data.save` may add ground truth and a name and label.
+Every check raises ``ValueError`` naming the file, the key, and the expected and actual value.
+"""
+
+import numpy as np
+
+__all__ = [
+    "FORMAT_2021",
+    "FORMAT_2019",
+    "FORMAT_KEYS",
+    "FORMAT_SPECIFIC_KEYS",
+    "GROUND_TRUTH_KEYS",
+    "TEXT_KEYS",
+    "RIGID_TOL",
+    "check_course_arrays",
+    "check_numeric",
+    "check_shape",
+    "check_finite",
+    "check_increasing",
+    "check_intrinsics",
+    "check_baseline",
+    "check_rigid",
+    "check_extras",
+]
+
+FORMAT_2021 = "2021+"
+FORMAT_2019 = "2019/2020"
+
+#: Keys each course format must have (and, with the extras below, the only ones allowed).
+FORMAT_KEYS = {
+    FORMAT_2021: ("time_stamps", "features", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam"),
+    FORMAT_2019: ("time_stamps", "features", "linear_velocity", "rotational_velocity", "K", "b", "cam_T_imu"),
+}
+#: The angular-velocity key and the extrinsics key of each format.
+FORMAT_SPECIFIC_KEYS = {
+    FORMAT_2021: ("angular_velocity", "imu_T_cam"),
+    FORMAT_2019: ("rotational_velocity", "cam_T_imu"),
+}
+#: Extra keys written by :func:`~visla_edu.data.save` for drives with ground truth.
+GROUND_TRUTH_KEYS = (
+    "ground_truth_world_T_imu",
+    "ground_truth_landmarks",
+    "ground_truth_linear_velocity",
+    "ground_truth_angular_velocity",
+    "ground_truth_outlier",
+)
+#: Extra string keys written by :func:`~visla_edu.data.save`.
+TEXT_KEYS = ("name", "label")
+#: Tolerance on ``R^T R = I`` for the camera extrinsics.
+RIGID_TOL = 1e-6
+
+
+def check_course_arrays(arrays, fmt, path):
+    """Check dtypes, shapes, finiteness and meaning of the non-feature keys; return T."""
+    velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
+    keys = ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key)
+    for key in keys:
+        check_numeric(arrays[key], key, path)
+    T = _frame_count(arrays["time_stamps"], path)
+    for key in ("linear_velocity", velocity_key):
+        check_shape(arrays[key], (3, T), key, path, T)
+    for key, shape in (("K", (3, 3)), ("b", ()), (pose_key, (4, 4))):
+        check_shape(arrays[key], shape, key, path)
+    for key in keys:
+        check_finite(arrays[key], key, path)
+    check_increasing(arrays["time_stamps"][0], path)
+    check_intrinsics(arrays["K"], path)
+    check_baseline(arrays["b"], path)
+    check_rigid(arrays[pose_key], pose_key, path)
+    return T
+
+
+def check_numeric(arr, key, path, kinds="fiu"):
+    """``arr`` (any shape) has a dtype kind in ``kinds`` (``"fiu"``: real numbers, ``"b"``: boolean)."""
+    if arr.dtype.kind not in kinds:
+        want = "boolean" if kinds == "b" else "real numbers"
+        raise ValueError(f"{path}: key '{key}' must hold {want}, got dtype {arr.dtype}")
+
+
+def _frame_count(time_stamps, path):
+    """T of ``time_stamps``, which must have shape (1, T) with T >= 1."""
+    if time_stamps.ndim != 2 or time_stamps.shape[0] != 1 or time_stamps.shape[1] < 1:
+        raise ValueError(f"{path}: key 'time_stamps' expected shape (1, T) with T >= 1, got {time_stamps.shape}")
+    return time_stamps.shape[1]
+
+
+def check_shape(arr, expected, key, path, T=None):
+    """``arr.shape == expected``; ``T`` (if given) is named as coming from ``time_stamps``."""
+    if arr.shape != tuple(expected):
+        note = f" (T = {T} from time_stamps)" if T is not None else ""
+        raise ValueError(f"{path}: key '{key}' expected shape {tuple(expected)}{note}, got {arr.shape}")
+
+
+def check_finite(arr, key, path):
+    """No NaN or inf in ``arr`` (any shape); the message gives the index of the first one."""
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"{path}: key '{key}' has a non-finite value {arr[index]} at index {index}")
+
+
+def check_increasing(stamps, path):
+    """``stamps`` (T,) strictly increasing; indices are reported as in the file's (1, T) key."""
+    bad = np.flatnonzero(np.diff(stamps) <= 0)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{path}: key 'time_stamps' must be strictly increasing, but time_stamps[0, {i + 1}] = "
+            f"{stamps[i + 1]!r} is not after time_stamps[0, {i}] = {stamps[i]!r}"
+        )
+
+
+def check_intrinsics(K, path):
+    """``K`` (3, 3) is ``[[fsu, s, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths."""
+    lower = K[np.tril_indices(3, -1)]
+    if np.any(lower != 0) or K[2, 2] != 1:
+        raise ValueError(
+            f"{path}: key 'K' must be upper triangular with K[2, 2] = 1 "
+            f"([[fsu, s, cu], [0, fsv, cv], [0, 0, 1]]), got {K.tolist()}"
+        )
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(f"{path}: key 'K' needs positive focal lengths, got fsu = {K[0, 0]}, fsv = {K[1, 1]}")
+
+
+def check_baseline(b, path):
+    """The stereo baseline ``b`` (a 0-d array, metres) is positive."""
+    if not b > 0:
+        raise ValueError(f"{path}: key 'b' (stereo baseline, metres) must be positive, got {b.item()!r}")
+
+
+def check_rigid(T, key, path):
+    """``T`` (4, 4) is in SE(3): ``R^T R = I`` within :data:`RIGID_TOL`, ``det R = +1``, last row ``[0, 0, 0, 1]``."""
+    R = T[:3, :3]
+    orth = float(np.abs(R.T @ R - np.eye(3)).max())
+    if orth > RIGID_TOL:
+        raise ValueError(
+            f"{path}: key '{key}' is not a rigid transform: max |R^T R - I| = {orth:.3g} > {RIGID_TOL:g}"
+        )
+    det = float(np.linalg.det(R))
+    if abs(det - 1) > 10 * RIGID_TOL:
+        raise ValueError(
+            f"{path}: key '{key}' is not a rigid transform: det(R) = {det:.6g}, expected +1 (a reflection?)"
+        )
+    if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(
+            f"{path}: key '{key}' is not a rigid transform: last row is {T[3].tolist()}, expected [0, 0, 0, 1]"
+        )
+
+
+def check_extras(arrays, T, M, path):
+    """Check the ground-truth keys (all or none; shapes from T and M) and the text keys.
+
+    Both are written by :func:`~visla_edu.data.save`.
+    """
+    present = [k for k in GROUND_TRUTH_KEYS if k in arrays]
+    if present and len(present) < len(GROUND_TRUTH_KEYS):
+        missing = [k for k in GROUND_TRUTH_KEYS if k not in arrays]
+        raise ValueError(f"{path}: has ground-truth key(s) {present} but is missing {missing}")
+    if present:
+        shapes = dict(zip(GROUND_TRUTH_KEYS, [(T, 4, 4), (M, 3), (T, 3), (T, 3), (M,)]))
+        for key, shape in shapes.items():
+            check_numeric(arrays[key], key, path, kinds="b" if key.endswith("outlier") else "fiu")
+            check_shape(arrays[key], shape, key, path)
+            check_finite(arrays[key], key, path)
+    for key in TEXT_KEYS:
+        if key in arrays and (arrays[key].dtype.kind != "U" or arrays[key].shape != ()):
+            raise ValueError(
+                f"{path}: key '{key}' must be a single string, got dtype {arrays[key].dtype} "
+                f"shape {arrays[key].shape}"
+            )
+

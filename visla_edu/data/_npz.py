@@ -1,0 +1,228 @@
+"""The one reader of ``.npz`` files in visla-edu: course files, and named arrays of any archive.
+
+:func:`load_npz` reads a course file (either format, or one written by
+:func:`~visla_edu.data.save`), checks it and converts it to the time-major
+:class:`~visla_edu.dataset.Dataset` once; :func:`read_arrays` reads named arrays of any
+archive (the dataset-10 stand-in reads its IMU drive and calibration with it). Both read the
+zip members themselves (``allow_pickle=False``) so a damaged, truncated or foreign file is
+reported as a ``ValueError`` naming the file, never as a zipfile or numpy traceback.
+"""
+
+import hashlib
+import io
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from visla_edu import lie
+from visla_edu.data._features import features_in_memory, features_streamed
+from visla_edu.data._format import (
+    FORMAT_2019,
+    FORMAT_2021,
+    FORMAT_KEYS,
+    GROUND_TRUTH_KEYS,
+    TEXT_KEYS,
+    check_course_arrays,
+)
+from visla_edu.data._registry import identify
+from visla_edu.dataset import Dataset, GroundTruth
+
+__all__ = ["load_npz", "read_arrays", "file_sha256", "time_major"]
+
+#: Errors of ``zipfile`` and ``zlib`` that mean the archive is damaged.
+_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError)
+
+
+def load_npz(path):
+    """Read, check and convert one course ``.npz`` file (see :func:`visla_edu.data.load`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An existing file.
+
+    Returns
+    -------
+    Dataset
+        ``source`` is the absolute path; ``name`` and ``label`` from
+        :func:`~visla_edu.data._registry.identify`; ``extra = {"sha256", "format", "known_file"}``.
+
+    Raises
+    ------
+    ValueError
+        The file is not a valid course file (the message names key, expected and actual).
+    """
+    path = Path(path).resolve()
+    sha = file_sha256(path)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            fmt, arrays, sparse = _read_course_members(zf, path)
+    except _ZIP_ERRORS as exc:
+        raise ValueError(_corrupt_message(path, exc)) from None
+    stored_name = str(arrays["name"]) if "name" in arrays else None
+    stored_label = str(arrays["label"]) if "label" in arrays else None
+    name, label, known = identify(path, sha, stored_name, stored_label)
+    extra = {"sha256": sha, "format": fmt, "known_file": known}
+    return _build_dataset(fmt, arrays, sparse, path, name, label, extra)
+
+
+def read_arrays(path, keys):
+    """The named arrays of an ``.npz`` archive, each read whole (no pickles).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    keys : sequence of str
+        Keys that must be present; others in the file are ignored.
+
+    Returns
+    -------
+    dict of str to ndarray
+        As stored (dtype and shape unchecked: the caller checks them).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Not an ``.npz`` archive, damaged, a key missing, or a member not a plain numpy array.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: file not found")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = _member_keys(zf)
+            missing = [k for k in keys if k not in members]
+            if missing:
+                raise ValueError(f"{path}: missing key(s) {missing}; keys present: {sorted(members)}")
+            return {key: _read_member(zf, members[key], key, path) for key in keys}
+    except _ZIP_ERRORS as exc:
+        raise ValueError(_corrupt_message(path, exc)) from None
+
+
+def file_sha256(path, block=2**20):
+    """Hex sha256 of a file, read in blocks of ``block`` bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(block):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _corrupt_message(path, exc):
+    with open(path, "rb") as f:
+        start = f.read(6)
+    hint = " It is a single .npy array, not an .npz archive." if start == b"\x93NUMPY" else ""
+    return (
+        f"{path}: not a valid .npz (zip) archive: the file is truncated, corrupt, or not an .npz "
+        f"file ({type(exc).__name__}: {exc}).{hint} Re-download the course file."
+    )
+
+
+def _read_course_members(zf, path):
+    """Format, checked small arrays, and sparse features ``(frame_ptr, ids, z, M)``."""
+    members = _member_keys(zf)
+    fmt = _detect_format(members, path)
+    _reject_unexpected(members, fmt, path)
+    arrays = {key: _read_member(zf, member, key, path) for key, member in members.items() if key != "features"}
+    T = check_course_arrays(arrays, fmt, path)
+    with zf.open(members["features"]) as fp:
+        sparse = features_streamed(fp, arrays, T, path)
+    if sparse is None:  # fortran order or an unusual .npy version: read it whole
+        dense = _read_member(zf, members["features"], "features", path)
+        sparse = features_in_memory(dense, arrays, T, path)
+    return fmt, arrays, sparse
+
+
+def _member_keys(zf):
+    """Key -> zip member name (``np.savez`` stores key ``k`` as ``k.npy``)."""
+    return {(n[:-4] if n.endswith(".npy") else n): n for n in zf.namelist() if not n.endswith("/")}
+
+
+def _read_member(zf, member, key, path):
+    """One whole member as an array (CRC-checked by ``zf.read``)."""
+    raw = zf.read(member)
+    try:
+        return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
+    except (ValueError, TypeError, EOFError, OSError, UnicodeError) as exc:
+        raise ValueError(f"{path}: key '{key}' is not a readable numpy array ({exc})") from None
+
+
+def _detect_format(members, path):
+    """The course format whose keys are all present, else a ``ValueError`` saying what is missing."""
+    present = set(members)
+    for fmt, required in FORMAT_KEYS.items():
+        if set(required) <= present:
+            return fmt
+    markers = {FORMAT_2021: {"angular_velocity", "imu_T_cam"}, FORMAT_2019: {"rotational_velocity", "cam_T_imu"}}
+    candidates = [fmt for fmt, keys in markers.items() if keys & present]
+    found = f"found keys {sorted(present)}"
+    if len(candidates) == 1:
+        fmt = candidates[0]
+        missing = [k for k in FORMAT_KEYS[fmt] if k not in present]
+        hint = ""
+        if path.stem == "10_imu_only":
+            hint = " This is dataset 10's IMU-only file: load('10') builds the stand-in from it."
+        raise ValueError(f"{path}: looks like the {fmt} course format but is missing key(s) {missing}; {found}.{hint}")
+    needs = "; ".join(
+        f"{fmt} needs {list(req)} (missing {[k for k in req if k not in present]})" for fmt, req in FORMAT_KEYS.items()
+    )
+    raise ValueError(f"{path}: matches neither course format: {needs}; {found}.")
+
+
+def _reject_unexpected(members, fmt, path):
+    allowed = set(FORMAT_KEYS[fmt]) | set(GROUND_TRUTH_KEYS) | set(TEXT_KEYS)
+    extra = sorted(k for k in members if k not in allowed)
+    if extra:
+        raise ValueError(
+            f"{path}: unexpected key(s) {extra} in a {fmt} course file; allowed are {list(FORMAT_KEYS[fmt])} "
+            f"and, for files written by visla_edu.data.save, {list(GROUND_TRUTH_KEYS + TEXT_KEYS)}."
+        )
+
+
+def time_major(arr):
+    """``(k, T)`` file layout -> ``(T, k)`` float64, C-contiguous."""
+    return np.ascontiguousarray(arr.T, dtype=float)
+
+
+def _build_dataset(fmt, arrays, sparse, path, name, label, extra):
+    """The :class:`Dataset` of checked arrays: time-major, ``imu_T_cam`` whatever the format."""
+    frame_ptr, obs_ids, obs_z, M = sparse
+    if fmt == FORMAT_2021:
+        angular, imu_T_cam = arrays["angular_velocity"], np.array(arrays["imu_T_cam"], dtype=float)
+    else:
+        angular, imu_T_cam = arrays["rotational_velocity"], lie.se3_inv(arrays["cam_T_imu"])
+    return Dataset(
+        name=name,
+        source=str(path),
+        time_stamps=np.array(arrays["time_stamps"][0], dtype=float),
+        linear_velocity=time_major(arrays["linear_velocity"]),
+        angular_velocity=time_major(angular),
+        K=np.array(arrays["K"], dtype=float),
+        b=float(arrays["b"]),
+        imu_T_cam=imu_T_cam,
+        num_landmarks=int(M),
+        frame_ptr=frame_ptr,
+        obs_ids=obs_ids,
+        obs_z=obs_z,
+        ground_truth=_ground_truth(arrays),
+        label=label,
+        extra=extra,
+    )
+
+
+def _ground_truth(arrays):
+    """The :class:`GroundTruth` of a file written by :func:`~visla_edu.data.save`, or None."""
+    if GROUND_TRUTH_KEYS[0] not in arrays:
+        return None
+    world_T_imu, landmarks, linear, angular, outlier = (arrays[k] for k in GROUND_TRUTH_KEYS)
+    return GroundTruth(
+        world_T_imu=np.array(world_T_imu, dtype=float),
+        landmarks=np.array(landmarks, dtype=float),
+        linear_velocity=np.array(linear, dtype=float),
+        angular_velocity=np.array(angular, dtype=float),
+        outlier=np.array(outlier, dtype=bool),
+    )

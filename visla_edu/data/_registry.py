@@ -1,0 +1,165 @@
+"""Where the course files are and which ones visla-edu knows.
+
+The data directory, the names :func:`~visla_edu.data.load` answers, the known course files
+(recognised by sha256) and the label a loaded file gets. Nothing here reads a file.
+"""
+
+import os
+from pathlib import Path
+
+from visla_edu.data._format import FORMAT_2019, FORMAT_2021
+
+__all__ = [
+    "ENV_VAR",
+    "REGISTRY",
+    "SIMULATED",
+    "COURSE_NAMES",
+    "STANDIN_INPUTS",
+    "data_dir",
+    "resolve_dir",
+    "available",
+    "has_standin_inputs",
+    "identify",
+]
+
+#: Environment variable naming the folder with the course files.
+ENV_VAR = "VISLA_EDU_DATA"
+
+#: Names that :func:`~visla_edu.data.load` answers with a simulated drive, and their preset.
+SIMULATED = {"sim": "course", "sim-small": "small", "sim-tiny": "tiny"}
+
+#: Known course files: name -> sha256, format and a description (used as ``Dataset.label``).
+REGISTRY = {
+    "03": {
+        "sha256": "fdfd30237cb0a5697625af7392acc2a241c2be299a7d5cf2d0e189fa95a1f0c9",
+        "format": FORMAT_2021,
+        "description": "dataset 3: KITTI-360 drive 2013_05_28_drive_0003, "
+        "10 Hz stereo feature tracks + IMU velocities",
+    },
+    "10": {
+        "sha256": None,  # no public copy of the full file was available to hash
+        "format": FORMAT_2021,
+        "description": "dataset 10: KITTI-360 drive 2013_05_28_drive_0010, "
+        "10 Hz stereo feature tracks + IMU velocities",
+    },
+    "0022": {
+        "sha256": "f190bd587bb8178185cae90113b51601caf66b81a6173032dbd5a450ca0e8c8b",
+        "format": FORMAT_2019,
+        "description": "KITTI raw 2011_09_26_drive_0022 (2019/2020 course format), "
+        "10 Hz stereo feature tracks + IMU velocities",
+    },
+    "10_imu_only": {
+        "sha256": "5543a9f404a80564b1ea382b7c2101652f3ef0829aa53fe16f0bbd93257018aa",
+        "format": "2021+ (IMU only)",
+        "description": "dataset 10: KITTI-360 drive 2013_05_28_drive_0010, IMU velocities only "
+        "(no features); the input of the stand-in load('10')",
+    },
+}
+#: Course names :func:`~visla_edu.data.load` finds as ``<data dir>/<name>.npz``.
+COURSE_NAMES = ("03", "10", "0022")
+#: Files the dataset-10 stand-in is built from when ``10.npz`` is absent.
+STANDIN_INPUTS = ("10_imu_only.npz", "03.npz")
+
+
+def resolve_dir(path=None):
+    """The data directory and a phrase saying where it came from.
+
+    Parameters
+    ----------
+    path : str or os.PathLike, optional
+        See :func:`data_dir`.
+
+    Returns
+    -------
+    directory : pathlib.Path
+        Absolute; not checked to exist.
+    how : str
+        E.g. ``"VISLA_EDU_DATA=/data"``, for error messages.
+    """
+    if path is not None:
+        return Path(path).expanduser().resolve(), "the data_dir argument"
+    env = os.environ.get(ENV_VAR, "").strip()
+    if env:
+        return Path(env).expanduser().resolve(), f"{ENV_VAR}={env}"
+    return (Path.cwd() / "data").resolve(), f"the default ./data ({ENV_VAR} is not set)"
+
+
+def data_dir(path=None):
+    """The folder with the course files, as an absolute path.
+
+    Parameters
+    ----------
+    path : str or os.PathLike, optional
+        Use this folder. Otherwise the environment variable ``VISLA_EDU_DATA``, and if
+        that is unset or empty, ``./data`` under the current working directory.
+
+    Returns
+    -------
+    pathlib.Path
+        Absolute; it is not checked to exist.
+    """
+    return resolve_dir(path)[0]
+
+
+def available(data_dir=None):
+    """Names :func:`~visla_edu.data.load` can answer right now, for menus in the CLI and widgets.
+
+    Parameters
+    ----------
+    data_dir : str or os.PathLike, optional
+        See :func:`data_dir`.
+
+    Returns
+    -------
+    list of str
+        Course names whose files exist (``"10"`` also when only the stand-in inputs
+        ``10_imu_only.npz`` and ``03.npz`` exist), then ``"sim"``.
+    """
+    directory, _ = resolve_dir(data_dir)
+    names = []
+    for name in COURSE_NAMES:
+        if (directory / f"{name}.npz").is_file() or (name == "10" and has_standin_inputs(directory)):
+            names.append(name)
+    return names + ["sim"]
+
+
+def has_standin_inputs(directory):
+    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path)."""
+    return all((directory / f).is_file() for f in STANDIN_INPUTS)
+
+
+def identify(path, sha, stored_name=None, stored_label=None):
+    """Name, label and registry entry of a loaded file.
+
+    A file whose sha256 is in :data:`REGISTRY` gets that entry's name and description. Other
+    files keep the name and label :func:`~visla_edu.data.save` stored in them, else are named
+    after the file; a file named like a known one but with another hash says so in its label.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file (absolute).
+    sha : str
+        Its sha256, hex.
+    stored_name, stored_label : str, optional
+        The ``name`` and ``label`` keys of the file, if it has them.
+
+    Returns
+    -------
+    name : str
+    label : str
+    known : str or None
+        The :data:`REGISTRY` name when recognised by sha256.
+    """
+    known = next((n for n, entry in REGISTRY.items() if entry["sha256"] == sha), None)
+    if known is not None:
+        return known, REGISTRY[known]["description"], known
+    name = stored_name if stored_name is not None else path.stem
+    if stored_label is not None:
+        return name, stored_label, None
+    entry = REGISTRY.get(path.stem)
+    if entry is None:
+        return name, f"{path.name} (not a known course file)", None
+    if entry["sha256"] is None:
+        return name, f"{entry['description']} (sha256 {sha} not on record)", None
+    return name, f"{entry['description']} -- but this copy's sha256 differs from the known file (modified?)", None

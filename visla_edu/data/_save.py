@@ -1,0 +1,68 @@
+"""Write a Dataset as a course file that :func:`~visla_edu.data.load` reads back exactly."""
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from visla_edu.data._format import GROUND_TRUTH_KEYS
+
+__all__ = ["save"]
+
+
+def save(dataset, path):
+    """Write a dataset as a 2021+ course file (plus ground truth and its name and label).
+
+    Parameters
+    ----------
+    dataset : Dataset
+    path : str or os.PathLike
+        Target file; ``.npz`` is appended if missing. Written atomically (temporary
+        file, then rename). The dense features ``(4, M, T)`` are built in memory.
+
+    Returns
+    -------
+    pathlib.Path
+        The absolute path written. :func:`~visla_edu.data.load` on it gives back identical arrays.
+    """
+    path = Path(path).expanduser()
+    if path.suffix != ".npz":
+        path = path.with_name(path.name + ".npz")
+    arrays = _course_arrays(dataset)
+    if dataset.ground_truth is not None:
+        arrays.update(_ground_truth_arrays(dataset.ground_truth))
+    arrays["name"] = np.array(str(dataset.name))
+    arrays["label"] = np.array(str(dataset.label))
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path.resolve()
+
+
+def _course_arrays(dataset):
+    """The 2021+ keys in the course layout: ``(k, T)`` rows and dense ``(4, M, T)`` features."""
+    return {
+        "time_stamps": np.asarray(dataset.time_stamps, dtype=float)[None, :],
+        "features": dataset.to_dense_features(),
+        "linear_velocity": np.asarray(dataset.linear_velocity, dtype=float).T,
+        "angular_velocity": np.asarray(dataset.angular_velocity, dtype=float).T,
+        "K": np.asarray(dataset.K, dtype=float),
+        "b": np.array(float(dataset.b)),
+        "imu_T_cam": np.asarray(dataset.imu_T_cam, dtype=float),
+    }
+
+
+def _ground_truth_arrays(gt):
+    """The ground-truth keys of :data:`~visla_edu.data._format.GROUND_TRUTH_KEYS`, time-major."""
+    values = (
+        np.asarray(gt.world_T_imu, dtype=float),
+        np.asarray(gt.landmarks, dtype=float),
+        np.asarray(gt.linear_velocity, dtype=float),
+        np.asarray(gt.angular_velocity, dtype=float),
+        np.asarray(gt.outlier, dtype=bool),
+    )
+    return dict(zip(GROUND_TRUTH_KEYS, values))

@@ -1,0 +1,191 @@
+"""The STAND-IN for course dataset 10: its real IMU drive with simulated stereo tracks.
+
+The real feature file ``10.npz`` is not available, only ``10_imu_only.npz`` (its time
+stamps and IMU velocities). :func:`standin_dataset10` takes that drive as the true motion
+and simulates landmarks, stereo tracks and IMU noise along it
+(:func:`visla_edu.simulate.simulate_along_drive`) with the rig of dataset 3, which comes from
+the same vehicle. Both input files are read with the package's one ``.npz`` reader and checked
+like course files. :func:`load_dataset10` is what ``load("10")`` does.
+"""
+
+import numpy as np
+
+from visla_edu.data._format import (
+    check_baseline,
+    check_finite,
+    check_increasing,
+    check_intrinsics,
+    check_numeric,
+    check_rigid,
+    check_shape,
+)
+from visla_edu.data._npz import load_npz, read_arrays, time_major
+from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, has_standin_inputs
+
+__all__ = ["STANDIN_LABEL", "STANDIN_NUM_LANDMARKS", "standin_dataset10", "load_dataset10"]
+
+#: Label of the dataset-10 stand-in (shown wherever the dataset is named).
+STANDIN_LABEL = (
+    "STAND-IN for dataset 10: real IMU drive of dataset 10, simulated stereo tracks "
+    "(the real 10.npz features are not available)"
+)
+#: Default number of landmarks of the stand-in, about the size of the real dataset 10.
+STANDIN_NUM_LANDMARKS = 13_000
+
+_IMU_KEYS = ("time_stamps", "linear_velocity", "angular_velocity")
+
+
+def load_dataset10(directory, how):
+    """The real ``10.npz`` if present, else the stand-in built from its IMU drive.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+        The data directory.
+    how : str
+        Where the directory came from (for the error message).
+
+    Returns
+    -------
+    Dataset
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither ``10.npz`` nor both stand-in inputs are in ``directory``.
+    """
+    full = directory / "10.npz"
+    if full.is_file():
+        return load_npz(full)
+    if has_standin_inputs(directory):
+        return _standin_as_course_file(directory)
+    missing = [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
+    raise FileNotFoundError(
+        f"dataset 10: the course file 10.npz is not in {directory} (the data directory from {how}), "
+        f"and the stand-in (simulated stereo tracks on dataset 10's real IMU drive) needs "
+        f"10_imu_only.npz and 03.npz there, but {' and '.join(missing)} "
+        f"{'is' if len(missing) == 1 else 'are'} missing. Set {ENV_VAR} to the folder with the course files."
+    )
+
+
+def _standin_as_course_file(directory):
+    """The stand-in for dataset 10, with the same calibration quirk as the course files.
+
+    Dataset 3 comes from the same vehicle. Its file's ``imu_T_cam`` has axes that disagree
+    with its IMU (found by :func:`visla_edu.diagnostics.check_extrinsics`), and the real
+    ``10.npz`` carries the same calibration. So the stand-in's cameras are simulated with the
+    corrected extrinsic (the physical rig), and the dataset reports the file's uncorrected
+    one, exactly as a user holding the real ``10.npz`` would see it.
+    """
+    from visla_edu import diagnostics  # lazy: only the stand-in needs it (and metrics' scipy.stats)
+
+    calibration = load_npz(directory / "03.npz")
+    physical_imu_T_cam, _ = diagnostics.resolve_extrinsics(calibration, "auto")
+    dataset = standin_dataset10(directory / "10_imu_only.npz", directory / "03.npz", imu_T_cam=physical_imu_T_cam)
+    dataset.imu_T_cam = calibration.imu_T_cam.copy()
+    dataset.extra["simulated_imu_T_cam"] = physical_imu_T_cam
+    return dataset
+
+
+def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, **overrides):
+    """The STAND-IN for course dataset 10: its real IMU drive with simulated stereo tracks.
+
+    The real feature file ``10.npz`` is not available. The measured velocities of
+    ``10_imu_only.npz`` define the true drive, landmarks are placed along that path and
+    tracked as in :func:`visla_edu.simulate.simulate_drive` (about
+    :data:`STANDIN_NUM_LANDMARKS` landmarks), and the measured IMU is the real velocities plus
+    the simulation noise.
+
+    The real gyro has biases of about 0.01 rad/s: integrating it as it is would make the
+    "true" car climb over a kilometre and roll over. The true angular velocity is therefore
+    the real one minus its mean roll and pitch rates (a car ends about as level as it
+    started); that mean is kept in the measurement as a constant gyro bias
+    (``config.gyro_bias``, also in ``extra["level_gyro_bias"]``), so the measured velocities
+    are still the real ones plus noise.
+
+    Parameters
+    ----------
+    imu_only_path : str or Path
+        ``10_imu_only.npz``: ``time_stamps`` (1, T) or (T,), ``linear_velocity`` (3, T),
+        ``angular_velocity`` (3, T).
+    calibration_path : str or Path
+        A 2021+ course file of the same rig (``03.npz``): ``K`` (3, 3), ``b``, ``imu_T_cam``.
+    seed : int
+    imu_T_cam : array_like, shape (4, 4), optional
+        Use this extrinsic instead of the file's (e.g. a corrected one).
+    **overrides
+        :class:`~visla_edu.simulate.SimulationConfig` fields (``K``, ``b`` too); the motion
+        fields and ``num_frames`` do not apply (the file decides).
+
+    Returns
+    -------
+    Dataset
+        Named ``"10-standin"``, labelled :data:`STANDIN_LABEL`, time stamps identical to
+        the file's, with ``ground_truth``.
+
+    Raises
+    ------
+    FileNotFoundError
+        A file does not exist.
+    ValueError
+        A file is not a readable ``.npz``, or a key is missing or has a wrong shape or value.
+    """
+    from visla_edu import simulate  # lazy: loading course files needs no simulation (nor scipy.ndimage)
+
+    time_stamps, true_v, real_w = _read_imu_drive(imu_only_path)
+    if "num_frames" in overrides:
+        raise ValueError("standin_dataset10: num_frames comes from the IMU file and cannot be overridden")
+    overrides.setdefault("num_landmarks", STANDIN_NUM_LANDMARKS)
+    level_bias = (float(real_w[:, 0].mean()), float(real_w[:, 1].mean()), 0.0)
+    true_w = real_w - np.array(level_bias)
+    overrides.setdefault("gyro_bias", level_bias)
+    if imu_T_cam is not None:
+        overrides["imu_T_cam"] = imu_T_cam
+    config = simulate.make_config("course", num_frames=len(time_stamps), **overrides)
+    calibration = _read_calibration(calibration_path, need_extrinsic=imu_T_cam is None)
+    extrinsic = "imu_T_cam given by the caller" if imu_T_cam is not None else f"imu_T_cam from {calibration_path}"
+    return simulate.simulate_along_drive(
+        time_stamps, true_v, true_w, config, calibration, seed,
+        name="10-standin",
+        source=(f"visla_edu.data.standin_dataset10: IMU drive from {imu_only_path}, K and b from "
+                f"{calibration_path}, {extrinsic}, seed={seed!r}; {config.describe()}"),
+        label=STANDIN_LABEL,
+        extra={"preset": "standin", "seed": seed, "config": config, "level_gyro_bias": level_bias},
+    )
+
+
+def _read_imu_drive(path):
+    """``time_stamps`` (T,), ``linear_velocity`` and ``angular_velocity`` (T, 3) of an IMU-only file."""
+    arrays = read_arrays(path, _IMU_KEYS)
+    for key in _IMU_KEYS:
+        check_numeric(arrays[key], key, path)
+    stamps = arrays["time_stamps"]
+    if stamps.ndim not in (1, 2) or stamps.size != stamps.shape[-1] or stamps.size < 2:
+        raise ValueError(f"{path}: key 'time_stamps' must have shape (1, T) or (T,) with T >= 2, "
+                         f"got {stamps.shape}")
+    T = stamps.size
+    for key in ("linear_velocity", "angular_velocity"):
+        check_shape(arrays[key], (3, T), key, path, T)
+    for key in _IMU_KEYS:
+        check_finite(arrays[key], key, path)
+    stamps = np.array(stamps.reshape(T), dtype=float)
+    check_increasing(stamps, path)
+    return stamps, time_major(arrays["linear_velocity"]), time_major(arrays["angular_velocity"])
+
+
+def _read_calibration(path, need_extrinsic):
+    """``K`` (3, 3), ``b`` and (if needed, else None) ``imu_T_cam`` (4, 4) of a 2021+ course file."""
+    shapes = {"K": (3, 3), "b": (), "imu_T_cam": (4, 4)} if need_extrinsic else {"K": (3, 3), "b": ()}
+    arrays = read_arrays(path, tuple(shapes))
+    if arrays["b"].size == 1:  # a scalar stored as shape (1,) is accepted too
+        arrays["b"] = arrays["b"].reshape(())
+    for key, shape in shapes.items():
+        check_numeric(arrays[key], key, path)
+        check_shape(arrays[key], shape, key, path)
+        check_finite(arrays[key], key, path)
+    check_intrinsics(arrays["K"], path)
+    check_baseline(arrays["b"], path)
+    if not need_extrinsic:
+        return np.array(arrays["K"], dtype=float), float(arrays["b"]), None
+    check_rigid(arrays["imu_T_cam"], "imu_T_cam", path)
+    return np.array(arrays["K"], dtype=float), float(arrays["b"]), np.array(arrays["imu_T_cam"], dtype=float)

@@ -1,0 +1,167 @@
+"""What a student should know about a drive before filtering it.
+
+:func:`summarize` collects the facts as a dict, :func:`format_summary` as the text that
+``visla-edu info DATASET`` prints.
+"""
+
+import numpy as np
+
+from visla_edu.dataset import repeated_frames
+
+__all__ = ["summarize", "format_summary"]
+
+
+def _stats(values):
+    """``{"min", "median", "max"}`` of an array (None entries when empty)."""
+    values = np.asarray(values)
+    if values.size == 0:
+        return {"min": None, "median": None, "max": None}
+    cast = int if values.dtype.kind in "iu" else float
+    return {"min": cast(values.min()), "median": float(np.median(values)), "max": cast(values.max())}
+
+
+def summarize(dataset):
+    """Facts about a dataset a student should know before running a filter on it.
+
+    Parameters
+    ----------
+    dataset : Dataset
+
+    Returns
+    -------
+    dict
+        Keys: ``name, label, source, frames, duration_s, time_step_s`` (mean/min/max),
+        ``landmarks, landmarks_never_observed, observations, observations_per_frame``
+        (min/median/max), ``frames_without_observations, track_length_frames``
+        (min/median/max over observed landmarks), ``landmarks_seen_once,
+        nonpositive_disparity, nonpositive_disparity_share, tiny_disparity,
+        tiny_disparity_depth_m, repeated_frames, tracks_contiguous,
+        noncontiguous_landmarks, speed_m_s`` (mean/min/max), ``distance_m, ground_truth``.
+    """
+    ds = dataset
+    steps = ds.time_steps
+    per_frame = np.diff(ds.frame_ptr)
+    lengths = ds.track_lengths()
+    observed = lengths > 0
+    spans = ds.track_spans()
+    gaps = (spans[:, 1] - spans[:, 0] + 1 != lengths) & observed
+    disparity = ds.obs_z[:, 0] - ds.obs_z[:, 2]
+    nonpositive = int(np.count_nonzero(disparity <= 0))
+    speed = np.linalg.norm(ds.linear_velocity, axis=1)
+    return {
+        "name": ds.name,
+        "label": ds.label,
+        "source": ds.source,
+        "frames": ds.num_frames,
+        "duration_s": float(ds.time_stamps[-1] - ds.time_stamps[0]),
+        "time_step_s": _mean_min_max(steps),
+        "landmarks": ds.num_landmarks,
+        "landmarks_never_observed": int(np.count_nonzero(~observed)),
+        "observations": ds.num_observations,
+        "observations_per_frame": _stats(per_frame),
+        "frames_without_observations": int(np.count_nonzero(per_frame == 0)),
+        "track_length_frames": _stats(lengths[observed]),
+        "landmarks_seen_once": int(np.count_nonzero(lengths == 1)),
+        "nonpositive_disparity": nonpositive,
+        "nonpositive_disparity_share": nonpositive / max(1, ds.num_observations),
+        "tiny_disparity": int(np.count_nonzero((disparity > 0) & (disparity < 1))),
+        "tiny_disparity_depth_m": float(ds.K[0, 0] * ds.b),
+        "repeated_frames": repeated_frames(ds),
+        "tracks_contiguous": not gaps.any(),
+        "noncontiguous_landmarks": int(np.count_nonzero(gaps)),
+        "speed_m_s": _mean_min_max(speed),
+        "distance_m": float(np.sum(speed[:-1] * steps)),
+        "ground_truth": ds.ground_truth is not None,
+    }
+
+
+def _mean_min_max(values):
+    if len(values) == 0:
+        return {"mean": None, "min": None, "max": None}
+    return {"mean": float(np.mean(values)), "min": float(np.min(values)), "max": float(np.max(values))}
+
+
+def _shorten(text, limit=160):
+    """``text`` cut to ``limit`` characters (a simulated drive's source lists its whole config)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def format_summary(dataset):
+    """The readable text of :func:`summarize` (what ``visla-edu info DATASET`` prints).
+
+    Parameters
+    ----------
+    dataset : Dataset
+
+    Returns
+    -------
+    str
+    """
+    s = summarize(dataset)
+    lines = [f"{s['name']}: {s['label']}" if s["label"] else s["name"], f"  source        {_shorten(s['source'])}"]
+    lines += _time_lines(s) + _observation_lines(s) + _track_lines(s) + _disparity_lines(s)
+    lines += _motion_lines(s)
+    return "\n".join(lines)
+
+
+def _fmt_stats(stats, unit=""):
+    def num(x):
+        return f"{x:g}" if isinstance(x, float) else str(x)
+
+    return f"min {num(stats['min'])} / median {num(stats['median'])} / max {num(stats['max'])}{unit}"
+
+
+def _time_lines(s):
+    step = s["time_step_s"]
+    if step["mean"] is None:
+        return [f"  frames        {s['frames']} (a single time stamp)"]
+    return [
+        f"  frames        {s['frames']} over {s['duration_s']:.1f} s; time step mean {step['mean']:.4f} s "
+        f"(min {step['min']:.4f}, max {step['max']:.4f}): use each step's own tau, not a constant"
+    ]
+
+
+def _observation_lines(s):
+    never = s["landmarks_never_observed"]
+    lines = [f"  landmarks     {s['landmarks']}" + (f" ({never} never observed)" if never else " (every one observed)")]
+    lines.append(f"  observations  {s['observations']} in total; per frame {_fmt_stats(s['observations_per_frame'])}")
+    if s["frames_without_observations"]:
+        count = s["frames_without_observations"]
+        lines.append(f"                {count} frames have no observations (prediction only)")
+    return lines
+
+
+def _track_lines(s):
+    lines = [
+        f"  tracks        length {_fmt_stats(s['track_length_frames'], ' frames')}; "
+        f"{s['landmarks_seen_once']} landmarks seen only once"
+    ]
+    if s["tracks_contiguous"]:
+        lines.append("                every track is one contiguous run of frames: a landmark can leave the "
+                     "filter after its last observation")
+    else:
+        lines.append(f"                {s['noncontiguous_landmarks']} tracks have gaps (landmark seen again after "
+                     "missing frames): keep them in the filter until their last observation")
+    for t in s["repeated_frames"]:
+        lines.append(f"  repeated      frame {t} repeats the features of frame {t - 1} exactly "
+                     "(duplicated camera frame; the IMU keeps moving)")
+    return lines
+
+
+def _disparity_lines(s):
+    return [
+        f"  disparity     {s['nonpositive_disparity']} observations ({100 * s['nonpositive_disparity_share']:.2f}%) "
+        "have uL - uR <= 0: no depth, skip them when initialising landmarks",
+        f"                {s['tiny_disparity']} observations have 0 < uL - uR < 1 px: depth beyond "
+        f"{s['tiny_disparity_depth_m']:.0f} m, very uncertain",
+    ]
+
+
+def _motion_lines(s):
+    speed = s["speed_m_s"]
+    lines = [
+        f"  speed         mean {speed['mean']:.2f} m/s (min {speed['min']:.2f}, max {speed['max']:.2f}); "
+        f"about {s['distance_m']:.0f} m driven"
+    ]
+    truth = "yes (poses, landmarks, velocities, outliers)" if s["ground_truth"] else "none (real data)"
+    return lines + [f"  ground truth  {truth}"]

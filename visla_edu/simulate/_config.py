@@ -1,0 +1,231 @@
+"""The parameters of a simulated drive: :class:`SimulationConfig`, its presets, the default rig."""
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from visla_edu import lie
+
+__all__ = ["SimulationConfig", "PRESETS", "PRESET_NAMES", "make_config", "default_rig"]
+
+
+@dataclass
+class SimulationConfig:
+    """Every parameter of a simulated drive (defaults: the ``"course"`` preset).
+
+    Lengths in metres, times in seconds, angles in radians, pixels in pixels.
+    Pairs ``(lo, hi)`` are ranges sampled uniformly unless said otherwise.
+
+    Attributes
+    ----------
+    num_frames : int
+        T, number of time stamps (ignored by the stand-in: the file decides).
+    time_step, time_step_jitter : float
+        Mean step between time stamps and the standard deviation of its jitter.
+    start_time : float
+        First time stamp.
+    speed_range : (float, float)
+        Forward speed band; the speed is ``mid + half_width * tanh(smooth noise)``.
+    speed_timescale : float
+        Correlation time of the speed changes.
+    yaw_rate_sigma, yaw_timescale : float
+        Gentle curves: smooth yaw-rate noise, its standard deviation and correlation time.
+    turn_interval : float
+        One turn per this much drive time (a 100 s drive has 4 at 25 s).
+    turn_angle_range, turn_duration_range : (float, float)
+        Heading change of a turn (either direction) and its duration.
+    roll_pitch_amplitude, roll_pitch_timescale : float
+        Roll and pitch angles are smooth noise of this amplitude; their rates are tiny.
+    side_velocity_sigma : float
+        Smooth lateral and vertical body velocity (a car barely slips).
+    linear_velocity_sigma, angular_velocity_sigma : float
+        White noise added to the true velocities to give the measured IMU velocities.
+    gyro_bias : (float, float, float)
+        Constant bias added to the measured angular velocity.
+    K, b, imu_T_cam : ndarray (3, 3), float, ndarray (4, 4), or None
+        Calibration; None means :func:`default_rig` (stand-in: the calibration file).
+    image_size : (int, int)
+        Image width and height in pixels.
+    num_landmarks : int
+        Target number of landmark tracks M (the per-frame cap may remove a few).
+    candidate_factor : float
+        Landmarks placed per wanted track (some are never seen, or only once).
+    imu_height : float
+        Height of the IMU above the road.
+    ahead_range : (float, float)
+        Roadside landmarks sit this far along the road ahead of their anchor pose...
+    lateral_range : (float, float)
+        ...this far to the left or right of the path...
+    height_range : (float, float)
+        ...and this high above the road.
+    far_share : float
+        Share of far landmarks (buildings, trees, hills): tiny disparity.
+    far_range, far_height_range : (float, float)
+        Far landmarks: distance from the anchor pose, height above the road.
+    far_bearing : float
+        Largest bearing (left or right of straight ahead) of a far landmark.
+    scene_speed_floor : float
+        The scene changes by ``distance + floor * time`` per step: new landmarks appear
+        and tracks are lost in proportion to it.
+    depth_range : (float, float)
+        A landmark is visible only at depths within this range (m, camera z).
+    track_loss_probability : float
+        Probability that the detector loses a track per frame of average scene change
+        (exponential lifetimes in scene-change units, mean ``1 / p`` frames, plus
+        ``min_track_length`` guaranteed frames).
+    min_track_length : int
+        Shorter tracks are dropped.
+    max_start_delay : int
+        Frames after its appearance a landmark may become visible, else it is dropped.
+    max_observations_per_frame : int
+        Cap on the observations of one frame; the farthest are dropped.
+    pixel_sigma : float
+        Standard deviation of the pixel noise on each of ``[uL, vL, uR, vR]``.
+    outlier_share : float
+        Share of landmark tracks that are gross outliers.
+    outlier_offset_range : (float, float)
+        Size of an outlier's constant offset: both images (wrong feature), or the right
+        image's u only (wrong stereo match), half of the outliers each.
+    nonpositive_disparity_share : float
+        Share of observations with ``uL - uR <= 0``: noise on far points, topped up by
+        forcing the farthest inlier observations to disparities in ``(-1, 0]``.
+    """
+
+    num_frames: int = 1010
+    time_step: float = 0.1046
+    time_step_jitter: float = 1e-4
+    start_time: float = 0.0
+    speed_range: tuple = (5.0, 15.0)
+    speed_timescale: float = 8.0
+    yaw_rate_sigma: float = 0.02
+    yaw_timescale: float = 4.0
+    turn_interval: float = 25.0
+    turn_angle_range: tuple = (0.4, 1.6)
+    turn_duration_range: tuple = (6.0, 12.0)
+    roll_pitch_amplitude: float = 0.01
+    roll_pitch_timescale: float = 2.0
+    side_velocity_sigma: float = 0.02
+    linear_velocity_sigma: float = 0.2
+    angular_velocity_sigma: float = 0.02
+    gyro_bias: tuple = (0.0, 0.0, 0.0)
+    K: object = None
+    b: object = None
+    imu_T_cam: object = None
+    image_size: tuple = (1400, 500)
+    num_landmarks: int = 5000
+    candidate_factor: float = 1.6
+    imu_height: float = 1.0
+    ahead_range: tuple = (3.0, 70.0)
+    lateral_range: tuple = (2.0, 30.0)
+    height_range: tuple = (0.0, 4.0)
+    far_share: float = 0.1
+    far_range: tuple = (40.0, 80.0)
+    far_height_range: tuple = (0.0, 10.0)
+    far_bearing: float = 0.7
+    scene_speed_floor: float = 3.0
+    depth_range: tuple = (1.5, 80.0)
+    track_loss_probability: float = 0.055
+    min_track_length: int = 2
+    max_start_delay: int = 10
+    max_observations_per_frame: int = 130
+    pixel_sigma: float = 1.0
+    outlier_share: float = 0.01
+    outlier_offset_range: tuple = (20.0, 60.0)
+    nonpositive_disparity_share: float = 0.01
+
+    def validate(self):
+        """Raise ``ValueError`` naming the first field with an impossible value."""
+        _require(self.num_frames >= 2, "num_frames", self.num_frames, ">= 2")
+        _require(self.num_landmarks >= 0, "num_landmarks", self.num_landmarks, ">= 0")
+        _require(self.time_step > 0, "time_step", self.time_step, "> 0")
+        for name in ("time_step_jitter", "linear_velocity_sigma", "angular_velocity_sigma",
+                     "pixel_sigma", "side_velocity_sigma", "roll_pitch_amplitude",
+                     "yaw_rate_sigma", "scene_speed_floor", "max_start_delay"):
+            _require(getattr(self, name) >= 0, name, getattr(self, name), ">= 0")
+        for name in ("far_share", "outlier_share", "nonpositive_disparity_share"):
+            _require(0 <= getattr(self, name) <= 1, name, getattr(self, name), "in [0, 1]")
+        _require(0 < self.track_loss_probability <= 1, "track_loss_probability",
+                 self.track_loss_probability, "in (0, 1]")
+        _require(self.min_track_length >= 1, "min_track_length", self.min_track_length, ">= 1")
+        _require(self.max_observations_per_frame >= 1, "max_observations_per_frame",
+                 self.max_observations_per_frame, ">= 1")
+        _require(self.candidate_factor >= 1, "candidate_factor", self.candidate_factor, ">= 1")
+        _require(0 < self.depth_range[0] < self.depth_range[1], "depth_range",
+                 self.depth_range, "0 < near < far")
+        for name in ("speed_range", "turn_angle_range", "turn_duration_range", "ahead_range",
+                     "lateral_range", "height_range", "far_range", "far_height_range",
+                     "outlier_offset_range"):
+            lo, hi = getattr(self, name)
+            _require(lo <= hi, name, getattr(self, name), "(lo, hi) with lo <= hi")
+        return self
+
+    def describe(self):
+        """One line ``name=value, ...``; arrays are shown by shape."""
+        parts = []
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.ndarray):
+                value = f"array{value.shape}"
+            parts.append(f"{f.name}={value}")
+        return "SimulationConfig(" + ", ".join(parts) + ")"
+
+
+def _require(ok, name, value, expected):
+    if not ok:
+        raise ValueError(f"SimulationConfig.{name} must be {expected}, got {value!r}")
+
+
+#: Overrides of the :class:`SimulationConfig` defaults for each preset.
+PRESETS = {
+    "tiny": {"num_frames": 60, "num_landmarks": 150},
+    "small": {"num_frames": 300, "num_landmarks": 1000},
+    "course": {},
+}
+PRESET_NAMES = {"tiny": "sim-tiny", "small": "sim-small", "course": "sim"}
+
+
+def make_config(preset="course", **overrides):
+    """The configuration of a preset with some fields replaced.
+
+    Parameters
+    ----------
+    preset : {"tiny", "small", "course"}
+        ``"tiny"``: 60 frames, ~150 landmarks (unit tests); ``"small"``: 300 frames,
+        ~1000 landmarks; ``"course"``: dataset-3 scale, 1010 frames, ~5000 landmarks.
+    **overrides
+        Any :class:`SimulationConfig` field.
+
+    Returns
+    -------
+    SimulationConfig
+    """
+    if preset not in PRESETS:
+        raise ValueError(f"make_config: unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
+    names = {f.name for f in dataclasses.fields(SimulationConfig)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ValueError(f"make_config: unknown SimulationConfig field(s) {unknown}; "
+                         f"valid fields: {sorted(names)}")
+    return SimulationConfig(**{**PRESETS[preset], **overrides}).validate()
+
+
+def default_rig():
+    """A KITTI-like stereo rig (made up for visla-edu, not taken from any course file).
+
+    Left camera: ``fsu = fsv = 550`` px, principal point ``(680, 240)``, 1400x500 images,
+    baseline 0.6 m, mounted 1.5 m ahead of and 0.6 m above the IMU, looking forward
+    (camera x = -IMU y, camera y = -IMU z, camera z = IMU x) with a ~1 degree misalignment.
+
+    Returns
+    -------
+    K : ndarray, shape (3, 3)
+    b : float
+    imu_T_cam : ndarray, shape (4, 4)
+    """
+    K = np.array([[550.0, 0.0, 680.0], [0.0, 550.0, 240.0], [0.0, 0.0, 1.0]])
+    imu_R_cam_nominal = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    imu_T_cam = np.eye(4)
+    imu_T_cam[:3, :3] = imu_R_cam_nominal @ lie.so3_exp(np.array([0.01, -0.012, 0.006]))
+    imu_T_cam[:3, 3] = [1.5, 0.0, 0.6]
+    return K, 0.6, imu_T_cam
