@@ -1,0 +1,253 @@
+"""The batch smoother: Levenberg-Marquardt over all poses and landmarks, with outlier rounds.
+
+One round is Levenberg-Marquardt to convergence on the robust cost (IRLS weights refreshed
+at every accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's
+rule). After a round, observations whose squared whitened error exceeds the chi-square
+(4 dof) quantile are rejected, landmarks left with too few observations (or in front of
+the camera by less than ``min_depth``) are dropped, and the next round starts from the
+current estimate. The first pose is held: it defines the world frame.
+"""
+
+import time
+
+import numpy as np
+from scipy import stats
+
+from visla_edu.smoother import _normal
+from visla_edu.smoother._config import SmootherConfig, blas_threads
+from visla_edu.smoother._factors import motion_steps
+from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
+                                         observation_status, rig_camera, triangulate_landmarks)
+from visla_edu.smoother._result import (SmootherResult, check_landmarks, check_trajectory, empty_history,
+                                        finish_history)
+
+__all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information"]
+
+#: Damping beyond which a round gives up (no step lowers the cost).
+MAX_DAMPING = 1e12
+#: Rounds followed by outlier rejection stop at ``ROUGH`` times the function tolerance: their
+#: estimate only has to separate outliers from inliers, and the last round refines.
+ROUGH = 100
+
+
+def motion_information(tau, config):
+    """Diagonal of ``W_t^{-1/2}`` for each step: ``1 / (tau_t sigma)``, shape (K, 6)."""
+    sigma = np.repeat([config.sigma_linear_velocity, config.sigma_angular_velocity], 3)
+    return 1.0 / (np.asarray(tau)[:, None] * sigma)
+
+
+def _state_norm(problem, world_T_imu, landmarks):
+    p = world_T_imu[problem.first_var:problem.last_frame + 1, :3, 3]
+    m = landmarks[problem.landmark_active]
+    return float(np.sqrt(np.sum(p * p) + np.sum(m * m)))
+
+
+def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_index=0, max_iterations=None,
+                        function_tolerance=None):
+    """Minimise the robust cost of ``problem`` from the given state.
+
+    Parameters
+    ----------
+    problem : Problem
+    world_T_imu : ndarray, shape (T, 4, 4)
+    landmarks : ndarray, shape (L, 3)
+        The problem's landmarks (local order).
+    config : SmootherConfig
+        Stopping rules and the first damping.
+    history : dict of list
+        Appended to, one record per iteration (see ``HISTORY_FIELDS``).
+    round_index : int
+    max_iterations : int, optional
+        Default ``config.max_iterations``.
+    function_tolerance : float, optional
+        Default ``config.function_tolerance``.
+
+    Returns
+    -------
+    world_T_imu, landmarks : ndarray
+        The estimate.
+    lin : Linearization
+        At the estimate (for covariances).
+    """
+    lin = _normal.linearize(problem, world_T_imu, landmarks)
+    damping, nu = config.initial_damping, 2.0
+    for _ in range(max_iterations or config.max_iterations):
+        try:
+            step = _normal.solve_step(problem, lin, damping)
+        except np.linalg.LinAlgError:
+            damping, nu = damping * nu, nu * 2
+            continue
+        new_T, new_m = _normal.apply_step(problem, world_T_imu, landmarks, step)
+        new_cost = _normal.evaluate(problem, new_T, new_m)
+        step_norm = float(np.sqrt(np.sum(step.d_pose**2) + np.sum(step.d_landmark**2)))
+        small_step = step_norm < config.step_tolerance * (1 + _state_norm(problem, world_T_imu, landmarks))
+        accepted = bool(np.isfinite(new_cost) and new_cost < lin.cost)
+        _record(history, round_index, new_cost if accepted else lin.cost, step_norm, accepted, damping)
+        if not accepted:
+            damping, nu = damping * nu, nu * 2
+            if small_step or damping > MAX_DAMPING:
+                break
+            continue
+        gain = (lin.cost - new_cost) / max(step.predicted, 1e-300)
+        damping, nu = damping * max(1 / 3, 1 - (2 * gain - 1) ** 3), 2.0
+        relative = (lin.cost - new_cost) / max(lin.cost, 1e-300)
+        world_T_imu, landmarks = new_T, new_m
+        lin = _normal.linearize(problem, world_T_imu, landmarks)
+        if small_step or relative < (function_tolerance or config.function_tolerance):
+            break
+    return world_T_imu, landmarks, lin
+
+
+def _record(history, round_index, cost, step_norm, accepted, damping):
+    for key, value in zip(("round", "cost", "step_norm", "accepted", "damping"),
+                          (round_index, cost, step_norm, accepted, damping)):
+        history[key].append(value)
+
+
+def reject_outliers(problem, world_T_imu, landmarks, probability):
+    """Deactivate observations with ``s > chi2.ppf(probability, 4)``.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+        The observations rejected now.
+    """
+    bad = np.zeros(len(problem.active), dtype=bool)
+    if probability < 1:
+        s, _ = _normal.observation_errors(problem, world_T_imu, landmarks)
+        bad = problem.active & (s > stats.chi2.ppf(probability, 4))
+        problem.active[bad] = False
+    return bad
+
+
+def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
+    """Drop active landmarks with too few active observations or too close to a camera.
+
+    Returns
+    -------
+    too_few, behind : int
+        Landmarks dropped for each reason.
+    """
+    if problem.num_landmarks == 0:
+        return 0, 0
+    _, depth = _normal.observation_errors(problem, world_T_imu, landmarks)
+    starts = problem.landmark_start[:-1]
+    count = np.add.reduceat(problem.active.astype(np.int64), starts)
+    close = np.add.reduceat((problem.active & ~(depth >= problem.min_depth)).astype(np.int64), starts) > 0
+    behind = problem.landmark_active & close
+    too_few = problem.landmark_active & ~behind & (count < min_observations)
+    problem.landmark_active[behind | too_few] = False
+    problem.active &= problem.landmark_active[problem.obs_landmark]
+    return int(too_few.sum()), int(behind.sum())
+
+
+def _setup(dataset, world_T_imu, landmarks, camera, config):
+    """The batch problem, its initial landmarks, the observation status and drop counts."""
+    status = observation_status(dataset, config)
+    initial = triangulate_landmarks(dataset, camera, world_T_imu, status == USED, landmarks)
+    known = np.all(np.isfinite(initial), axis=1)
+    use = (status == USED) & known[dataset.obs_ids]
+    rejected = {"nonpositive_disparity": int(np.sum(status == NONPOSITIVE)),
+                "repeated_frame": int(np.sum(status == REPEATED)),
+                "landmarks_no_position": int(np.sum(~known & (np.bincount(dataset.obs_ids, status == USED,
+                                                                          dataset.num_landmarks) > 0)))}
+    status[(status == USED) & ~use] = DROPPED
+    step_inv, tau = motion_steps(dataset.time_stamps, dataset.twists, config.imu_lag)
+    idx = np.flatnonzero(use)
+    problem = build_problem(dataset.observation_frames()[idx], dataset.obs_ids[idx], dataset.obs_z[idx], idx,
+                            camera=camera, config=config, frames=(0, 1, dataset.num_frames - 1),
+                            motion=(0, step_inv, motion_information(tau, config)))
+    return problem, initial[problem.landmark_ids], status, rejected
+
+
+def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
+    """Batch smoother: the course objective over all poses and landmarks.
+
+    Minimises ``sum_obs rho(|z - h(T_t, m_j)|^2_V) + sum_t |log((T_t exp(tau_t u_t^))^{-1} T_{t+1})|^2_{W_t}``
+    by Levenberg-Marquardt on SE(3) with the landmark Schur complement, in
+    ``config.rejection_rounds + 1`` rounds with outlier rejection in between (see the
+    module docstring), then computes the marginal covariances.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    world_T_imu : array_like, shape (T, 4, 4)
+        Initial trajectory, e.g. the EKF's (``RunResult.world_T_imu``) or dead reckoning.
+        Its first pose is held.
+    landmarks : array_like, shape (M, 3), optional
+        Initial map (e.g. ``RunResult.landmarks``); NaN rows and a missing map are
+        triangulated from each landmark's largest-disparity observation.
+    imu_T_cam : array_like, shape (4, 4), optional
+        Calibration to use (e.g. ``RunResult.imu_T_cam``, after the extrinsic correction);
+        default the dataset's.
+    config : SmootherConfig, optional
+
+    Returns
+    -------
+    SmootherResult
+    """
+    config = config or SmootherConfig()
+    with blas_threads(config.blas_threads):
+        return _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config)
+
+
+def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
+    """:func:`smooth` with the BLAS thread limit in place."""
+    start = time.perf_counter()
+    world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)
+    landmarks = check_landmarks(landmarks, dataset.num_landmarks, dataset.name)
+    camera = rig_camera(dataset, imu_T_cam)
+    problem, m, status, rejected = _setup(dataset, world_T_imu, landmarks, camera, config)
+    rejected.update(_drop_counts(*drop_landmarks(problem, world_T_imu, m, config.min_observations)))
+    outlier = np.zeros(len(problem.active), dtype=bool)
+    history = empty_history()
+    timing = {"setup": time.perf_counter() - start}
+    round_index, final = 0, config.rejection_rounds == 0
+    while True:
+        tolerance = config.function_tolerance * (1 if final else ROUGH)
+        world_T_imu, m, lin = levenberg_marquardt(problem, world_T_imu, m, config, history, round_index,
+                                                  function_tolerance=tolerance)
+        if final:
+            break
+        newly = reject_outliers(problem, world_T_imu, m, config.rejection_probability)
+        outlier |= newly
+        dropped = _drop_counts(*drop_landmarks(problem, world_T_imu, m, config.min_observations))
+        for key, value in dropped.items():
+            rejected[key] += value
+        round_index += 1
+        final = round_index == config.rejection_rounds or not (newly.any() or any(dropped.values()))
+    rejected["outliers"] = int(outlier.sum())
+    timing["solve"] = time.perf_counter() - start - timing["setup"]
+    status[problem.obs_source[~problem.active]] = DROPPED
+    status[problem.obs_source[outlier]] = REJECTED
+    return _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start)
+
+
+def _drop_counts(too_few, behind):
+    return {"landmarks_too_few": too_few, "landmarks_behind_camera": behind}
+
+
+def _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start):
+    """Marginal covariances and the :class:`SmootherResult`."""
+    T, M = dataset.num_frames, dataset.num_landmarks
+    cov_start = time.perf_counter()
+    pose_cov = np.full((T, 6, 6), np.nan)
+    landmark_cov = np.full((M, 3, 3), np.nan)
+    if config.pose_covariance or config.landmark_covariance:
+        poses, lms = _normal.marginals(problem, lin, config.landmark_covariance)
+        pose_cov[0] = 0.0
+        if config.pose_covariance:
+            pose_cov[1:] = poses
+        if lms is not None:
+            landmark_cov[problem.landmark_ids] = lms
+    landmarks = np.full((M, 3), np.nan)
+    keep = problem.landmark_active
+    landmarks[problem.landmark_ids[keep]] = m[keep]
+    timing["covariance"] = time.perf_counter() - cov_start
+    timing["total"] = time.perf_counter() - start
+    return SmootherResult(
+        name=dataset.name, mode="smooth", time_stamps=dataset.time_stamps.copy(), world_T_imu=world_T_imu,
+        landmarks=landmarks, pose_cov=pose_cov, landmark_cov=landmark_cov, history=finish_history(history),
+        rejected=rejected, obs_status=status, timing=timing, config=config.to_dict(),
+        imu_T_cam=camera.imu_T_cam.copy(),
+    )

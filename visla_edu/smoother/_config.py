@@ -1,0 +1,135 @@
+"""Settings of the batch and sliding-window smoothers: :class:`SmootherConfig`."""
+
+import contextlib
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "blas_threads"]
+
+#: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
+LOSSES = ("cauchy", "huber", "none")
+#: What the sliding window does with the states that leave it.
+WINDOW_MODES = ("fix", "marginalize")
+
+
+@dataclass
+class SmootherConfig:
+    """Noise model, robust loss, stopping rules and window settings of the smoothers.
+
+    The noise settings mean what they mean in :class:`visla_edu.ekf.FilterConfig` and have
+    the same defaults, so the smoother and the filter solve for the same model.
+
+    Attributes
+    ----------
+    sigma_pixel : float
+        Standard deviation of each stereo pixel coordinate (px): ``V = sigma_pixel^2 I4``.
+    sigma_linear_velocity, sigma_angular_velocity : float
+        White noise on each velocity sample (m/s, rad/s):
+        ``W_t = tau_t^2 diag(sigma_v^2 I3, sigma_w^2 I3)``.
+    imu_lag : int
+        The step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
+    loss : {"cauchy", "huber", "none"}
+        Robust loss ``rho(s)`` of the squared whitened reprojection error ``s = |r|^2 / sigma^2``:
+        Cauchy ``k^2 log(1 + s / k^2)``, Huber ``s`` up to ``k^2`` then ``2 k sqrt(s) - k^2``.
+    loss_scale : float
+        ``k``, in units of the whitened error norm ``sqrt(s)`` (4 dof: inliers are below 3.1
+        with 95% probability).
+    max_iterations : int
+        Levenberg-Marquardt iterations per round (accepted or not).
+    function_tolerance : float
+        Stop when an accepted step lowers the cost by less than this fraction.
+    step_tolerance : float
+        Stop when the step norm is below ``step_tolerance * (1 + |state|)`` (state: the
+        pose translations and landmark positions, in metres).
+    initial_damping : float
+        First Levenberg-Marquardt damping ``lambda`` (``H + lambda diag(H)``).
+    rejection_probability : float
+        After each round, observations whose squared whitened error exceeds the chi-square
+        (4 dof) quantile at this probability are dropped (1.0 disables rejection).
+    rejection_rounds : int
+        Rounds of "converge, reject, re-solve" (0: converge once, reject nothing).
+    min_observations : int
+        Landmarks with fewer usable observations are dropped from the problem.
+    min_depth : float
+        Landmarks predicted closer than this (m, camera z) in any observation are dropped.
+    skip_repeated_frames : bool
+        Ignore the observations of frames that exactly repeat the previous frame's.
+    pose_covariance, landmark_covariance : bool
+        Compute the marginal covariances at the solution.
+    window_size : int
+        Frames N in the sliding window.
+    window_iterations : int
+        Gauss-Newton iterations per new frame in the sliding window.
+    window_mode : {"fix", "marginalize"}
+        What happens to a pose leaving the window, see :func:`smooth_window`.
+    blas_threads : int or None
+        BLAS threads while a smoother runs. Its dense blocks are small (6x6 to a few hundred
+        rows), where a second BLAS thread costs far more in synchronisation than it saves
+        (the 60-frame simulated drive: 0.46 s with one thread, 12 s with two on a busy
+        2-core machine); None leaves numpy's setting alone.
+    """
+
+    sigma_pixel: float = 1.5
+    sigma_linear_velocity: float = 0.5
+    sigma_angular_velocity: float = 0.05
+    imu_lag: int = 0
+    loss: str = "cauchy"
+    loss_scale: float = 3.0
+    max_iterations: int = 30
+    function_tolerance: float = 1e-6
+    step_tolerance: float = 1e-9
+    initial_damping: float = 1e-4
+    rejection_probability: float = 0.999
+    rejection_rounds: int = 2
+    min_observations: int = 2
+    min_depth: float = 0.5
+    skip_repeated_frames: bool = True
+    pose_covariance: bool = True
+    landmark_covariance: bool = True
+    window_size: int = 10
+    window_iterations: int = 2
+    window_mode: str = "fix"
+    blas_threads: int = 1
+
+    def __post_init__(self):
+        for name in ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity", "loss_scale",
+                     "function_tolerance", "step_tolerance", "initial_damping"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
+                raise ValueError(f"SmootherConfig.{name} must be a positive number, got {value!r}")
+        if not isinstance(self.min_depth, (int, float, np.number)) or not self.min_depth >= 0:
+            raise ValueError(f"SmootherConfig.min_depth must be a number >= 0 (m), got {self.min_depth!r}")
+        if not 0 < self.rejection_probability <= 1:
+            raise ValueError(f"SmootherConfig.rejection_probability must be in (0, 1], got "
+                             f"{self.rejection_probability!r}")
+        for name, low in (("imu_lag", None), ("max_iterations", 1), ("rejection_rounds", 0),
+                          ("min_observations", 2), ("window_size", 2), ("window_iterations", 1)):
+            _check_int(name, getattr(self, name), low)
+        if self.blas_threads is not None:
+            _check_int("blas_threads", self.blas_threads, 1)
+        if self.loss not in LOSSES:
+            raise ValueError(f"SmootherConfig.loss must be one of {LOSSES}, got {self.loss!r}")
+        if self.window_mode not in WINDOW_MODES:
+            raise ValueError(f"SmootherConfig.window_mode must be one of {WINDOW_MODES}, got {self.window_mode!r}")
+
+    def to_dict(self):
+        """Plain dict of the settings (for saving with results)."""
+        return asdict(self)
+
+
+def blas_threads(n):
+    """Context manager limiting numpy's BLAS threads to ``n`` (None: leave as is)."""
+    if n is None:
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=int(n), user_api="blas")
+
+
+def _check_int(name, value, low):
+    """Raise ValueError unless ``value`` is an integer (bools are not) and at least ``low``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"SmootherConfig.{name} must be an integer, got {value!r}")
+    if low is not None and value < low:
+        raise ValueError(f"SmootherConfig.{name} must be >= {low}, got {value!r}")
