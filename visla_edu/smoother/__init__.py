@@ -35,6 +35,7 @@ from visla_edu.smoother._factors import motion_residuals, reprojection, robust_l
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
 from visla_edu.smoother._result import HISTORY_FIELDS, SmootherResult
 from visla_edu.smoother._se3 import se3_right_jacobian, se3_right_jacobian_inv
+from visla_edu.smoother._window import smooth_window
 
 __all__ = [
     "SmootherConfig",
@@ -44,6 +45,7 @@ __all__ = [
     "STATUS_NAMES",
     "HISTORY_FIELDS",
     "smooth",
+    "smooth_window",
     "triangulate_landmarks",
     "motion_residuals",
     "reprojection",

@@ -87,9 +87,10 @@ def _camera_points(problem, world_T_imu, landmarks):
     p_imu, q : ndarray, shape (3, N)
         ``R^T (m - t)`` and ``R_c p_imu + t_c``.
     """
-    R = np.moveaxis(world_T_imu[:, :3, :3], 0, -1)[:, :, problem.obs_frame]
-    d = (landmarks[problem.obs_landmark] - world_T_imu[problem.obs_frame, :3, 3]).T
-    p_imu = np.einsum("jin,jn->in", R, d)
+    poses = world_T_imu[problem.obs_frame]
+    d = landmarks[problem.obs_landmark] - poses[:, :3, 3]
+    p_imu = (poses[:, :3, :3] * d[:, :, None]).sum(axis=1).T  # R^T d
+    R = np.moveaxis(poses[:, :3, :3], 0, -1)
     return R, p_imu, problem.cam_T_imu[:3, :3] @ p_imu + problem.cam_T_imu[:3, 3:]
 
 
@@ -106,7 +107,7 @@ def observation_errors(problem, world_T_imu, landmarks):
     """Squared whitened reprojection errors ``s = |h - z|^2 / sigma^2`` and depths, shape (N,) each."""
     _, _, q = _camera_points(problem, world_T_imu, landmarks)
     r = _pixels(problem, q) - problem.obs_z
-    return np.einsum("ni,ni->n", r, r) / problem.sigma_pixel**2, q[2]
+    return (r * r).sum(axis=1) / problem.sigma_pixel**2, q[2]
 
 
 def _motion_poses(problem, world_T_imu):
@@ -145,7 +146,17 @@ def evaluate(problem, world_T_imu, landmarks):
     prior = _prior_residual(problem, world_T_imu)
     if prior is not None:
         cost += prior[0] @ prior[0]
+    if problem.landmark_prior is not None:
+        cost += _landmark_prior_cost(problem, landmarks)
     return float(cost)
+
+
+def _landmark_prior_cost(problem, landmarks):
+    """``sum_j m^T Lambda m - 2 m^T eta`` over the active landmarks (up to a constant)."""
+    info, eta = problem.landmark_prior
+    act = problem.landmark_active
+    m = landmarks[act]
+    return float(np.sum(m * (info[act] @ m[:, :, None])[:, :, 0]) - 2 * np.sum(m * eta[act]))
 
 
 def _projection_information(problem, q, wr, w):
@@ -209,7 +220,7 @@ def _observation_blocks(problem, world_T_imu, landmarks):
     """
     R, p_imu, q = _camera_points(problem, world_T_imu, landmarks)
     r = _pixels(problem, q) - problem.obs_z
-    s = np.einsum("ni,ni->n", r, r) / problem.sigma_pixel**2
+    s = (r * r).sum(axis=1) / problem.sigma_pixel**2
     rho, weight = robust_loss(s, problem.loss, problem.loss_scale)
     w = np.where(problem.active, weight / problem.sigma_pixel**2, 0.0)
     B, Atr = _projection_information(problem, q, w[:, None] * r, w)
@@ -226,7 +237,7 @@ def _observation_blocks(problem, world_T_imu, landmarks):
     blocks = {
         "Hpp": Hpp[_UPPER] * on_var, "g_p": -np.concatenate([h, _hat_times(p_imu, h[:, None])[:, 0]]) * on_var,
         "Hpm": -np.concatenate([KRt, _hat_times(p_imu, KRt)]) * on_var,
-        "Hmm": _times(R, KRt), "g_m": np.einsum("ijn,jn->in", R, h),
+        "Hmm": _times(R, KRt), "g_m": (R * h[None]).sum(axis=1),
     }
     return blocks, float(rho[problem.active].sum())
 
@@ -240,9 +251,9 @@ def _add_motion(problem, world_T_imu, Hpp, sub, g_p):
     nxt, var = prev + 1, prev >= 0
     J_nextT, J_prevT = np.swapaxes(J_next, 1, 2), np.swapaxes(J_prev, 1, 2)
     Hpp[nxt] += J_nextT @ J_next
-    g_p[nxt] += np.einsum("kij,kj->ki", J_nextT, e)
+    g_p[nxt] += (J_nextT @ e[:, :, None])[:, :, 0]
     Hpp[prev[var]] += (J_prevT @ J_prev)[var]
-    g_p[prev[var]] += np.einsum("kij,kj->ki", J_prevT, e)[var]
+    g_p[prev[var]] += (J_prevT @ e[:, :, None])[var, :, 0]
     sub[prev[var]] += (J_nextT @ J_prev)[var]
     cost = float(np.sum(e * e))
     prior = _prior_residual(problem, world_T_imu)
@@ -279,6 +290,11 @@ def linearize(problem, world_T_imu, landmarks):
     cost += _add_motion(problem, world_T_imu, Hpp, sub, g_p)
     Hmm = np.moveaxis(_landmark_sum(problem, obs["Hmm"]), -1, 0)
     g_m = _landmark_sum(problem, obs["g_m"]).T
+    if problem.landmark_prior is not None:
+        info, eta = problem.landmark_prior
+        Hmm += info
+        g_m += (info @ landmarks[:, :, None])[:, :, 0] - eta
+        cost += _landmark_prior_cost(problem, landmarks)
     return Linearization(cost, Hpp, sub, g_p, obs["Hpm"], Hmm, g_m)
 
 
@@ -303,18 +319,21 @@ def _landmark_factors(problem, lin, damping):
     """``L_j^{-1}`` of the damped landmark blocks (identity for inactive landmarks), (L, 3, 3)."""
     Hmm = _damped(lin.Hmm, damping)
     Hmm[~problem.landmark_active] = np.eye(3)
+    # A landmark whose observations the robust loss has all but switched off has a nearly
+    # singular block: a relative floor keeps its Cholesky factor finite (it barely moves).
+    Hmm += (1e-12 * np.trace(Hmm, axis1=1, axis2=2) + 1e-300)[:, None, None] * np.eye(3)
     return np.linalg.inv(np.linalg.cholesky(Hmm))
 
 
 def _reduced_system(problem, lin, damping, L_inv):
     """The Schur complement as an EnvelopeSystem, its right-hand side, and the ``V`` rows."""
     lm = problem.obs_landmark
-    V = np.einsum("acn,bcn->abn", lin.Hpm, np.moveaxis(L_inv, 0, -1)[:, :, lm])  # H_pm L^{-T}
+    V = _times_transpose(lin.Hpm, np.moveaxis(L_inv[lm], 0, -1))  # H_pm L^{-T}, (6, 3, N)
     rows = np.zeros((problem.num_slots, 6, 3))
     on = problem.slot >= 0
     rows[problem.slot[on]] = np.moveaxis(V[:, :, on], -1, 0)
-    u = np.einsum("lij,lj->il", L_inv, lin.g_m)
-    rhs = -lin.g_p + np.asarray(problem.frame_sum @ np.einsum("abn,bn->na", V, u[:, lm]))
+    u = (L_inv @ lin.g_m[:, :, None])[:, :, 0]
+    rhs = -lin.g_p + np.asarray(problem.frame_sum @ (V * u[lm].T[None]).sum(axis=1).T)
     keep = problem.landmark_active & (problem.span_hi >= problem.span_lo)
     system = _envelope.EnvelopeSystem(_damped(lin.Hpp, damping), lin.sub, problem.span_lo[keep],
                                       problem.span_hi[keep], problem.span_start[keep], rows)
@@ -344,9 +363,9 @@ def solve_step(problem, lin, damping):
     system, rhs, _ = _reduced_system(problem, lin, damping, L_inv)
     d_pose = _envelope.solve(_envelope.cholesky(system), rhs)
     var = problem.obs_var()
-    t = _landmark_sum(problem, np.einsum("acn,na->cn", lin.Hpm, d_pose[np.maximum(var, 0)])).T
+    t = _landmark_sum(problem, (lin.Hpm * d_pose[np.maximum(var, 0)].T[:, None]).sum(axis=0)).T
     Hmm_inv = np.swapaxes(L_inv, 1, 2) @ L_inv
-    d_landmark = -np.einsum("lij,lj->li", Hmm_inv, lin.g_m + t)
+    d_landmark = -(Hmm_inv @ (lin.g_m + t)[:, :, None])[:, :, 0]
     d_landmark[~problem.landmark_active] = 0.0
     grad = np.sum(lin.g_p * d_pose) + np.sum(lin.g_m * d_landmark)
     diag = np.sum(np.diagonal(lin.Hpp, axis1=1, axis2=2) * d_pose**2) + \

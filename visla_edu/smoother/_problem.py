@@ -76,6 +76,9 @@ class Problem:
     active : ndarray of bool, shape (N,)
     landmark_active : ndarray of bool, shape (L,)
     prior : PosePrior or None
+    landmark_prior : (ndarray, ndarray) or None
+        Quadratic landmark priors ``m^T Lambda m - 2 m^T eta`` per landmark: ``Lambda``
+        (L, 3, 3) and ``eta`` (L, 3) (observations from held poses, folded in).
     slot : ndarray of int, shape (N,)
         Row of each observation in the Schur correction rows (-1 at held frames).
     span_lo, span_hi, span_start : ndarray of int, shape (L,)
@@ -106,6 +109,7 @@ class Problem:
     active: np.ndarray
     landmark_active: np.ndarray
     prior: PosePrior = None
+    landmark_prior: tuple = None
     slot: np.ndarray = None
     span_lo: np.ndarray = None
     span_hi: np.ndarray = None
@@ -130,7 +134,7 @@ class Problem:
 
 
 def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, config, frames, motion,
-                  prior=None):
+                  prior=None, landmark_prior=None):
     """Assemble a :class:`Problem` and its structure from observations in any order.
 
     Parameters
@@ -147,6 +151,8 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
         ``(motion_from, step_inv, motion_sqrt_information)`` for the steps
         ``motion_from .. last_frame - 1``.
     prior : PosePrior, optional
+    landmark_prior : (ndarray, ndarray), optional
+        ``Lambda`` (M, 3, 3) and ``eta`` (M, 3) indexed by dataset landmark id.
 
     Returns
     -------
@@ -168,6 +174,8 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
         active=np.ones(len(order), dtype=bool), landmark_active=np.ones(len(landmark_ids), dtype=bool),
         prior=prior,
     )
+    if landmark_prior is not None:
+        problem.landmark_prior = (landmark_prior[0][landmark_ids], landmark_prior[1][landmark_ids])
     _build_structure(problem)
     return problem
 
