@@ -2,7 +2,8 @@
 
 One round is Levenberg-Marquardt to convergence on the robust cost (IRLS weights refreshed
 at every accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's
-rule). After a round, observations whose squared whitened error exceeds the chi-square
+rule). A landmark that a step would bring behind a camera observing it (no finite cost) is
+dropped on the spot: kept, it would force the damping up and shrink every step. After a round, observations whose squared whitened error exceeds the chi-square
 (4 dof) quantile are rejected, landmarks left with too few observations (or in front of
 the camera by less than ``min_depth``) are dropped, and the next round starts from the
 current estimate. The first pose is held: it defines the world frame.
@@ -17,7 +18,7 @@ from visla_edu.smoother import _normal
 from visla_edu.smoother._config import SmootherConfig, blas_threads
 from visla_edu.smoother._factors import motion_steps
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
-                                         observation_status, rig_camera, triangulate_landmarks)
+                                         far_landmarks, observation_status, rig_camera, triangulate_landmarks)
 from visla_edu.smoother._result import (SmootherResult, check_landmarks, check_trajectory, empty_history,
                                         finish_history)
 
@@ -43,7 +44,7 @@ def _state_norm(problem, world_T_imu, landmarks):
 
 
 def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_index=0, max_iterations=None,
-                        function_tolerance=None):
+                        function_tolerance=None, final_linearization=True):
     """Minimise the robust cost of ``problem`` from the given state.
 
     Parameters
@@ -61,6 +62,9 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         Default ``config.max_iterations``.
     function_tolerance : float, optional
         Default ``config.function_tolerance``.
+    final_linearization : bool
+        Relinearise after a step accepted in the last allowed iteration (for covariances);
+        without it the returned ``lin`` may be from the state before that step.
 
     Returns
     -------
@@ -68,18 +72,30 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         The estimate.
     lin : Linearization
         At the estimate (for covariances).
+    factor : EnvelopeFactor or None
+        Of the last step solved (None if none was).
     """
     lin = _normal.linearize(problem, world_T_imu, landmarks)
     damping, nu = config.initial_damping, 2.0
-    for _ in range(max_iterations or config.max_iterations):
+    iterations = max_iterations or config.max_iterations
+    factor = None
+    for iteration in range(iterations):
         try:
             step = _normal.solve_step(problem, lin, damping)
+            factor = step.factor
         except np.linalg.LinAlgError:
             damping, nu = damping * nu, nu * 2
             continue
-        new_T, new_m = _normal.apply_step(problem, world_T_imu, landmarks, step)
-        new_cost = _normal.evaluate(problem, new_T, new_m)
+        new_T, new_m, too_close = _normal.apply_step(problem, world_T_imu, landmarks, step)
         step_norm = float(np.sqrt(np.sum(step.d_pose**2) + np.sum(step.d_landmark**2)))
+        if too_close.any():  # the step sends them behind a camera: inconsistent, drop them
+            problem.landmark_active[too_close] = False
+            problem.active &= problem.landmark_active[problem.obs_landmark]
+            problem.dropped_in_steps += int(too_close.sum())
+            lin = _normal.linearize(problem, world_T_imu, landmarks)
+            _record(history, round_index, lin.cost, step_norm, False, damping)
+            continue
+        new_cost = _normal.evaluate(problem, new_T, new_m)
         small_step = step_norm < config.step_tolerance * (1 + _state_norm(problem, world_T_imu, landmarks))
         accepted = bool(np.isfinite(new_cost) and new_cost < lin.cost)
         _record(history, round_index, new_cost if accepted else lin.cost, step_norm, accepted, damping)
@@ -92,10 +108,11 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         damping, nu = damping * max(1 / 3, 1 - (2 * gain - 1) ** 3), 2.0
         relative = (lin.cost - new_cost) / max(lin.cost, 1e-300)
         world_T_imu, landmarks = new_T, new_m
-        lin = _normal.linearize(problem, world_T_imu, landmarks)
+        if final_linearization or iteration + 1 < iterations:
+            lin = _normal.linearize(problem, world_T_imu, landmarks)
         if small_step or relative < (function_tolerance or config.function_tolerance):
             break
-    return world_T_imu, landmarks, lin
+    return world_T_imu, landmarks, lin, factor
 
 
 def _record(history, round_index, cost, step_norm, accepted, damping):
@@ -121,36 +138,44 @@ def reject_outliers(problem, world_T_imu, landmarks, probability):
 
 
 def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
-    """Drop active landmarks with too few active observations or too close to a camera.
+    """Drop active landmarks with too few active observations, too close to a camera, or too far.
+
+    Too far: the largest predicted disparity ``fsu b / depth`` over its active observations is
+    below ``min_disparity / 2``.
 
     Returns
     -------
-    too_few, behind : int
-        Landmarks dropped for each reason.
+    dict of int
+        Landmarks dropped: ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far``.
     """
     if problem.num_landmarks == 0:
-        return 0, 0
+        return _drop_counts(0, 0, 0)
     _, depth = _normal.observation_errors(problem, world_T_imu, landmarks)
     starts = problem.landmark_start[:-1]
     count = np.add.reduceat(problem.active.astype(np.int64), starts)
     close = np.add.reduceat((problem.active & ~(depth >= problem.min_depth)).astype(np.int64), starts) > 0
+    disparity = np.where(problem.active, -problem.Ks[2, 3] / np.where(depth > 0, depth, np.inf), -np.inf)
+    far = np.maximum.reduceat(disparity, starts) < problem.min_disparity / 2
     behind = problem.landmark_active & close
-    too_few = problem.landmark_active & ~behind & (count < min_observations)
-    problem.landmark_active[behind | too_few] = False
+    too_far = problem.landmark_active & ~behind & far & (count > 0)
+    too_few = problem.landmark_active & ~behind & ~too_far & (count < min_observations)
+    problem.landmark_active[behind | too_far | too_few] = False
     problem.active &= problem.landmark_active[problem.obs_landmark]
-    return int(too_few.sum()), int(behind.sum())
+    return _drop_counts(int(too_few.sum()), int(behind.sum()), int(too_far.sum()))
 
 
 def _setup(dataset, world_T_imu, landmarks, camera, config):
     """The batch problem, its initial landmarks, the observation status and drop counts."""
     status = observation_status(dataset, config)
     initial = triangulate_landmarks(dataset, camera, world_T_imu, status == USED, landmarks)
+    far = far_landmarks(dataset, status == USED, config.min_disparity)
     known = np.all(np.isfinite(initial), axis=1)
-    use = (status == USED) & known[dataset.obs_ids]
+    use = (status == USED) & (known & ~far)[dataset.obs_ids]
     rejected = {"nonpositive_disparity": int(np.sum(status == NONPOSITIVE)),
                 "repeated_frame": int(np.sum(status == REPEATED)),
                 "landmarks_no_position": int(np.sum(~known & (np.bincount(dataset.obs_ids, status == USED,
-                                                                          dataset.num_landmarks) > 0)))}
+                                                                          dataset.num_landmarks) > 0))),
+                "landmarks_too_far": int(far.sum())}
     status[(status == USED) & ~use] = DROPPED
     step_inv, tau = motion_steps(dataset.time_stamps, dataset.twists, config.imu_lag)
     idx = np.flatnonzero(use)
@@ -198,33 +223,35 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
     landmarks = check_landmarks(landmarks, dataset.num_landmarks, dataset.name)
     camera = rig_camera(dataset, imu_T_cam)
     problem, m, status, rejected = _setup(dataset, world_T_imu, landmarks, camera, config)
-    rejected.update(_drop_counts(*drop_landmarks(problem, world_T_imu, m, config.min_observations)))
+    dropped = drop_landmarks(problem, world_T_imu, m, config.min_observations)
+    rejected.update({k: rejected.get(k, 0) + v for k, v in dropped.items()})
     outlier = np.zeros(len(problem.active), dtype=bool)
     history = empty_history()
     timing = {"setup": time.perf_counter() - start}
     round_index, final = 0, config.rejection_rounds == 0
     while True:
         tolerance = config.function_tolerance * (1 if final else ROUGH)
-        world_T_imu, m, lin = levenberg_marquardt(problem, world_T_imu, m, config, history, round_index,
-                                                  function_tolerance=tolerance)
+        world_T_imu, m, lin, _ = levenberg_marquardt(problem, world_T_imu, m, config, history, round_index,
+                                                     function_tolerance=tolerance)
         if final:
             break
         newly = reject_outliers(problem, world_T_imu, m, config.rejection_probability)
         outlier |= newly
-        dropped = _drop_counts(*drop_landmarks(problem, world_T_imu, m, config.min_observations))
+        dropped = drop_landmarks(problem, world_T_imu, m, config.min_observations)
         for key, value in dropped.items():
             rejected[key] += value
         round_index += 1
         final = round_index == config.rejection_rounds or not (newly.any() or any(dropped.values()))
     rejected["outliers"] = int(outlier.sum())
+    rejected["landmarks_behind_camera"] += problem.dropped_in_steps
     timing["solve"] = time.perf_counter() - start - timing["setup"]
     status[problem.obs_source[~problem.active]] = DROPPED
     status[problem.obs_source[outlier]] = REJECTED
     return _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start)
 
 
-def _drop_counts(too_few, behind):
-    return {"landmarks_too_few": too_few, "landmarks_behind_camera": behind}
+def _drop_counts(too_few, behind, too_far):
+    return {"landmarks_too_few": too_few, "landmarks_behind_camera": behind, "landmarks_too_far": too_far}
 
 
 def _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start):

@@ -53,6 +53,14 @@ class SmootherConfig:
         Landmarks with fewer usable observations are dropped from the problem.
     min_depth : float
         Landmarks predicted closer than this (m, camera z) in any observation are dropped.
+    min_disparity : float
+        Landmarks never seen with at least this disparity ``uL - uR`` (px) are left out, and
+        an estimate that drifts beyond twice that range (largest predicted disparity below
+        ``min_disparity / 2``) is dropped after a round. Their depth, beyond
+        ``fsu b / min_disparity``, is so poorly observed that Gauss-Newton on xyz landmarks
+        sends them off along their viewing rays (on dataset 03, landmarks at 300 m ran to
+        minus a million metres in six iterations), which stalls Levenberg-Marquardt. The same
+        3 px as :attr:`visla_edu.ekf.FilterConfig.min_init_disparity`.
     skip_repeated_frames : bool
         Ignore the observations of frames that exactly repeat the previous frame's.
     pose_covariance, landmark_covariance : bool
@@ -84,11 +92,12 @@ class SmootherConfig:
     rejection_rounds: int = 2
     min_observations: int = 2
     min_depth: float = 0.5
+    min_disparity: float = 3.0
     skip_repeated_frames: bool = True
     pose_covariance: bool = True
     landmark_covariance: bool = True
-    window_size: int = 10
-    window_iterations: int = 2
+    window_size: int = 20
+    window_iterations: int = 1
     window_mode: str = "fix"
     blas_threads: int = 1
 
@@ -98,8 +107,10 @@ class SmootherConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
                 raise ValueError(f"SmootherConfig.{name} must be a positive number, got {value!r}")
-        if not isinstance(self.min_depth, (int, float, np.number)) or not self.min_depth >= 0:
-            raise ValueError(f"SmootherConfig.min_depth must be a number >= 0 (m), got {self.min_depth!r}")
+        for name, unit in (("min_depth", "m"), ("min_disparity", "px")):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.number)) or not 0 <= value < np.inf:
+                raise ValueError(f"SmootherConfig.{name} must be a number >= 0 ({unit}), got {value!r}")
         if not 0 < self.rejection_probability <= 1:
             raise ValueError(f"SmootherConfig.rejection_probability must be in (0, 1], got "
                              f"{self.rejection_probability!r}")

@@ -67,11 +67,14 @@ class Linearization:
 
 @dataclass
 class Step:
-    """A damped Gauss-Newton step: pose and landmark increments, predicted cost decrease."""
+    """A damped Gauss-Newton step: pose and landmark increments, predicted cost decrease, and
+    the Cholesky factor of the damped reduced system it solved (its inverse approximates the
+    pose covariance at the state the step started from)."""
 
     d_pose: np.ndarray
     d_landmark: np.ndarray
     predicted: float
+    factor: object = None
 
 
 def _camera_points(problem, world_T_imu, landmarks):
@@ -361,7 +364,8 @@ def solve_step(problem, lin, damping):
     """
     L_inv = _landmark_factors(problem, lin, damping)
     system, rhs, _ = _reduced_system(problem, lin, damping, L_inv)
-    d_pose = _envelope.solve(_envelope.cholesky(system), rhs)
+    factor = _envelope.cholesky(system)
+    d_pose = _envelope.solve(factor, rhs)
     var = problem.obs_var()
     t = _landmark_sum(problem, (lin.Hpm * d_pose[np.maximum(var, 0)].T[:, None]).sum(axis=0)).T
     Hmm_inv = np.swapaxes(L_inv, 1, 2) @ L_inv
@@ -370,15 +374,30 @@ def solve_step(problem, lin, damping):
     grad = np.sum(lin.g_p * d_pose) + np.sum(lin.g_m * d_landmark)
     diag = np.sum(np.diagonal(lin.Hpp, axis1=1, axis2=2) * d_pose**2) + \
         np.sum(np.diagonal(lin.Hmm, axis1=1, axis2=2) * d_landmark**2)
-    return Step(d_pose, d_landmark, float(-grad + damping * diag))
+    return Step(d_pose, d_landmark, float(-grad + damping * diag), factor)
 
 
 def apply_step(problem, world_T_imu, landmarks, step):
-    """``T <- T exp(dp^)`` on the pose variables, ``m <- m + dm``; new arrays."""
+    """``T <- T exp(dp^)`` on the pose variables, ``m <- m + dm``.
+
+    Returns
+    -------
+    world_T_imu : ndarray, shape (T, 4, 4)
+    landmarks : ndarray, shape (L, 3)
+        New arrays.
+    too_close : ndarray of bool, shape (L,)
+        Active landmarks the step would bring closer than ``min_depth`` to (or behind) a
+        camera observing them. Such a step has no finite cost; the smoothers drop these
+        landmarks as inconsistent rather than let one of them shrink every step.
+    """
     out = world_T_imu.copy()
     frames = slice(problem.first_var, problem.last_frame + 1)
     out[frames] = world_T_imu[frames] @ lie.se3_exp(step.d_pose)
-    return out, landmarks + step.d_landmark
+    moved = landmarks + step.d_landmark
+    _, depth = observation_errors(problem, out, moved)
+    too_close = np.zeros(problem.num_landmarks, dtype=bool)
+    too_close[problem.obs_landmark[problem.active & ~(depth >= problem.min_depth)]] = True
+    return out, moved, too_close
 
 
 def marginals(problem, lin, landmark_covariance=True):

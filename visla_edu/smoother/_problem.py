@@ -22,7 +22,7 @@ from visla_edu.camera import StereoCamera
 from visla_edu.dataset import repeated_frames
 
 __all__ = ["PosePrior", "Problem", "build_problem", "STATUS_NAMES", "observation_status",
-           "triangulate_landmarks", "rig_camera"]
+           "far_landmarks", "triangulate_landmarks", "rig_camera"]
 
 #: Status of each dataset observation in a smoother result (``SmootherResult.obs_status``).
 STATUS_NAMES = ("used", "nonpositive_disparity", "repeated_frame", "landmark_dropped", "rejected")
@@ -54,7 +54,7 @@ class Problem:
     ----------
     Ks, cam_T_imu : ndarray, shape (4, 4)
         Stereo matrix and ``inv(imu_T_cam)``.
-    sigma_pixel, loss, loss_scale, min_depth
+    sigma_pixel, loss, loss_scale, min_depth, min_disparity
         From :class:`~visla_edu.smoother.SmootherConfig`.
     first_frame, first_var, last_frame : int
         Frames in the problem; variables from ``first_var`` on.
@@ -86,6 +86,8 @@ class Problem:
     num_slots : int
     frame_sum : scipy.sparse.csr_matrix, shape (n, N)
         Sums per-observation pose terms into their block rows.
+    dropped_in_steps : int
+        Landmarks the solver dropped because a step would bring them behind a camera.
     """
 
     Ks: np.ndarray
@@ -94,6 +96,7 @@ class Problem:
     loss: str
     loss_scale: float
     min_depth: float
+    min_disparity: float
     first_frame: int
     first_var: int
     last_frame: int
@@ -116,6 +119,7 @@ class Problem:
     span_start: np.ndarray = None
     num_slots: int = 0
     frame_sum: object = None
+    dropped_in_steps: int = 0
 
     @property
     def num_vars(self):
@@ -165,7 +169,8 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
     motion_from, step_inv, sqrt_info = motion
     problem = Problem(
         Ks=camera.Ks, cam_T_imu=camera.cam_T_imu, sigma_pixel=float(config.sigma_pixel), loss=config.loss,
-        loss_scale=float(config.loss_scale), min_depth=float(config.min_depth), first_frame=first_frame,
+        loss_scale=float(config.loss_scale), min_depth=float(config.min_depth),
+        min_disparity=float(config.min_disparity), first_frame=first_frame,
         first_var=first_var, last_frame=last_frame, motion_from=motion_from, step_inv=step_inv,
         motion_sqrt_information=sqrt_info, obs_frame=obs_frame[order], obs_landmark=obs_landmark,
         obs_z=np.asarray(obs_z, dtype=float)[order], obs_source=np.asarray(obs_source)[order],
@@ -219,6 +224,14 @@ def observation_status(dataset, config, frames=None):
     if config.skip_repeated_frames:
         status[np.isin(frames, repeated_frames(dataset))] = REPEATED
     return status
+
+
+def far_landmarks(dataset, usable, min_disparity):
+    """Landmarks whose usable observations all have a disparity below ``min_disparity`` px, (M,) bool."""
+    disparity = np.where(usable, dataset.obs_z[:, 0] - dataset.obs_z[:, 2], -np.inf)
+    best = np.full(dataset.num_landmarks, -np.inf)
+    np.maximum.at(best, dataset.obs_ids, disparity)
+    return np.isfinite(best) & (best < min_disparity)
 
 
 def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):

@@ -37,7 +37,8 @@ class SmootherResult:
     rejected : dict of int
         ``outliers`` (observations rejected by the chi-square test), ``nonpositive_disparity``
         and ``repeated_frame`` (observations never used), ``landmarks_no_position``,
-        ``landmarks_too_few``, ``landmarks_behind_camera`` (landmarks dropped).
+        ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far`` (landmarks
+        dropped, see :class:`~visla_edu.smoother.SmootherConfig`).
     obs_status : ndarray of int8, shape (N,)
         Status of each dataset observation, a code of :data:`STATUS_NAMES`.
     timing : dict of float

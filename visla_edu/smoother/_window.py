@@ -34,7 +34,7 @@ import numpy as np
 from scipy import stats
 
 from visla_edu import lie
-from visla_edu.smoother import _normal
+from visla_edu.smoother import _envelope, _normal
 from visla_edu.smoother._batch import levenberg_marquardt, motion_information
 from visla_edu.smoother._config import SmootherConfig, blas_threads
 from visla_edu.smoother._factors import motion_steps, reprojection, robust_loss
@@ -76,12 +76,16 @@ class _WindowState:
         self.dropped = {"landmarks_too_few": 0, "landmarks_behind_camera": 0}
 
     def predict(self, k):
-        """Predict pose ``k`` from pose ``k - 1`` and triangulate the landmarks first seen at ``k``."""
+        """Predict pose ``k`` from pose ``k - 1``; triangulate the landmarks seen at ``k`` for the
+        first time with a disparity of at least ``min_disparity`` (as the EKF does; earlier
+        observations still in the problem are used from then on)."""
         self.world_T_imu[k] = self.world_T_imu[k - 1] @ lie.se3_inv(self.step_inv[k - 1])
         lo, hi = self.dataset.frame_ptr[k], self.dataset.frame_ptr[k + 1]
         idx = np.arange(lo, hi)
         ids = self.dataset.obs_ids[idx]
-        new = idx[(self.status[idx] == USED) & np.isnan(self.landmarks[ids, 0])]
+        disparity = self.dataset.obs_z[idx, 0] - self.dataset.obs_z[idx, 2]
+        new = idx[(self.status[idx] == USED) & np.isnan(self.landmarks[ids, 0])
+                  & (disparity >= self.config.min_disparity)]
         if len(new):
             self.landmarks[self.dataset.obs_ids[new]] = self.camera.triangulate(
                 self.dataset.obs_z[new], self.world_T_imu[k])
@@ -95,7 +99,7 @@ class _WindowState:
         """
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v0], ds.frame_ptr[k + 1])
-        idx = idx[self.status[idx] == USED]
+        idx = idx[(self.status[idx] == USED) & np.isfinite(self.landmarks[ds.obs_ids[idx], 0])]
         lo = self.held_from(v0)
         if lo < v0:
             old = np.arange(ds.frame_ptr[lo], ds.frame_ptr[v0])
@@ -189,16 +193,22 @@ def _process_frame(state, k, history):
     problem = state.problem(k, v0)
     m = state.landmarks[problem.landmark_ids]
     _drop_close(state, problem, m)
-    T, m, lin = levenberg_marquardt(problem, state.world_T_imu, m, config, history, round_index=k,
-                                    max_iterations=config.window_iterations)
+    leaving = k >= config.window_size and not last  # pose v0 leaves the window after this frame
+    marginalize = config.window_mode == "marginalize" and leaving
+    covariance = marginalize or (config.pose_covariance and (leaving or last))
+    T, m, lin, factor = levenberg_marquardt(problem, state.world_T_imu, m, config, history, round_index=k,
+                                            max_iterations=config.window_iterations, final_linearization=False)
+    if problem.dropped_in_steps:
+        gone = problem.landmark_ids[~problem.landmark_active]
+        state.status[np.isin(state.dataset.obs_ids, gone) & (state.status == USED)] = DROPPED
+        state.dropped["landmarks_behind_camera"] += problem.dropped_in_steps
     state.world_T_imu[v0:k + 1] = T[v0:k + 1]
     state.landmarks[problem.landmark_ids[problem.landmark_active]] = m[problem.landmark_active]
     state.online[k] = state.world_T_imu[k]
     _reject(state, problem, m)
-    leaving = k >= config.window_size and not last  # pose v0 leaves the window after this frame
-    marginalize = config.window_mode == "marginalize" and leaving
-    if marginalize or (config.pose_covariance and (leaving or last)):
-        cov, _ = _normal.marginals(problem, lin, landmark_covariance=False)
+    if covariance:
+        cov = _envelope.inverse_diagonal(factor) if factor is not None else \
+            _normal.marginals(problem, lin, landmark_covariance=False)[0]
         state.pose_cov[v0:k + 1] = cov if last else state.pose_cov[v0:k + 1]
         state.pose_cov[v0] = cov[0]
         if marginalize:
@@ -227,7 +237,9 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None):
         window (the last window's estimates for its frames), ``online_world_T_imu`` each pose
         when its frame was the newest, ``frame_seconds`` the time per frame, ``pose_cov`` the
         window marginal at exit (conditioned on the held poses in ``"fix"`` mode, hence
-        optimistic). Landmark covariances are not computed.
+        optimistic), from the factor of the frame's last Gauss-Newton step (the Hessian one
+        step before the final estimate, with the Levenberg-Marquardt damping: a cheap
+        approximation). Landmark covariances are not computed.
     """
     config = config or SmootherConfig()
     first = np.eye(4) if world_T_imu0 is None else check_trajectory(np.asarray(world_T_imu0)[None], 1,
