@@ -29,6 +29,8 @@ MAX_DAMPING = 1e12
 #: Rounds followed by outlier rejection stop at ``ROUGH`` times the function tolerance: their
 #: estimate only has to separate outliers from inliers, and the last round refines.
 ROUGH = 100
+#: ... and get ``max_iterations // ROUGH_ITERATIONS`` iterations (the last round gets all).
+ROUGH_ITERATIONS = 2
 
 
 def motion_information(tau, config):
@@ -86,7 +88,7 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         except np.linalg.LinAlgError:
             damping, nu = damping * nu, nu * 2
             continue
-        new_T, new_m, too_close = _normal.apply_step(problem, world_T_imu, landmarks, step)
+        new_T, new_m, too_close, errors = _normal.apply_step(problem, world_T_imu, landmarks, step)
         step_norm = float(np.sqrt(np.sum(step.d_pose**2) + np.sum(step.d_landmark**2)))
         if too_close.any():  # the step sends them behind a camera: inconsistent, drop them
             problem.landmark_active[too_close] = False
@@ -95,7 +97,7 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
             lin = _normal.linearize(problem, world_T_imu, landmarks)
             _record(history, round_index, lin.cost, step_norm, False, damping)
             continue
-        new_cost = _normal.evaluate(problem, new_T, new_m)
+        new_cost = _normal.evaluate(problem, new_T, new_m, errors)
         small_step = step_norm < config.step_tolerance * (1 + _state_norm(problem, world_T_imu, landmarks))
         accepted = bool(np.isfinite(new_cost) and new_cost < lin.cost)
         _record(history, round_index, new_cost if accepted else lin.cost, step_norm, accepted, damping)
@@ -231,8 +233,9 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
     round_index, final = 0, config.rejection_rounds == 0
     while True:
         tolerance = config.function_tolerance * (1 if final else ROUGH)
+        iterations = config.max_iterations if final else max(1, config.max_iterations // ROUGH_ITERATIONS)
         world_T_imu, m, lin, _ = levenberg_marquardt(problem, world_T_imu, m, config, history, round_index,
-                                                     function_tolerance=tolerance)
+                                                     max_iterations=iterations, function_tolerance=tolerance)
         if final:
             break
         newly = reject_outliers(problem, world_T_imu, m, config.rejection_probability)

@@ -84,12 +84,12 @@ class SmootherConfig:
     imu_lag: int = 0
     loss: str = "cauchy"
     loss_scale: float = 3.0
-    max_iterations: int = 30
+    max_iterations: int = 10
     function_tolerance: float = 1e-6
     step_tolerance: float = 1e-9
     initial_damping: float = 1e-4
     rejection_probability: float = 0.999
-    rejection_rounds: int = 2
+    rejection_rounds: int = 1
     min_observations: int = 2
     min_depth: float = 0.5
     min_disparity: float = 3.0

@@ -126,7 +126,7 @@ def _prior_residual(problem, world_T_imu):
     return prior.sqrt_information @ e, prior.sqrt_information @ se3_right_jacobian_inv(e)
 
 
-def evaluate(problem, world_T_imu, landmarks):
+def evaluate(problem, world_T_imu, landmarks, errors=None):
     """The robust cost ``C``; ``inf`` if an active observation is closer than ``min_depth``.
 
     Parameters
@@ -134,12 +134,14 @@ def evaluate(problem, world_T_imu, landmarks):
     problem : Problem
     world_T_imu : ndarray, shape (T, 4, 4)
     landmarks : ndarray, shape (L, 3)
+    errors : (ndarray, ndarray), optional
+        :func:`observation_errors` at this state, if already computed.
 
     Returns
     -------
     float
     """
-    s, depth = observation_errors(problem, world_T_imu, landmarks)
+    s, depth = observation_errors(problem, world_T_imu, landmarks) if errors is None else errors
     act = problem.active
     if np.any(depth[act] < problem.min_depth):
         return np.inf
@@ -389,15 +391,17 @@ def apply_step(problem, world_T_imu, landmarks, step):
         Active landmarks the step would bring closer than ``min_depth`` to (or behind) a
         camera observing them. Such a step has no finite cost; the smoothers drop these
         landmarks as inconsistent rather than let one of them shrink every step.
+    errors : (ndarray, ndarray)
+        :func:`observation_errors` at the new state (for :func:`evaluate`).
     """
     out = world_T_imu.copy()
     frames = slice(problem.first_var, problem.last_frame + 1)
     out[frames] = world_T_imu[frames] @ lie.se3_exp(step.d_pose)
     moved = landmarks + step.d_landmark
-    _, depth = observation_errors(problem, out, moved)
+    errors = observation_errors(problem, out, moved)
     too_close = np.zeros(problem.num_landmarks, dtype=bool)
-    too_close[problem.obs_landmark[problem.active & ~(depth >= problem.min_depth)]] = True
-    return out, moved, too_close
+    too_close[problem.obs_landmark[problem.active & ~(errors[1] >= problem.min_depth)]] = True
+    return out, moved, too_close, errors
 
 
 def marginals(problem, lin, landmark_covariance=True):
