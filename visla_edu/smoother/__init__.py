@@ -14,6 +14,15 @@ and a robust loss ``rho``. Gauss-Newton / Levenberg-Marquardt with the right per
 complement and the reduced pose system is solved by a block envelope Cholesky factor, which
 also gives the marginal covariances.
 
+* :func:`smooth` -- the batch smoother over the whole drive, started from a trajectory
+  (the EKF's, or dead reckoning) and optionally a map; rounds of outlier rejection.
+* :func:`smooth_window` -- the fixed-lag sliding window (the last ``window_size`` frames),
+  frame by frame, the real-time middle ground between the filter and the batch.
+
+Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
+history, rejection counts, per-observation status, timing); :class:`SmootherConfig` holds
+every setting and validates it.
+
     >>> from visla_edu import data, run, smoother
     >>> ds = data.load("sim-tiny")
     >>> ekf = run.run_filter(ds, "slam", progress=False)

@@ -1,12 +1,20 @@
 """The batch smoother: Levenberg-Marquardt over all poses and landmarks, with outlier rounds.
 
-One round is Levenberg-Marquardt to convergence on the robust cost (IRLS weights refreshed
-at every accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's
-rule). A landmark that a step would bring behind a camera observing it (no finite cost) is
-dropped on the spot: kept, it would force the damping up and shrink every step. After a round, observations whose squared whitened error exceeds the chi-square
-(4 dof) quantile are rejected, landmarks left with too few observations (or in front of
-the camera by less than ``min_depth``) are dropped, and the next round starts from the
-current estimate. The first pose is held: it defines the world frame.
+One round is Levenberg-Marquardt on the robust cost (IRLS weights refreshed at every
+accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's rule).
+A landmark that a step would bring behind a camera observing it (no finite cost) is dropped
+on the spot: kept, it would force the damping up and shrink every step. After a round,
+observations whose squared whitened error exceeds the chi-square (4 dof) quantile are
+rejected, landmarks left with too few observations, too close to a camera or too far are
+dropped, and the next round starts from the current estimate. Rounds followed by a rejection
+are rough (100 times the function tolerance, half the iterations): they only have to
+separate outliers from inliers. The first pose is held: it defines the world frame.
+
+Measured on simulated drives (preset "small", 5% outlier tracks, seeds 0-4, from the EKF):
+one rejection round gives the same ATE as two (0.078/0.199/0.094/0.518/0.172 m against
+0.078/0.193/0.095/0.532/0.168 m) with fewer iterations; capping the rough round at half the
+iterations costs nothing on four seeds and 0.17 -> 0.25 m on seed 4, and saves a quarter of
+dataset 03's time (its 20 s whole-process budget).
 """
 
 import time

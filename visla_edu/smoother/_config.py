@@ -36,7 +36,8 @@ class SmootherConfig:
         ``k``, in units of the whitened error norm ``sqrt(s)`` (4 dof: inliers are below 3.1
         with 95% probability).
     max_iterations : int
-        Levenberg-Marquardt iterations per round (accepted or not).
+        Levenberg-Marquardt iterations of the final round (accepted or not); a rough round
+        before a rejection gets half.
     function_tolerance : float
         Stop when an accepted step lowers the cost by less than this fraction.
     step_tolerance : float
@@ -48,7 +49,8 @@ class SmootherConfig:
         After each round, observations whose squared whitened error exceeds the chi-square
         (4 dof) quantile at this probability are dropped (1.0 disables rejection).
     rejection_rounds : int
-        Rounds of "converge, reject, re-solve" (0: converge once, reject nothing).
+        Rounds of "solve roughly, reject" before the final solve (0: solve once, reject
+        nothing).
     min_observations : int
         Landmarks with fewer usable observations are dropped from the problem.
     min_depth : float
@@ -66,7 +68,8 @@ class SmootherConfig:
     pose_covariance, landmark_covariance : bool
         Compute the marginal covariances at the solution.
     window_size : int
-        Frames N in the sliding window.
+        Frames N in the sliding window (20: see :mod:`visla_edu.smoother._window` for the
+        measurements behind the window defaults).
     window_iterations : int
         Gauss-Newton iterations per new frame in the sliding window.
     window_mode : {"fix", "marginalize"}

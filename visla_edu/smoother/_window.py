@@ -24,8 +24,16 @@ What happens to the states that leave the window (``SmootherConfig.window_mode``
     approximation of a pose-only prior), and the old observations of the landmarks that stay
     are lost.
 
-Measured (``benchmarks/bench_smoother.py``) on simulated drives and 0020: ``"fix"`` is as
-fast and more accurate (see the benchmark's table), hence the default.
+Measured (``benchmarks/bench_smoother.py``, simulated drives "small" with 5% outlier tracks,
+seeds 0-4, ATE in m): ``"fix"`` 0.11, 0.13, 0.14, 0.55, 0.14; ``"marginalize"`` 0.34, 0.45,
+0.48, 2.56, 2.78, at the same time per frame (the EKF: 2.4, 1.3, 1.4, 1.8, 4.4). The pose-only
+prior forgets what the old frames said about the landmarks still in view; holding the old
+poses keeps it. Hence ``"fix"`` is the default.
+
+Window length and iterations (same drives, seeds 0-2, CPU per frame): 10 frames with two
+iterations 0.32/0.23/0.18 m at 19 ms, one iteration 0.31/0.23/0.23 m at 11 ms; 20 frames with
+one iteration 0.11/0.13/0.14 m at 14 ms; 30 frames 0.10/0.11/0.10 m at 19 ms. The default is
+20 frames, one iteration: dataset 03 then takes 15 ms per frame (median).
 """
 
 import time
