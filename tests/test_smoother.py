@@ -353,3 +353,27 @@ def test_initial_landmarks_come_from_the_largest_disparity_observation(tiny):
         obs = np.flatnonzero((tiny.obs_ids == j) & usable)
         best = obs[np.argmax(tiny.obs_z[obs, 0] - tiny.obs_z[obs, 2])]
         assert np.allclose(m[j], tiny.camera.triangulate(tiny.obs_z[best:best + 1], T[frames[best]])[0])
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_batch_improves_on_the_ekf_and_dead_reckoning_on_kitti_0020(require_data, data_dir):
+    """0020 = KITTI odometry 06; its velocities are nearly noise-free, so both use small noise."""
+    from visla_edu import data
+
+    ds = data.load(str(require_data("0020")))
+    poses = data_dir / "kitti_odometry_06_poses.txt"
+    if not poses.is_file():
+        pytest.skip(f"{poses.name} not found in {data_dir}")
+    rows = np.loadtxt(poses).reshape(-1, 3, 4)
+    P = np.tile(np.eye(4), (len(rows), 1, 1))
+    P[:, :3, :] = rows
+    truth = ds.imu_T_cam @ P @ lie.se3_inv(ds.imu_T_cam)  # world_T_imu = imu_T_cam P cam_T_imu
+    noise = {"imu_lag": 1, "sigma_linear_velocity": 0.05, "sigma_angular_velocity": 0.005}
+    ekf = run.run_filter(ds, "slam", FilterConfig(**noise), progress=False)
+    result = smoother.smooth(ds, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, smoother.SmootherConfig(**noise))
+    n = len(truth)
+    ate = {name: metrics.ate(T[:n], truth, align=False) for name, T in (
+        ("smoother", result.world_T_imu), ("ekf", ekf.world_T_imu),
+        ("dead reckoning", motion.dead_reckon(ds.time_stamps, ds.twists, lag=1)))}
+    assert ate["smoother"] < ate["ekf"] < ate["dead reckoning"], ate
