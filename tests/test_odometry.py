@@ -172,7 +172,7 @@ def test_same_seed_same_result():
 
 
 @pytest.mark.parametrize("setting, value", [("pixel_sigma", -1.0), ("probability", 1.0), ("hypotheses", 0),
-                                            ("min_inliers", 2), ("iterations", 1.5)])
+                                            ("min_inliers", 2), ("hypotheses", 1.5)])
 def test_bad_settings_name_the_setting(setting, value):
     ds = simulate.simulate_drive("tiny", seed=0)
     with pytest.raises(ValueError, match=setting):
