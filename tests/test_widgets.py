@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from visla_edu import filters
-from visla_edu.ekf import FilterConfig, FilterDivergedError
+from visla_edu.filters import FilterConfig, FilterDivergedError
 from visla_edu.widgets import StepperFigure, StepperWidget, app_notebook_path
 
 

@@ -30,7 +30,7 @@ import ipywidgets as w
 import numpy as np
 
 from visla_edu import filters
-from visla_edu.ekf import FilterConfig, FilterDivergedError
+from visla_edu.filters import FilterConfig, FilterDivergedError
 from visla_edu.stepper import MODE_LABELS, NOISE_FIELDS, Stepper, dataset_choices, world_position_covariance
 
 __all__ = ["StepperFigure", "StepperWidget", "serve", "app_notebook_path", "NOISE_RANGES"]
