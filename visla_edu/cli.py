@@ -134,10 +134,10 @@ def _cmd_run(args):
 
 
 def _cmd_stepper(args):
-    from visla_edu import widgets
+    from visla_edu.stepper import app
 
     print(f"serving the filter stepper on http://localhost:{args.port}/ (Ctrl-C to stop)")
-    widgets.serve(port=args.port, open_browser=args.open, data_dir=args.data_dir, wait=True)
+    app.serve(port=args.port, open_browser=args.open, data_dir=args.data_dir, wait=True)
 
 
 def _cmd_release(args):

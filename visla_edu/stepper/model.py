@@ -1,4 +1,4 @@
-"""The filter stepper: a filter you can move through in time, forwards and backwards.
+"""The filter stepper's model: a filter you can move through in time, forwards and backwards.
 
 A :class:`Stepper` owns one filter object (see :func:`visla_edu.run.make_filter`) and the
 history of what it produced: the :class:`~visla_edu.filters.StepRecord` of every frame
@@ -10,8 +10,9 @@ observations and the active landmarks). The *frontier* is the last frame process
   further, so a step forward costs one filter step, never a re-run;
 * changing the dataset, the mode or the noise settings resets the filter to frame 0.
 
-This module is the model behind :mod:`visla_edu.widgets`; it has no ipywidgets or
-matplotlib dependency, so it can be scripted and tested on its own::
+This module is the model behind the view (:mod:`visla_edu.stepper.figure`,
+:mod:`visla_edu.stepper.widget`); it has no ipywidgets or matplotlib dependency, so it can
+be scripted and tested on its own::
 
     >>> from visla_edu.stepper import Stepper
     >>> s = Stepper("sim-tiny", mode="slam")
