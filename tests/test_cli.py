@@ -37,6 +37,20 @@ def test_bad_setting_names_the_problem():
         cli.main(["run", "sim-tiny", "--set", "sigma_pixel=big"])
 
 
+@pytest.mark.parametrize("value", ["none", "None", "2"])
+def test_blas_threads_option(value, capsys):
+    assert cli.main(["run", "sim-tiny", "--mode", "deadreckon", "--blas-threads", value, "--quiet"]) == 0
+    assert "mode deadreckon" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "two"])
+def test_bad_blas_threads_names_the_option(value, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["run", "sim-tiny", "--blas-threads", value])
+    err = capsys.readouterr().err
+    assert "--blas-threads" in err and "positive integer or 'none'" in err
+
+
 def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert cli.main(["info", "03", "--data-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err

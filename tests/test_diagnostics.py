@@ -10,7 +10,7 @@ import pytest
 
 from visla_edu import data, diagnostics, run, simulate
 from visla_edu.diagnostics import CORRECTIONS
-from visla_edu.ekf import FilterConfig
+from visla_edu.filters import FilterConfig
 
 K_RIG, B_RIG, RIG = simulate.default_rig()
 

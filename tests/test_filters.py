@@ -5,14 +5,16 @@ trajectory to rounding error (DESIGN.md, "The joint EKF, fast and exact: the act
 """
 
 import dataclasses
+import subprocess
+import sys
 import warnings
 
 import numpy as np
 import pytest
 
-from visla_edu import ekf, filters, lie, metrics, motion, run, simulate
-from visla_edu.data import repeated_frames
-from visla_edu.ekf import FilterConfig, FilterDivergedError
+from visla_edu import filters, metrics, motion, run, simulate
+from visla_edu.dataset import repeated_frames
+from visla_edu.filters import FilterConfig, FilterDivergedError
 
 #: The simulated drives have no extrinsic error; skipping the check keeps the tests fast.
 CFG = FilterConfig(extrinsic_correction="none")
@@ -75,7 +77,7 @@ def active_and_dense(request):
     records = {}
     for dense in (False, True):
         flt = run.make_filter(ds, "slam", cfg, dense=dense)
-        with run.blas_threads(cfg.blas_threads):
+        with run.limit_blas_threads(1):
             records[dense] = [flt.step() for _ in range(ds.num_frames)]
         flts[dense] = flt
     return ds, cfg, flts, records
@@ -93,8 +95,8 @@ def test_active_set_and_dense_give_the_same_pose_trajectory(active_and_dense):
         if a.nis_dof:
             assert a.nis == pytest.approx(b.nis, rel=1e-6)
     # the dense filter really carried every (strided) landmark, the active set only a few
-    assert flts[True].Sigma.shape[0] == 6 + 3 * len(np.arange(0, ds.num_landmarks, flts[True].config.landmark_stride))
-    assert flts[False].Sigma.shape[0] < flts[True].Sigma.shape[0]
+    assert flts[True].state.Sigma.shape[0] == 6 + 3 * len(np.arange(0, ds.num_landmarks, flts[True].config.landmark_stride))
+    assert flts[False].state.Sigma.shape[0] < flts[True].state.Sigma.shape[0]
     # and the drive is not trivial: SLAM moved away from dead reckoning
     dr = motion.dead_reckon(ds.time_stamps, ds.twists)
     assert np.max(np.abs(pose[False][:, :3, 3] - dr[:, :3, 3])) > 1e-2
@@ -251,8 +253,8 @@ def test_summary_mentions_mode_and_counts(tiny, tiny_results):
 
 @pytest.mark.parametrize("blas_threads", [1, None])
 def test_save_and_load_result_round_trip(tiny, tmp_path, blas_threads):
-    cfg = FilterConfig(extrinsic_correction="none", blas_threads=blas_threads, landmark_stride=2)
-    r = run.run_filter(tiny, "vio", cfg)
+    cfg = FilterConfig(extrinsic_correction="none", landmark_stride=2)
+    r = run.run_filter(tiny, "vio", cfg, blas_threads=blas_threads)
     path = tmp_path / "result.npz"
     run.save_result(r, path)
     back = run.load_result(path)
@@ -265,6 +267,47 @@ def test_save_and_load_result_round_trip(tiny, tmp_path, blas_threads):
         else:
             assert a == b and type(a) is type(b), f.name
     assert back.summary() == r.summary()
+
+
+def _blas_threads_now():
+    from threadpoolctl import threadpool_info
+
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_blas_thread_limit_holds_while_the_driver_runs(tiny):
+    before = _blas_threads_now()
+    for limit, expected in ((1, [1] * len(before)), (None, before)):
+        during = [_blas_threads_now() for rec in run.iterate_filter(tiny, "deadreckon", CFG, blas_threads=limit)
+                  if rec.t == 5]
+        assert during == [expected]
+        assert _blas_threads_now() == before
+    with pytest.raises(ValueError, match="blas_threads must be a positive integer or None"):
+        run.run_filter(tiny, "deadreckon", CFG, blas_threads=0)
+
+
+def test_filter_hooks_are_declared_on_the_base():
+    from visla_edu.filters._base import _Filter
+
+    assert _Filter.__abstractmethods__ == {"pose_cov", "_predict_covariance", "_update", "_active",
+                                           "landmark_estimates"}
+    for cls in (filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry, filters.JointSlam):
+        assert not cls.__abstractmethods__, cls
+
+
+def test_layers_import_only_what_they_need():
+    """The codes are a leaf; the filters use the Dataset, not the loader; the EKF math holds no settings."""
+    code = "\n".join([
+        "import sys",
+        "import visla_edu.codes",
+        "loaded = sorted(m for m in sys.modules if m.startswith('visla_edu.'))",
+        "assert loaded == ['visla_edu.codes'], loaded",
+        "import visla_edu.ekf, visla_edu.filters",
+        "assert 'visla_edu.data' not in sys.modules",
+        "assert not hasattr(visla_edu.ekf, 'FilterConfig') and not hasattr(visla_edu.ekf, 'FilterDivergedError')",
+    ])
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
 
 
 def test_landmark_stride_uses_only_strided_landmarks(tiny):
@@ -534,13 +577,13 @@ def test_landmark_cross_covariance_switch(tiny):
                                                          landmark_cross_covariance=correlated))
         entered = []
         while not entered:
-            before = set(flt.active_ids.tolist())
+            before = set(flt.state.active_ids.tolist())
             rec = flt.step()
             entered = [lm for lm in rec.ids[rec.status == filters.OBS_NEW] if lm not in before]
             if rec.t == 0:
                 entered = []  # the pose is exactly known at frame 0: every cross-covariance is zero
-        cols = 6 + 3 * flt.slot_of[entered[0]] + np.arange(3)
-        cross = flt.Sigma[np.ix_(cols, np.arange(6))]
+        cols = 6 + 3 * flt.state.slot_of[entered[0]] + np.arange(3)
+        cross = flt.state.Sigma[np.ix_(cols, np.arange(6))]
         if correlated:
             assert np.abs(cross).max() > 1e-9
         else:

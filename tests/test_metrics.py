@@ -166,6 +166,19 @@ def test_chi2_bounds_match_scipy(dof, p):
     assert metrics.chi2_bounds(dof) == metrics.chi2_bounds(dof, 0.95)
 
 
+def test_chi2_bounds_and_nis_band_on_arrays():
+    dof = np.array([4, 0, 40])
+    lo, hi = metrics.chi2_bounds(dof)
+    assert lo.shape == hi.shape == (3,)
+    for i in (0, 2):
+        assert (lo[i], hi[i]) == metrics.chi2_bounds(int(dof[i]))
+    assert np.isnan(lo[1]) and np.isnan(hi[1])  # no degrees of freedom: no band
+    band_lo, band_hi = metrics.nis_band(dof)
+    np.testing.assert_array_equal(band_lo[[0, 2]], lo[[0, 2]] / dof[[0, 2]])
+    np.testing.assert_array_equal(band_hi[[0, 2]], hi[[0, 2]] / dof[[0, 2]])
+    assert np.isnan(band_lo[1]) and np.isnan(band_hi[1])
+
+
 @pytest.mark.parametrize("dof, runs", [(6, 1), (6, 8), (3, 50)])
 def test_average_nees_bounds(dof, runs):
     lo, hi = metrics.average_nees_bounds(dof, runs)

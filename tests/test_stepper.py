@@ -1,11 +1,15 @@
 """Tests of visla_edu.stepper: the filter stepper model (history, frontier, resets)."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from visla_edu import data, filters, lie, run
-from visla_edu.ekf import FilterConfig, FilterDivergedError
-from visla_edu.stepper import NOISE_FIELDS, Stepper, dataset_choices, nis_band, world_position_covariance
+from visla_edu.filters import FilterConfig, FilterDivergedError
+from visla_edu.metrics import nis_band
+from visla_edu.stepper import NOISE_FIELDS, Stepper, dataset_choices, world_position_covariance
 
 
 @pytest.fixture(scope="module")
@@ -267,6 +271,19 @@ def test_divergence_stops_at_last_good_frame(tiny):
         s.goto(20)
     assert (s.t, s.frontier) == (5, 5)
     assert s.goto(2).t == 2
+
+
+def test_blas_threads_argument(tiny):
+    assert Stepper(tiny, blas_threads=None).goto(5).t == 5
+    with pytest.raises(ValueError, match="blas_threads"):
+        Stepper(tiny, blas_threads=0)
+
+
+def test_model_imports_no_gui():
+    code = ("import sys, visla_edu.stepper; "
+            "gui = [m for m in ('ipywidgets', 'matplotlib') if m in sys.modules]; assert not gui, gui")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
 
 
 def test_dataset_choices_list_available_and_small_simulations(data_dir):

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from visla_edu import filters
-from visla_edu.ekf import FilterConfig, FilterDivergedError
-from visla_edu.widgets import StepperFigure, StepperWidget, app_notebook_path
+from visla_edu.filters import FilterConfig, FilterDivergedError
+from visla_edu.stepper.app import app_notebook_path
+from visla_edu.stepper.figure import StepperFigure
+from visla_edu.stepper.widget import StepperWidget
 
 
 @pytest.fixture

@@ -6,6 +6,7 @@ Examples::
     visla-edu run sim --plot sim.png        # joint SLAM on the built-in simulated drive
     visla-edu run 03 --mode mapping --out map.npz
     visla-edu run 03 --dense --landmark-stride 20
+    visla-edu run 03 --blas-threads none      # leave numpy's BLAS threads alone (default: 1)
     visla-edu stepper --port 8866           # the filter stepper page (Voila)
     visla-edu release                       # regenerate notebooks/ from solutions/
 """
@@ -14,6 +15,8 @@ import argparse
 import dataclasses
 import sys
 from pathlib import Path
+
+from visla_edu.codes import MODES, SLAM
 
 __all__ = ["main", "build_parser"]
 
@@ -33,7 +36,7 @@ def build_parser():
 
     run = sub.add_parser("run", parents=[common], help="run a filter over a dataset")
     run.add_argument("dataset", help="03, 0022, 10, sim, sim-small, sim-tiny or a path to an .npz file")
-    run.add_argument("--mode", default="slam", choices=["deadreckon", "mapping", "vio", "slam"])
+    run.add_argument("--mode", default=SLAM, choices=MODES)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--landmark-stride", type=int, default=None, help="use every N-th landmark only")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
@@ -41,6 +44,9 @@ def build_parser():
     run.add_argument("--out", default=None, help="save the result (.npz)")
     run.add_argument("--plot", default=None, help="save a top-down figure of trajectory and map (.png)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
+                     help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
+                          "'none' leaves numpy's setting alone)")
 
     stepper = sub.add_parser("stepper", parents=[common], help="serve the interactive filter stepper with Voila")
     stepper.add_argument("--port", type=int, default=8866)
@@ -53,9 +59,22 @@ def build_parser():
     return parser
 
 
+def _blas_threads(text):
+    """``--blas-threads`` value: a positive integer or ``none``."""
+    if text.strip().lower() == "none":
+        return None
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'none', got {text!r}")
+    return n
+
+
 def _parse_settings(pairs):
     """``["sigma_pixel=2", ...]`` -> FilterConfig keyword arguments, typed like the defaults."""
-    from visla_edu.ekf import FilterConfig
+    from visla_edu.filters import FilterConfig
 
     fields = {f.name: f for f in dataclasses.fields(FilterConfig)}
     defaults = FilterConfig()
@@ -84,7 +103,7 @@ def _cmd_info(args):
 
 def _cmd_run(args):
     from visla_edu import data, plotting, run
-    from visla_edu.ekf import FilterConfig
+    from visla_edu.filters import FilterConfig
 
     settings = _parse_settings(args.set)
     if args.landmark_stride is not None:
@@ -94,7 +113,7 @@ def _cmd_run(args):
     if dataset.label:
         print(dataset.label)
     result = run.run_filter(dataset, args.mode, config, dense=args.dense,
-                            progress=False if args.quiet else None, verbose=True)
+                            progress=False if args.quiet else None, verbose=True, blas_threads=args.blas_threads)
     print(result.summary())
     if dataset.ground_truth is not None:
         from visla_edu import metrics
@@ -115,10 +134,10 @@ def _cmd_run(args):
 
 
 def _cmd_stepper(args):
-    from visla_edu import widgets
+    from visla_edu.stepper import app
 
     print(f"serving the filter stepper on http://localhost:{args.port}/ (Ctrl-C to stop)")
-    widgets.serve(port=args.port, open_browser=args.open, data_dir=args.data_dir, wait=True)
+    app.serve(port=args.port, open_browser=args.open, data_dir=args.data_dir, wait=True)
 
 
 def _cmd_release(args):

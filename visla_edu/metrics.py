@@ -9,7 +9,7 @@ from scipy import stats
 
 from visla_edu import lie
 
-__all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "average_nees_bounds"]
+__all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "nis_band", "average_nees_bounds"]
 
 
 def _check_trajectories(est, gt):
@@ -125,9 +125,47 @@ def nees(errors, covariances, skip_singular=True):
 
 
 def chi2_bounds(dof, probability=0.95):
-    """Two-sided chi-square interval for one value with ``dof`` degrees of freedom."""
+    """Two-sided ``probability`` interval of a chi-square value with ``dof`` degrees of freedom.
+
+    ``[chi2.ppf(a, dof), chi2.ppf(1 - a, dof)]`` with ``a = (1 - probability) / 2``: the one
+    place the package computes a chi-square band (NEES, NIS, the stepper's and the plots'
+    bands all call it).
+
+    Parameters
+    ----------
+    dof : int or array_like of int
+        Degrees of freedom; entries ``<= 0`` give NaN.
+    probability : float
+
+    Returns
+    -------
+    lower, upper : float, or ndarray of the shape of ``dof``
+    """
     tail = (1 - probability) / 2
-    return float(stats.chi2.ppf(tail, dof)), float(stats.chi2.ppf(1 - tail, dof))
+    dof = np.asarray(dof, dtype=float)
+    lower, upper = stats.chi2.ppf(tail, dof), stats.chi2.ppf(1 - tail, dof)
+    if dof.ndim == 0:
+        return float(lower), float(upper)
+    return lower, upper
+
+
+def nis_band(dof, probability=0.95):
+    """Two-sided ``probability`` band of ``chi2(dof) / dof``: where NIS per degree of freedom should stay.
+
+    Parameters
+    ----------
+    dof : int or array_like of int
+        Degrees of freedom; entries ``<= 0`` (no update) give NaN.
+    probability : float
+
+    Returns
+    -------
+    lower, upper : ndarray (the shape of ``dof``)
+    """
+    dof = np.asarray(dof, dtype=float)
+    lower, upper = chi2_bounds(dof, probability)
+    with np.errstate(divide="ignore", invalid="ignore"):  # dof 0: NaN / 0
+        return np.asarray(lower / dof), np.asarray(upper / dof)
 
 
 def average_nees_bounds(dof, runs, probability=0.95):

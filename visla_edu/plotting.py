@@ -6,6 +6,8 @@ or saved unless asked, so notebooks, the CLI and the widgets share them.
 
 import numpy as np
 
+from visla_edu.codes import DEADRECKON, OBS_GATED
+
 __all__ = ["covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
            "covariance_ellipses", "plot_nis"]
 
@@ -109,7 +111,7 @@ def plot_result(result, path=None, ground_truth=None, title=None):
 
     fig, ax = plt.subplots(figsize=(8, 7))
     plot_trajectory_map(result.world_T_imu, result.landmarks, ax=ax, label=f"{result.mode} estimate",
-                        reference=result.dead_reckoning if result.mode != "deadreckon" else None,
+                        reference=result.dead_reckoning if result.mode != DEADRECKON else None,
                         ground_truth=ground_truth)
     ax.set_title(title or f"{result.name}: {result.mode}{' (dense)' if result.dense else ''}")
     fig.tight_layout()
@@ -128,7 +130,7 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     z_pred : ndarray, shape (k, 4), optional
         Predicted pixels (NaN rows skipped); a line joins each prediction to its observation.
     status : ndarray of int, shape (k,), optional
-        ``visla_edu.filters.OBS_*`` codes; gated observations are drawn as red crosses.
+        ``OBS_*`` codes (:mod:`visla_edu.codes`); gated observations are drawn as red crosses.
     image_size : (width, height)
     ax : matplotlib Axes, optional
 
@@ -136,8 +138,6 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     -------
     matplotlib Axes
     """
-    from visla_edu.filters import OBS_GATED
-
     ax = _axes(ax, figsize=(10, 4))
     gated = np.zeros(len(z), dtype=bool) if status is None else status == OBS_GATED
     ax.scatter(z[~gated, 0], z[~gated, 1], s=14, facecolors="none", edgecolors="C0", label="observed")
@@ -187,8 +187,9 @@ def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
 def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     """NIS per degree of freedom over time, with the ``probability`` band of ``chi2(dof)/dof``.
 
-    A consistent filter keeps NIS/dof inside the band about ``probability`` of the time;
-    above it the filter is over-confident (noise too small), below it too cautious.
+    A consistent filter keeps NIS/dof inside the band (:func:`visla_edu.metrics.nis_band`)
+    about ``probability`` of the time; above it the filter is over-confident (noise too
+    small), below it too cautious.
 
     Parameters
     ----------
@@ -204,7 +205,7 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     -------
     matplotlib Axes
     """
-    from scipy.stats import chi2
+    from visla_edu.metrics import nis_band
 
     ax = _axes(ax, figsize=(8, 3))
     nis = np.asarray(nis, dtype=float)
@@ -213,11 +214,7 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     ok = dof > 0
     ratio = np.full(len(nis), np.nan)
     ratio[ok] = nis[ok] / dof[ok]
-    tail = (1 - probability) / 2
-    lo = np.full(len(nis), np.nan)
-    hi = np.full(len(nis), np.nan)
-    lo[ok] = chi2.ppf(tail, dof[ok]) / dof[ok]
-    hi[ok] = chi2.ppf(1 - tail, dof[ok]) / dof[ok]
+    lo, hi = nis_band(dof, probability)
     ax.fill_between(x, lo, hi, color="C2", alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
     ax.plot(x, ratio, ".-", color="C0", ms=3, lw=0.8, label="NIS / dof")
     ax.axhline(1.0, color="0.4", lw=0.8, ls=":")

@@ -1,5 +1,11 @@
 """One driver for every filter mode: a step iterator and a whole-run function.
 
+:func:`make_filter` builds a mode by name (:data:`MODES`, from :mod:`visla_edu.codes`),
+:func:`iterate_filter` steps it, :func:`run_filter` runs it to the end into a
+:class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
+:func:`load_result` write and read it. How the driver runs is in its arguments, not in the
+filter's settings: the BLAS thread limit (:func:`limit_blas_threads`) and the progress bar.
+
 >>> from visla_edu import data, run
 >>> ds = data.load("sim-tiny")
 >>> result = run.run_filter(ds, mode="slam", progress=False)
@@ -8,6 +14,7 @@ True
 """
 
 import contextlib
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -15,36 +22,61 @@ import numpy as np
 
 from visla_edu import diagnostics, filters, motion
 from visla_edu.camera import StereoCamera
-from visla_edu.ekf import FilterConfig
+from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
+from visla_edu.filters import FilterConfig
 
-__all__ = ["MODES", "RunResult", "make_filter", "iterate_filter", "run_filter", "save_result", "load_result"]
+__all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "iterate_filter", "run_filter",
+           "save_result", "load_result"]
 
-#: Filter modes by name.
-MODES = ("deadreckon", "mapping", "vio", "slam")
+#: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
+_MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
+                 VIO: filters.VisualInertialOdometry}
 
 
-def blas_threads(n):
-    """Context manager limiting numpy's BLAS threads to ``n`` (None: leave as is).
+def limit_blas_threads(n):
+    """Context manager limiting the BLAS threads of numpy and scipy to ``n`` (None: leave as is).
 
     The filter's per-step matrices are a few hundred rows at most; on a 2-core machine a
     multi-threaded BLAS spends more time synchronising than computing, so the driver runs
-    with one thread unless told otherwise (``FilterConfig.blas_threads``).
+    with one thread unless told otherwise (the ``blas_threads`` argument of
+    :func:`run_filter`, :func:`iterate_filter` and :class:`visla_edu.stepper.Stepper`).
+    The BLAS libraries are looked up once per process: a lookup costs about 1.5 ms, as much
+    as a filter step, and the stepper enters the limit at every move.
+
+    Parameters
+    ----------
+    n : int or None
+        Threads, >= 1.
     """
-    if n is None:
+    if _check_blas_threads(n) is None:
         return contextlib.nullcontext()
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=int(n), user_api="blas")
+    return _blas_controller().limit(limits=int(n), user_api="blas")
 
 
-def make_filter(dataset, mode="slam", config=None, dense=False, verbose=False):
+def _check_blas_threads(n):
+    if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1):
+        raise ValueError(f"blas_threads must be a positive integer or None, got {n!r}")
+    return n
+
+
+@functools.cache
+def _blas_controller():
+    """The BLAS libraries loaded in this process (numpy's and scipy's), looked up once."""
+    import scipy.linalg  # noqa: F401  (loads scipy's BLAS before the lookup)
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
+def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     """Build the filter object for ``mode`` with the corrected calibration.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     mode : {"deadreckon", "mapping", "vio", "slam"}
-    config : FilterConfig, optional
+        One of :data:`visla_edu.codes.MODES`.
+    config : visla_edu.filters.FilterConfig, optional
     dense : bool
         Textbook joint EKF over all (strided) landmarks; only for ``mode="slam"``.
     verbose : bool
@@ -52,32 +84,30 @@ def make_filter(dataset, mode="slam", config=None, dense=False, verbose=False):
 
     Returns
     -------
-    filters.DeadReckoning or subclass, or filters.JointSlam
+    filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
     """
     config = config or FilterConfig()
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    if dense and mode != "slam":
+    if dense and mode != SLAM:
         raise ValueError(f"dense=True is the textbook joint filter and needs mode='slam', got mode={mode!r}")
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
         print(evidence)
     camera = StereoCamera(dataset.K, dataset.b, imu_T_cam)
-    if mode == "slam":
+    if mode == SLAM:
         return filters.JointSlam(dataset, camera, config, dense=dense)
-    cls = {"deadreckon": filters.DeadReckoning, "mapping": filters.LandmarkMapping,
-           "vio": filters.VisualInertialOdometry}[mode]
-    return cls(dataset, camera, config)
+    return _MODE_CLASSES[mode](dataset, camera, config)
 
 
-def iterate_filter(dataset, mode="slam", config=None, dense=False):
+def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
     """Yield one :class:`~visla_edu.filters.StepRecord` per frame.
 
-    The BLAS thread limit of ``config`` holds while the generator runs.
+    Parameters are those of :func:`run_filter`; the BLAS thread limit holds while the
+    generator runs.
     """
-    config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense)
-    with blas_threads(config.blas_threads):
+    with limit_blas_threads(blas_threads):
         while not flt.done:
             yield flt.step()
 
@@ -101,7 +131,7 @@ class RunResult:
         The IMU-only trajectory, for comparison.
     nis, nis_dof : ndarray, shape (T,)
     status_counts : ndarray of int, shape (T, 6)
-        Observations per frame by status (``filters.STATUS_NAMES``).
+        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
     step_seconds : ndarray, shape (T,)
     config : dict
     imu_T_cam : ndarray, shape (4, 4)
@@ -126,7 +156,7 @@ class RunResult:
 
     def status_totals(self):
         """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``."""
-        return dict(zip(filters.STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
+        return dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
 
     def summary(self):
         """A few lines a student can read: mode, counts, timing."""
@@ -143,68 +173,99 @@ class RunResult:
         return "\n".join(lines)
 
 
-def run_filter(dataset, mode="slam", config=None, dense=False, progress=None, verbose=False):
+def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verbose=False, blas_threads=1):
     """Run a filter over the whole dataset.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     mode : {"deadreckon", "mapping", "vio", "slam"}
-    config : FilterConfig, optional
+        One of :data:`visla_edu.codes.MODES`.
+    config : visla_edu.filters.FilterConfig, optional
     dense : bool
         Textbook dense joint filter (``mode="slam"`` only).
     progress : bool, optional
         Show a tqdm progress bar; by default only for runs longer than 500 frames.
     verbose : bool
         Print the evidence of an automatic extrinsic correction.
+    blas_threads : int or None
+        BLAS threads while the filter runs (the per-step matrices are small, so 1 is
+        fastest); None leaves numpy's setting alone. See :func:`limit_blas_threads`.
 
     Returns
     -------
     RunResult
     """
+    _check_blas_threads(blas_threads)
     config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense, verbose=verbose)
     T = dataset.num_frames
-    out = _allocate(T)
+    arrays = RunArrays(T)
     show = T > 500 if progress is None else progress
-    with blas_threads(config.blas_threads), _progress_bar(T, show, f"{dataset.name} {mode}") as bar:
-        for t in range(T):
+    with limit_blas_threads(blas_threads), _progress_bar(T, show, f"{dataset.name} {mode}") as bar:
+        for _ in range(T):
             start = time.perf_counter()
             rec = flt.step()
-            out["step_seconds"][t] = time.perf_counter() - start
-            _store(out, rec)
+            arrays.store(rec, seconds=time.perf_counter() - start)
             bar.update(1)
-    landmarks, landmark_cov = _landmark_estimates(flt)
+    landmarks, landmark_cov = flt.landmark_estimates()
     return RunResult(
         name=dataset.name, mode=mode, dense=dense, time_stamps=dataset.time_stamps.copy(),
         landmarks=landmarks, landmark_cov=landmark_cov,
         dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=config.imu_lag),
-        config=config.to_dict(), imu_T_cam=flt.camera.imu_T_cam.copy(), **out,
+        config=config.to_dict(), imu_T_cam=flt.camera.imu_T_cam.copy(), **arrays.as_dict(),
     )
 
 
-def _allocate(T):
-    return {
-        "world_T_imu": np.empty((T, 4, 4)), "pose_cov": np.empty((T, 6, 6)),
-        "nis": np.full(T, np.nan), "nis_dof": np.zeros(T, dtype=np.int64),
-        "status_counts": np.zeros((T, len(filters.STATUS_NAMES)), dtype=np.int64),
-        "step_seconds": np.zeros(T),
-    }
+class RunArrays:
+    """Per-frame arrays of a run, filled one :class:`~visla_edu.filters.StepRecord` at a time.
 
+    The whole-run driver (:func:`run_filter`) and the stepper (:class:`visla_edu.stepper.Stepper`)
+    both keep their per-frame figures here.
 
-def _store(out, rec):
-    t = rec.t
-    out["world_T_imu"][t] = rec.world_T_imu
-    out["pose_cov"][t] = rec.pose_cov
-    out["nis"][t] = rec.nis
-    out["nis_dof"][t] = rec.nis_dof
-    out["status_counts"][t] = np.bincount(rec.status, minlength=len(filters.STATUS_NAMES))
+    Parameters
+    ----------
+    num_frames : int
+        ``T``.
 
+    Attributes
+    ----------
+    world_T_imu : ndarray, shape (T, 4, 4)
+    pose_cov : ndarray, shape (T, 6, 6)
+    nis : ndarray, shape (T,)
+        NaN where there was no update.
+    nis_dof : ndarray of int, shape (T,)
+    status_counts : ndarray of int, shape (T, 6)
+        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
+    step_seconds : ndarray, shape (T,)
+        Wall time of each filter step.
+    """
 
-def _landmark_estimates(flt):
-    if isinstance(flt, filters.JointSlam):
-        return flt.landmark_estimates()
-    return flt.landmarks.copy(), flt.landmark_cov.copy()
+    #: The arrays, in the order :class:`RunResult` lists them.
+    FIELDS = ("world_T_imu", "pose_cov", "nis", "nis_dof", "status_counts", "step_seconds")
+
+    def __init__(self, num_frames):
+        T = num_frames
+        self.world_T_imu = np.empty((T, 4, 4))
+        self.pose_cov = np.empty((T, 6, 6))
+        self.nis = np.full(T, np.nan)
+        self.nis_dof = np.zeros(T, dtype=np.int64)
+        self.status_counts = np.zeros((T, len(STATUS_NAMES)), dtype=np.int64)
+        self.step_seconds = np.zeros(T)
+
+    def store(self, rec, seconds=0.0):
+        """Write frame ``rec.t``'s figures (``seconds``: wall time of its step)."""
+        t = rec.t
+        self.world_T_imu[t] = rec.world_T_imu
+        self.pose_cov[t] = rec.pose_cov
+        self.nis[t] = rec.nis
+        self.nis_dof[t] = rec.nis_dof
+        self.status_counts[t] = np.bincount(rec.status, minlength=len(STATUS_NAMES))
+        self.step_seconds[t] = seconds
+
+    def as_dict(self):
+        """``{name: array}`` of :attr:`FIELDS` (the arrays themselves, not copies)."""
+        return {name: getattr(self, name) for name in self.FIELDS}
 
 
 class _NoBar:
@@ -229,8 +290,8 @@ def save_result(result, path):
     Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
     initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
-    ``config_<name>`` for every setting used (a setting of None, e.g. ``blas_threads``, is
-    stored as an empty array: the file must load without pickle).
+    ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
+    so the file loads without pickle; files of earlier versions hold ``blas_threads`` so).
     """
     arrays = {k: v for k, v in vars(result).items() if k != "config"}
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})

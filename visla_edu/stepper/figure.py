@@ -1,72 +1,35 @@
-"""The filter stepper as an interactive view (ipywidgets + matplotlib).
+"""The stepper's figure: one persistent matplotlib figure, redrawn by moving its artists.
 
-In a notebook, one line shows it::
-
-    from visla_edu.widgets import StepperWidget; StepperWidget("sim")
-
-As a page of its own (Voila)::
-
-    visla-edu stepper --port 8866          # or: python -c "from visla_edu.widgets import serve; serve(wait=True)"
-
-The view is thin: every control either re-configures the :class:`~visla_edu.stepper.Stepper`
-(dataset, mode, noise settings: the filter restarts from frame 0) or sets its time (slider,
-play, step buttons), and then the figure is redrawn. The figure is one persistent matplotlib
-figure (:class:`StepperFigure`) whose artists are updated in place and rendered to a PNG that
-replaces the content of an ``ipywidgets.Output``; no ipympl is needed and the same image shows
-in JupyterLab, classic notebooks and Voila.
+:class:`StepperFigure` reads a :class:`~visla_edu.stepper.Stepper` (the model) and renders
+PNG bytes; it has no ipywidgets dependency, so it can be used (and tested) on its own.
 """
 
-import base64
 import contextlib
-import importlib.util
 import io
-import os
-import subprocess
-import sys
-import time
-from pathlib import Path
 
-import ipywidgets as w
 import numpy as np
 
-from visla_edu import filters
-from visla_edu.ekf import FilterConfig, FilterDivergedError
-from visla_edu.stepper import MODE_LABELS, NOISE_FIELDS, Stepper, dataset_choices, world_position_covariance
+from visla_edu.codes import (
+    DEADRECKON,
+    OBS_FAR,
+    OBS_GATED,
+    OBS_IGNORED,
+    OBS_NEW,
+    OBS_NO_DEPTH,
+    OBS_USED,
+    STATUS_NAMES,
+)
+from visla_edu.stepper.model import MODE_LABELS, world_position_covariance
 
-__all__ = ["StepperFigure", "StepperWidget", "serve", "app_notebook_path", "NOISE_RANGES"]
+__all__ = ["StepperFigure"]
 
-#: Slider ranges ``(min, max)`` of the noise and initialisation settings; log scale for sigmas.
-NOISE_RANGES = {
-    "sigma_pixel": (0.1, 50.0),
-    "sigma_linear_velocity": (0.01, 10.0),
-    "sigma_angular_velocity": (1e-4, 1.0),
-    "landmark_prior_sigma": (0.01, 100.0),
-    "landmark_prior_inflation": (0.1, 10.0),
-    "gate_probability": (0.9, 1.0),
-}
-_NOISE_DESCRIPTIONS = {
-    "sigma_pixel": ("pixel σ (px)", "observation noise: R = σ² I per stereo pixel"),
-    "sigma_linear_velocity": ("v σ (m/s)", "IMU linear-velocity noise (motion noise W)"),
-    "sigma_angular_velocity": ("ω σ (rad/s)", "IMU angular-velocity noise (motion noise W)"),
-    "landmark_prior_sigma": ("landmark σ (m)", "isotropic prior of a new landmark"),
-    "landmark_prior_inflation": ("prior inflation", "scale of the triangulation covariance of a new landmark"),
-    "gate_probability": ("gate prob.", "chi-square gate (4 dof) probability; 1 = no gating"),
-}
 _STATUS_STYLE = {  # status -> (marker, colour, label)
-    filters.OBS_USED: ("o", "C0", "used"),
-    filters.OBS_NEW: ("s", "C2", "new landmark"),
-    filters.OBS_GATED: ("x", "C3", "gated (outlier)"),
-    filters.OBS_NO_DEPTH: ("v", "m", "no depth"),
-    filters.OBS_FAR: (".", "0.5", "too far / unused"),
+    OBS_USED: ("o", "C0", "used"),
+    OBS_NEW: ("s", "C2", "new landmark"),
+    OBS_GATED: ("x", "C3", "gated (outlier)"),
+    OBS_NO_DEPTH: ("v", "m", "no depth"),
+    OBS_FAR: (".", "0.5", "too far / unused"),
 }
-
-
-def app_notebook_path():
-    """Path of the standalone stepper page (``stepper_app.ipynb``, shipped in the package)."""
-    return Path(__file__).resolve().parent / "stepper_app.ipynb"
-
-
-# ====================================================================== the figure
 
 
 class StepperFigure:
@@ -138,8 +101,8 @@ class StepperFigure:
                        ((self.ax_left, "left"), (self.ax_right, "right"))}
         self._build_nis()
         handles = [self._image[self.ax_left][k] for k in
-                   (filters.OBS_USED, "pred", filters.OBS_NEW, filters.OBS_GATED, filters.OBS_NO_DEPTH,
-                    filters.OBS_FAR)]
+                   (OBS_USED, "pred", OBS_NEW, OBS_GATED, OBS_NO_DEPTH,
+                    OBS_FAR)]
         self.fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.99, 0.985), ncol=3,
                         fontsize="small", frameon=False, handletextpad=0.3, columnspacing=1.0,
                         title="stereo frame: observed by status, predicted (lines: innovations)",
@@ -241,10 +204,10 @@ class StepperFigure:
             self.gt_line.set_data([], [])
             self.gt_points.set_offsets(np.zeros((0, 2)))
         self.gt_pose.set_data([], [])
-        self._dr = stepper.dead_reckoning[:, :3, 3] if stepper.mode != "deadreckon" else None
+        self._dr = stepper.dead_reckoning[:, :3, 3] if stepper.mode != DEADRECKON else None
         self._static_paths = [stepper.dead_reckoning[:, :2, 3]] + ([gt.world_T_imu[:, :2, 3]] if gt is not None else [])
         handles = [self.est_line, self.pose_ellipse]
-        if stepper.mode != "deadreckon":
+        if stepper.mode != DEADRECKON:
             handles += [self.dr_line, self.active_points, self.map_points]
         if gt is not None:
             handles += [self.gt_line, self.gt_points]
@@ -278,9 +241,9 @@ class StepperFigure:
         self._update_map(stepper, rec, t)
         for ax, (cu, cv) in ((self.ax_left, (0, 1)), (self.ax_right, (2, 3))):
             self._update_image(self._image[ax], rec, cu, cv)
-        counts = np.bincount(rec.status, minlength=len(filters.STATUS_NAMES))
-        self.captions["frame"] = (f"frame {t}: {len(rec.ids)} observations, {counts[filters.OBS_USED]} used, "
-                                  f"{counts[filters.OBS_NEW]} new, {counts[filters.OBS_GATED]} gated")
+        counts = np.bincount(rec.status, minlength=len(STATUS_NAMES))
+        self.captions["frame"] = (f"frame {t}: {len(rec.ids)} observations, {counts[OBS_USED]} used, "
+                                  f"{counts[OBS_NEW]} new, {counts[OBS_GATED]} gated")
         self._update_nis(stepper, rec, t)
         ds = stepper.dataset
         self.title.set_text(f"{ds.name}: {MODE_LABELS[stepper.mode]}\nt = {t} / {ds.num_frames - 1}"
@@ -360,8 +323,8 @@ class StepperFigure:
         z = rec.z
         for code in _STATUS_STYLE:
             sel = rec.status == code
-            if code == filters.OBS_FAR:
-                sel |= rec.status == filters.OBS_IGNORED
+            if code == OBS_FAR:
+                sel |= rec.status == OBS_IGNORED
             arts[code].set_offsets(z[sel][:, [cu, cv]] if np.any(sel) else np.zeros((0, 2)))
         ok = np.isfinite(rec.z_pred[:, 0])
         pred = rec.z_pred[ok][:, [cu, cv]]
@@ -384,7 +347,7 @@ class StepperFigure:
             if len(f) else ""
         if rec.nis_dof:
             text = f"NIS/dof = {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof}){inside}"
-        elif stepper.mode == "deadreckon":
+        elif stepper.mode == DEADRECKON:
             text = "dead reckoning: no updates, no NIS"
         else:
             text = f"no update at frame {t}{inside}"
@@ -444,324 +407,3 @@ class StepperFigure:
         buf = io.BytesIO()
         Image.fromarray(rgba[..., :3]).save(buf, format="png", compress_level=1)
         return buf.getvalue()
-
-
-# ====================================================================== the widget
-
-
-class _Busy:
-    """Re-entrancy guard: changes made by the view itself do not trigger more work."""
-
-    def __init__(self):
-        self.depth = 0
-
-    @contextlib.contextmanager
-    def __call__(self):
-        self.depth += 1
-        try:
-            yield
-        finally:
-            self.depth -= 1
-
-    def __bool__(self):
-        return self.depth > 0
-
-
-class StepperWidget(w.VBox):
-    """The filter stepper: controls and figure (displays itself as a cell's last expression).
-
-    Parameters
-    ----------
-    dataset : str or Dataset
-        Initial dataset (a name from :func:`visla_edu.stepper.dataset_choices`, e.g. ``"sim"``,
-        ``"sim-tiny"``, ``"03"``, ``"10"``, or a loaded dataset).
-    mode : {"deadreckon", "mapping", "vio", "slam"}
-    config : FilterConfig, optional
-    data_dir : str or os.PathLike, optional
-        Folder of the course files (default: ``VISLA_EDU_DATA``).
-    **figure_options
-        Passed to :class:`StepperFigure` (``figsize``, ``dpi``, ``n_sigma``, ``follow``...).
-
-    Attributes
-    ----------
-    stepper : visla_edu.stepper.Stepper
-        The model; the view only calls ``goto``/``configure`` on it.
-    figure : StepperFigure
-    dataset_dropdown, mode_dropdown, view_toggle : ipywidgets selection widgets
-    play : ipywidgets.Play
-        Linked to ``time_slider``.
-    time_slider : ipywidgets.IntSlider
-    first_button, back_button, step_button, jump_button, end_button : ipywidgets.Button
-        Frame 0, one back, one forward, ten forward, the last frame.
-    noise_sliders : dict of str -> slider
-        One per :data:`visla_edu.stepper.NOISE_FIELDS`; a change re-runs the filter.
-    defaults_button : ipywidgets.Button
-        Restore the default noise settings.
-    status : ipywidgets.HTML
-        ``t = ...`` and what the current frame did; errors show here.
-    output : ipywidgets.Output
-        Holds the rendered figure.
-    render_count : int
-        Figures rendered so far.
-    last_redraw_seconds, last_update_seconds : float
-    """
-
-    def __init__(self, dataset="sim", mode="slam", config=None, data_dir=None, **figure_options):
-        self.data_dir = data_dir
-        self._busy = _Busy()
-        self.render_count = 0
-        self.last_redraw_seconds = 0.0
-        self.last_update_seconds = 0.0
-        self.stepper = Stepper(dataset, mode=mode, config=config, data_dir=data_dir)
-        self.figure = StepperFigure(**figure_options)
-        self.last_update_seconds = self.stepper.last_update_seconds
-        self._build_controls(dataset)
-        super().__init__([self._header, self._time_row, self._noise_box, self.status, self.output],
-                         layout=w.Layout(width="100%"))
-        self.add_class("visla-stepper")
-        self.redraw()
-
-    # ------------------------------------------------------------ controls
-    def _build_controls(self, dataset):
-        s = self.stepper
-        choices = dataset_choices(self.data_dir)
-        if isinstance(dataset, str):
-            if dataset not in [v for _, v in choices]:
-                choices.append((dataset, dataset))
-            value = dataset
-        else:
-            choices.append((f"{dataset.name} (given)", dataset))
-            value = dataset
-        self.dataset_dropdown = w.Dropdown(options=choices, value=value, description="dataset",
-                                           layout=w.Layout(width="auto", min_width="22em"))
-        self.mode_dropdown = w.Dropdown(options=[(label, m) for m, label in MODE_LABELS.items()],
-                                        value=s.mode, description="mode", layout=w.Layout(width="auto"))
-        self.view_toggle = w.ToggleButtons(options=[("follow", True), ("whole drive", False)],
-                                           value=self.figure.follow, description="map view",
-                                           style={"button_width": "8em", "description_width": "5em"})
-        self.dataset_dropdown.observe(self._on_dataset, names="value")
-        self.mode_dropdown.observe(self._on_mode, names="value")
-        self.view_toggle.observe(self._on_view, names="value")
-        self._header = w.HBox([self.dataset_dropdown, self.mode_dropdown, self.view_toggle],
-                              layout=w.Layout(flex_flow="row wrap"))
-
-        T = s.num_frames
-        self.play = w.Play(value=0, min=0, max=T - 1, step=1, interval=250, description="play",
-                           show_repeat=False)
-        self.time_slider = w.IntSlider(value=0, min=0, max=T - 1, description="frame t",
-                                       continuous_update=False, layout=w.Layout(width="40em"))
-        self._play_link = w.link((self.play, "value"), (self.time_slider, "value"))
-        self.time_slider.observe(self._on_time, names="value")
-
-        def button(text, tooltip, handler):
-            b = w.Button(description=text, tooltip=tooltip, layout=w.Layout(width="auto"))
-            b.on_click(handler)
-            return b
-
-        self.first_button = button("first", "frame 0", lambda _: self._set_time(0))
-        self.back_button = button("◀ back", "one frame back", lambda _: self._set_time(self.stepper.t - 1))
-        self.step_button = button("step ▶", "one frame forward", lambda _: self._set_time(self.stepper.t + 1))
-        self.jump_button = button("+10 ▶▶", "ten frames forward", lambda _: self._set_time(self.stepper.t + 10))
-        self.end_button = button("end", "last frame (runs the filter to the end)",
-                                 lambda _: self._set_time(self.stepper.num_frames - 1))
-        self._time_row = w.HBox([self.play, self.time_slider, self.first_button, self.back_button,
-                                 self.step_button, self.jump_button, self.end_button],
-                                layout=w.Layout(flex_flow="row wrap", align_items="center"))
-
-        defaults = FilterConfig()
-        self.noise_sliders = {}
-        for name in NOISE_FIELDS:
-            lo, hi = NOISE_RANGES[name]
-            label, tip = _NOISE_DESCRIPTIONS[name]
-            value = getattr(s.config, name)
-            common = dict(description=label, tooltip=tip, continuous_update=False,
-                          style={"description_width": "8em"}, layout=w.Layout(width="24em"))
-            if name == "gate_probability":
-                slider = w.FloatSlider(value=value, min=min(lo, value), max=hi, step=0.0005,
-                                       readout_format=".4f", **common)
-            else:
-                lo, hi = min(lo, value, getattr(defaults, name)), max(hi, value, getattr(defaults, name))
-                slider = w.FloatLogSlider(value=value, base=10, min=np.log10(lo), max=np.log10(hi),
-                                          step=0.05, readout_format=".3g", **common)
-            slider.observe(self._on_noise, names="value")
-            self.noise_sliders[name] = slider
-        self.defaults_button = w.Button(description="defaults", tooltip="restore the default noise settings",
-                                        layout=w.Layout(width="7em"))
-        self.defaults_button.on_click(self._on_defaults)
-        grid = w.GridBox(list(self.noise_sliders.values()) + [self.defaults_button],
-                         layout=w.Layout(grid_template_columns="repeat(3, 25em)"))
-        self._noise_box = w.Accordion(children=[grid], selected_index=None)
-        self._noise_box.set_title(0, "noise and initialisation (a change re-runs the filter from frame 0)")
-        self.status = w.HTML(layout=w.Layout(min_height="2.6em"))
-        self.output = w.Output(layout=w.Layout(min_height="300px"))
-
-    # ------------------------------------------------------------ handlers
-    def _set_time(self, t):
-        self.time_slider.value = int(np.clip(t, 0, self.stepper.num_frames - 1))
-
-    def _on_time(self, change):
-        if self._busy:
-            return
-        self.goto(change["new"])
-
-    def goto(self, t):
-        """Set the stepper's time to ``t`` and redraw (what the slider and buttons do)."""
-        error = None
-        if int(t) - self.stepper.frontier > 50:
-            self._show_status(f"<i>running the filter from frame {self.stepper.frontier} to {int(t)}...</i>")
-        try:
-            self.stepper.goto(int(t))
-        except FilterDivergedError as err:
-            error = err
-        self.last_update_seconds = self.stepper.last_update_seconds
-        if self.time_slider.value != self.stepper.t:
-            with self._busy():
-                self.time_slider.value = self.stepper.t
-                self.play.playing = False
-        self.redraw(error=error)
-
-    def _on_dataset(self, change):
-        if self._busy:
-            return
-        self._reconfigure(dict(dataset=change["new"]), keep_time=False,
-                          revert=lambda: setattr(self.dataset_dropdown, "value", change["old"]))
-
-    def _on_mode(self, change):
-        if self._busy:
-            return
-        self._reconfigure(dict(mode=change["new"]), keep_time=True,
-                          revert=lambda: setattr(self.mode_dropdown, "value", change["old"]))
-
-    def _on_noise(self, change):
-        if self._busy:
-            return
-        name = next(k for k, v in self.noise_sliders.items() if v is change["owner"])
-        self._reconfigure({name: float(change["new"])}, keep_time=True,
-                          revert=lambda: setattr(change["owner"], "value", change["old"]))
-
-    def _on_defaults(self, _):
-        defaults = FilterConfig()
-        with self._busy():
-            for name, slider in self.noise_sliders.items():
-                slider.value = getattr(defaults, name)
-        self._reconfigure({name: getattr(defaults, name) for name in self.noise_sliders}, keep_time=True)
-
-    def _on_view(self, change):
-        self.figure.follow = bool(change["new"])
-        self.redraw()
-
-    def _reconfigure(self, settings, keep_time, revert=None):
-        """Re-configure the stepper (it restarts at frame 0), then go back to the same frame."""
-        t = self.stepper.t
-        self.play.playing = False
-        self._show_status("<i>re-running the filter...</i>")
-        try:
-            self.stepper.configure(**settings)
-        except (ValueError, FileNotFoundError, TypeError) as err:
-            if revert is not None:
-                with self._busy():
-                    revert()
-            self.redraw(error=err)
-            return
-        T = self.stepper.num_frames
-        t = min(t, T - 1) if keep_time else 0
-        with self._busy():
-            self.time_slider.max = T - 1
-            self.play.max = T - 1
-            self.time_slider.value = t
-        self.goto(t)
-
-    # ------------------------------------------------------------ drawing
-    def _show_status(self, extra=""):
-        s = self.stepper
-        c = self.figure.captions
-        frame = c["frame"].split(": ", 1)[-1]
-        self.status.value = (
-            f"<b>t = {s.t}</b> / {s.num_frames - 1} ({s.time_stamps[s.t]:.2f} s) &middot; {_html(frame)}"
-            f" &middot; {_html(c['nis'])}<br>{_html(c['map']).replace(chr(10), ' &middot; ')}"
-            f"<br><small>{_html(s.dataset.label or s.dataset.name)} &middot; frontier {s.frontier} &middot; "
-            f"state update {1e3 * self.last_update_seconds:.1f} ms &middot; "
-            f"redraw {1e3 * self.last_redraw_seconds:.0f} ms &middot; renders {self.render_count}</small>"
-            + (f"<br>{extra}" if extra else ""))
-
-    def redraw(self, error=None):
-        """Update the figure to the stepper's frame and replace the image in ``output``."""
-        start = time.perf_counter()
-        self.figure.update(self.stepper)
-        png = self.figure.render_png()
-        self.output.outputs = ({
-            "output_type": "display_data",
-            "data": {"image/png": base64.b64encode(png).decode("ascii"),
-                     "text/plain": f"<stepper figure, t = {self.stepper.t}>"},
-            "metadata": {},
-        },)
-        self.render_count += 1
-        self.last_redraw_seconds = time.perf_counter() - start
-        extra = ""
-        if error is not None:
-            extra = (f"<span style='color:#b00'><b>{type(error).__name__}:</b> {_html(str(error))}</span>"
-                     + (" (stopped at the last good frame; change the noise settings to re-run)"
-                        if isinstance(error, FilterDivergedError) else ""))
-        self._show_status(extra)
-
-
-
-def _html(text):
-    import html
-
-    return html.escape(str(text))
-
-
-# ====================================================================== Voila page
-
-
-def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None, wait=False, **popen_options):
-    """Serve the stepper as a standalone page with Voila (``voila stepper_app.ipynb --port N``).
-
-    Parameters
-    ----------
-    port : int
-    open_browser : bool
-        Let Voila open the page in a browser.
-    data_dir : str or os.PathLike, optional
-        Folder of the course files, passed to the page as ``VISLA_EDU_DATA``.
-    dataset : str, optional
-        Dataset the page opens with (default ``"sim"``), via ``VISLA_EDU_STEPPER_DATASET``.
-    mode : str, optional
-        Filter mode the page opens with (default ``"slam"``), via ``VISLA_EDU_STEPPER_MODE``.
-    wait : bool
-        Block until the server exits (Ctrl-C stops it); otherwise return at once.
-    **popen_options
-        Passed to :class:`subprocess.Popen` (e.g. ``stdout=``, ``stderr=`` to capture the log).
-
-    Returns
-    -------
-    subprocess.Popen
-        The Voila process (the page is at ``http://localhost:<port>/``); stop it with
-        ``terminate()``.
-    """
-    notebook = app_notebook_path()
-    if not notebook.is_file():
-        raise FileNotFoundError(f"the stepper page {notebook} is missing from the installed package")
-    cmd = [sys.executable, "-m", "voila", str(notebook), f"--port={int(port)}"]
-    if not open_browser:
-        cmd.append("--no-browser")
-    env = dict(os.environ)
-    if data_dir is not None:
-        from visla_edu import data
-
-        env[data.ENV_VAR] = str(Path(data_dir).expanduser().resolve())
-    if dataset is not None:
-        env["VISLA_EDU_STEPPER_DATASET"] = str(dataset)
-    if mode is not None:
-        env["VISLA_EDU_STEPPER_MODE"] = str(mode)
-    if importlib.util.find_spec("voila") is None:
-        raise RuntimeError("the stepper page needs Voila: pip install voila")
-    proc = subprocess.Popen(cmd, env=env, cwd=str(notebook.parent), **popen_options)
-    if wait:
-        try:
-            proc.wait()
-        except KeyboardInterrupt:
-            proc.terminate()
-            proc.wait(timeout=10)
-    return proc

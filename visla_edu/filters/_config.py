@@ -1,0 +1,158 @@
+"""The filter modes' settings: noise, initialisation, gating, and the teaching comparisons."""
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["FilterConfig"]
+
+
+@dataclass
+class FilterConfig:
+    """Noise, initialisation and gating parameters of the filter modes.
+
+    Each setting names the modes that read it (``deadreckon``, ``mapping``, ``vio``,
+    ``slam``; see :data:`visla_edu.codes.MODES`). How the driver runs (BLAS threads, progress
+    bar) is not a setting: those are arguments of :func:`visla_edu.run.run_filter`.
+
+    The defaults work without per-dataset tuning on the simulated drives, datasets 03 and
+    0022 and the dataset-10 stand-in. They were chosen from evidence, not guessed (notebook 07
+    recomputes each figure):
+
+    * ``visla-edu info`` measures the IMU noise from second differences of the velocities:
+      up to 0.5 m/s and 0.05 rad/s (dataset 0022, the noisiest file), so those are the
+      velocity noise settings. With 0.02 rad/s instead, 03 and 0022 gate about twice as many
+      observations (15.7% and 14.9%, against 8.0% and 4.5%), and the 03 trajectory ends 36 m
+      below its start height after 1.3 km (4 m with 0.05 rad/s).
+    * The gated share grows with a track's age (tracker drift: roughly 10% after ten frames
+      on 03), and the distances are heavy-tailed (about 1% of them above 100 for a
+      chi-square(4) variable), so gating stays on.
+    * ``sigma_pixel`` 1.5 gives accepted observations a NIS per degree of freedom of 0.9 on
+      03 (1.5 at 1 px): slightly conservative, as it should be with drifting tracks.
+    * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
+      far landmark triangulated from a 2 px disparity is a poor Gaussian in x, y, z that makes
+      joint SLAM overconfident and less accurate, while fixed far landmarks help VIO hold its
+      orientation. Against 2 px, SLAM's error on the dataset-10 stand-in drops from 24 m to
+      15 m and the NEES on 300-frame drives falls by a third; 5 px helps SLAM a little more
+      but makes VIO worse than dead reckoning on some simulated drives. 03 and 0022 gate
+      8.0% and 4.5% of their observations (7.5% and 4.4% at 2 px).
+    * The extrinsic check finds dataset 03's ``imu_T_cam`` axes flipped (rotation slope -0.78,
+      +0.83 after the ``flip_yz`` correction), hence ``extrinsic_correction="auto"``.
+    * The time-alignment check prefers ``imu_lag=+1`` by only 0.2% (03) and 1% (0022) of
+      the rotation residual: too weak to leave the course's convention ``u[t]`` for ``t->t+1``.
+
+    The three switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
+    ``vio_refine_landmarks`` are the teaching comparisons of the modes that read them: the
+    default is the consistent filter, the other value the tempting shortcut the notebooks
+    measure against it (04 mapping, 05 VIO, 06 SLAM).
+
+    Attributes
+    ----------
+    sigma_pixel : float
+        Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate (px);
+        ``R = sigma_pixel^2 I4``.
+    sigma_linear_velocity : float
+        Modes: all. White noise on each linear-velocity sample (m/s); ``W`` scales it by the
+        time step.
+    sigma_angular_velocity : float
+        Modes: all. White noise on each angular-velocity sample (rad/s).
+    landmark_prior_inflation : float
+        Modes: mapping, vio, slam. A landmark enters the state at its first observation (which
+        it consumes) with its mean at the stereo triangulation and the covariance
+        ``inflation^2 C_tri + sigma^2 I`` from the pixels, plus, in VIO and SLAM, the pose's
+        uncertainty (in SLAM also its correlation) carried through the triangulation (see
+        :func:`visla_edu.ekf.initialize_landmarks`). ``C_tri`` is long along the viewing ray
+        and grows with depth squared; the inflation allows for the linearisation error of far
+        points.
+    landmark_prior_sigma : float
+        Modes: mapping, vio, slam. Isotropic part of a new landmark's covariance (m).
+    initial_pose_sigma : float
+        Modes: all. Standard deviation of the first pose; 0 because ``world`` is the first IMU
+        frame.
+    gate_probability : float
+        Modes: mapping, vio, slam. Observations whose Mahalanobis distance exceeds the
+        chi-square quantile with 4 degrees of freedom at this probability are rejected as
+        outliers (1.0 disables gating).
+    min_init_disparity : float
+        Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` (px) to triangulate a new
+        landmark; smaller disparities give depths beyond ``fsu b / min_init_disparity``.
+        Observations with non-positive disparity are never used.
+    imu_lag : int
+        Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
+        the step ``t -> t+1``: ``u[t + imu_lag]``.
+    extrinsic_correction : str
+        Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
+        ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
+        finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
+        of a correction (``"flip_yz"``, ...), see :data:`visla_edu.diagnostics.CORRECTIONS`.
+    landmark_cross_covariance : bool
+        Mode: slam (teaching comparison, notebook 06). True: a new landmark enters correlated
+        with the state (``G_pose Sigma_pose,x``). False is the textbook shortcut (pixel
+        covariance only, no correlation), which makes the filter overconfident.
+    mapping_motion_noise : bool
+        Mode: mapping (teaching comparison, notebook 04). True: widen each observation's noise
+        by the dead-reckoning motion noise since the landmark's first sighting. False takes
+        the dead-reckoned poses as exact.
+    vio_refine_landmarks : bool
+        Mode: vio (teaching comparison, notebook 05). True: also update the landmarks with the
+        observations that just corrected the pose, which counts each observation twice; off
+        by default.
+    skip_repeated_frames : bool
+        Modes: mapping, vio, slam. Make no update at frames whose observations exactly repeat
+        the previous frame's (a duplicated camera frame while the IMU moved on; dataset 03
+        has one at 1008).
+    landmark_stride : int
+        Modes: mapping, vio, slam. Use only landmarks whose index is a multiple of this (the
+        textbook workaround for the dense filter's memory; 1 = every landmark).
+    """
+
+    sigma_pixel: float = 1.5
+    sigma_linear_velocity: float = 0.5
+    sigma_angular_velocity: float = 0.05
+    landmark_prior_inflation: float = 1.0
+    landmark_prior_sigma: float = 0.1
+    initial_pose_sigma: float = 0.0
+    gate_probability: float = 0.999
+    min_init_disparity: float = 3.0
+    imu_lag: int = 0
+    extrinsic_correction: str = "auto"
+    landmark_cross_covariance: bool = True
+    mapping_motion_noise: bool = True
+    vio_refine_landmarks: bool = False
+    skip_repeated_frames: bool = True
+    landmark_stride: int = 1
+
+    def __post_init__(self):
+        positive = ["sigma_pixel", "landmark_prior_sigma"]
+        non_negative = ["landmark_prior_inflation", "sigma_linear_velocity", "sigma_angular_velocity",
+                        "initial_pose_sigma", "min_init_disparity"]
+        for name in positive:
+            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
+                raise ValueError(f"FilterConfig.{name} must be a positive number, got {getattr(self, name)!r}")
+        for name in non_negative:
+            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
+                raise ValueError(f"FilterConfig.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0 < self.gate_probability <= 1:
+            raise ValueError(f"FilterConfig.gate_probability must be in (0, 1], got {self.gate_probability!r}")
+        if int(self.landmark_stride) != self.landmark_stride or self.landmark_stride < 1:
+            raise ValueError(f"FilterConfig.landmark_stride must be a positive integer, got {self.landmark_stride!r}")
+        if int(self.imu_lag) != self.imu_lag:
+            raise ValueError(f"FilterConfig.imu_lag must be an integer, got {self.imu_lag!r}")
+
+    @property
+    def pixel_variance(self):
+        """``sigma_pixel^2``."""
+        return self.sigma_pixel**2
+
+    @property
+    def gate_threshold(self):
+        """Chi-square (4 dof) quantile at ``gate_probability``; ``inf`` when gating is off."""
+        if self.gate_probability >= 1:
+            return np.inf
+        from scipy.stats import chi2
+
+        return float(chi2.ppf(self.gate_probability, 4))
+
+    def to_dict(self):
+        """Plain dict of the settings (for saving with results)."""
+        return asdict(self)
