@@ -199,6 +199,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense, verbose=verbose)
+    flt.record_landmarks = False  # a whole run keeps no per-frame landmarks
     T = dataset.num_frames
     arrays = RunArrays(T)
     show = T > 500 if progress is None else progress
