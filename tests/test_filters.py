@@ -16,8 +16,10 @@ from visla_edu import filters, metrics, motion, run, simulate
 from visla_edu.dataset import repeated_frames
 from visla_edu.filters import FilterConfig, FilterDivergedError
 
-#: The simulated drives have no extrinsic error; skipping the check keeps the tests fast.
-CFG = FilterConfig(extrinsic_correction="none")
+#: The simulated drives have no extrinsic error and no IMU lag, and these tests are not about
+#: measuring the noise: fixed settings (the former defaults) skip the calibration and keep them fast.
+FIXED = dict(extrinsic_correction="none", sigma_linear_velocity=0.5, sigma_angular_velocity=0.05, imu_lag=0)
+CFG = FilterConfig(**FIXED)
 
 
 def matched_config(ds, **overrides):
@@ -200,8 +202,8 @@ def test_deadreckon_mode_equals_motion_dead_reckon(tiny, lag):
     u = motion.select_twists(tiny.twists, lag)
     for t, tau in enumerate(tiny.time_steps):
         P = motion.predict_pose_covariance(P, motion.pose_transition(u[t], tau),
-                                           motion.motion_noise(tau, cfg.sigma_linear_velocity,
-                                                               cfg.sigma_angular_velocity))
+                                           motion.motion_noise(tau, r.config["sigma_linear_velocity"],
+                                                               r.config["sigma_angular_velocity"]))
         np.testing.assert_allclose(r.pose_cov[t + 1], P, rtol=1e-10, atol=1e-15)
 
 
@@ -254,7 +256,7 @@ def test_summary_mentions_mode_and_counts(tiny, tiny_results):
 
 @pytest.mark.parametrize("blas_threads", [1, None])
 def test_save_and_load_result_round_trip(tiny, tmp_path, blas_threads):
-    cfg = FilterConfig(extrinsic_correction="none", landmark_stride=2)
+    cfg = FilterConfig(**FIXED, landmark_stride=2)
     r = run.run_filter(tiny, "vio", cfg, blas_threads=blas_threads)
     path = tmp_path / "result.npz"
     run.save_result(r, path)

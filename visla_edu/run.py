@@ -25,8 +25,8 @@ from visla_edu.camera import StereoCamera
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
-__all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "iterate_filter", "run_filter",
-           "save_result", "load_result"]
+__all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "resolve_config", "iterate_filter",
+           "run_filter", "save_result", "load_result"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
@@ -69,7 +69,10 @@ def _blas_controller():
 
 
 def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
-    """Build the filter object for ``mode`` with the corrected calibration.
+    """Build the filter object for ``mode`` with the settings and calibration resolved.
+
+    Settings left at ``"auto"`` (the velocity noise, the IMU lag, the extrinsic correction)
+    are measured from the data first (:func:`resolve_config`).
 
     Parameters
     ----------
@@ -80,17 +83,18 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     dense : bool
         Textbook joint EKF over all (strided) landmarks; only for ``mode="slam"``.
     verbose : bool
-        Print the extrinsic diagnostic's evidence when a correction is applied.
+        Print the evidence of an automatic extrinsic correction.
 
     Returns
     -------
     filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
+        Its ``config`` is the resolved one (no ``"auto"`` left but ``extrinsic_correction``).
     """
-    config = config or FilterConfig()
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if dense and mode != SLAM:
         raise ValueError(f"dense=True is the textbook joint filter and needs mode='slam', got mode={mode!r}")
+    config = resolve_config(dataset, config or FilterConfig())
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
         print(evidence)
@@ -98,6 +102,38 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     if mode == SLAM:
         return filters.JointSlam(dataset, camera, config, dense=dense)
     return _MODE_CLASSES[mode](dataset, camera, config)
+
+
+def resolve_config(dataset, config):
+    """``config`` with its ``"auto"`` settings measured from ``dataset``.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig
+
+    Returns
+    -------
+    visla_edu.filters.FilterConfig
+        The same object when nothing was ``"auto"``.
+    """
+    if config.resolved:
+        return config
+    return config.resolve(_measured_settings(dataset))
+
+
+def _measured_settings(dataset):
+    # TEMPORARY (replaced by diagnostics.calibrate when it lands): per-axis velocity noise =
+    # white noise (second differences) and the change within a step (first differences); lag 0.
+    from types import SimpleNamespace
+
+    u = dataset.twists
+    second = np.diff(u, n=2, axis=0)
+    white = 1.4826 * np.median(np.abs(second - np.median(second, axis=0)), axis=0) / np.sqrt(6)
+    first = np.sqrt(np.mean(np.diff(u, axis=0) ** 2, axis=0))
+    hold = np.sqrt(np.maximum(first**2 - 2 * white**2, 0.0)) / 2
+    sigma = np.maximum(np.sqrt(white**2 + hold**2), [1e-3] * 3 + [1e-4] * 3)
+    return SimpleNamespace(sigma_linear_velocity=tuple(sigma[:3]), sigma_angular_velocity=tuple(sigma[3:]), imu_lag=0)
 
 
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
@@ -199,6 +235,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense, verbose=verbose)
+    config = flt.config
     flt.record_landmarks = False  # a whole run keeps no per-frame landmarks
     T = dataset.num_frames
     arrays = RunArrays(T)
@@ -299,11 +336,17 @@ def save_result(result, path):
     np.savez_compressed(path, **arrays)
 
 
+def _setting(array):
+    """A saved setting back: None (empty), a number or string, or a per-axis tuple."""
+    if array.size == 0:
+        return None
+    return array.item() if array.size == 1 else tuple(array.tolist())
+
+
 def load_result(path):
     """Load a :class:`RunResult` written by :func:`save_result`."""
     with np.load(path, allow_pickle=False) as f:
-        config = {k[len("config_"):]: (None if f[k].size == 0 else f[k].item())
-                  for k in f.files if k.startswith("config_")}
+        config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
         fields = {k: f[k] for k in f.files if not k.startswith("config_")}
     for key in ("name", "mode"):
         fields[key] = str(fields[key])

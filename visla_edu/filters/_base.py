@@ -102,6 +102,9 @@ class _Filter(abc.ABC):
     """
 
     def __init__(self, dataset, camera, config):
+        if not config.resolved:
+            raise ValueError("a filter needs its 'auto' settings measured first: build it with "
+                             "visla_edu.run.make_filter, or pass config=run.resolve_config(dataset, config)")
         self.dataset = dataset
         self.camera = camera
         self.config = config

@@ -1,10 +1,17 @@
 """The filter modes' settings: noise, initialisation, gating, and the teaching comparisons."""
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-__all__ = ["FilterConfig"]
+__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS"]
+
+#: The value of a setting the driver measures from the data (:func:`visla_edu.diagnostics.calibrate`).
+AUTO = "auto"
+#: ``imu_lag`` is searched and accepted in ``-MAX_IMU_LAG .. MAX_IMU_LAG`` frames.
+MAX_IMU_LAG = 2
+#: Settings that may be ``"auto"`` and their attribute on the calibration that resolves them.
+AUTO_FIELDS = ("sigma_linear_velocity", "sigma_angular_velocity", "imu_lag")
 
 
 @dataclass
@@ -51,11 +58,13 @@ class FilterConfig:
     sigma_pixel : float
         Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate (px);
         ``R = sigma_pixel^2 I4``.
-    sigma_linear_velocity : float
-        Modes: all. White noise on each linear-velocity sample (m/s); ``W`` scales it by the
-        time step.
-    sigma_angular_velocity : float
-        Modes: all. White noise on each angular-velocity sample (rad/s).
+    sigma_linear_velocity : float, (float, float, float) or "auto"
+        Modes: all. Noise on each linear-velocity sample (m/s), one value for every axis or one
+        per body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
+        axis (:func:`visla_edu.diagnostics.calibrate`: the samples' white noise and how much
+        the velocity changes within a step, which the model holds constant).
+    sigma_angular_velocity : float, (float, float, float) or "auto"
+        Modes: all. Noise on each angular-velocity sample (rad/s), as above.
     landmark_prior_inflation : float
         Modes: mapping, vio, slam. A landmark enters the state at its first observation (which
         it consumes) with its mean at the stereo triangulation and the covariance
@@ -77,9 +86,10 @@ class FilterConfig:
         Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` (px) to triangulate a new
         landmark; smaller disparities give depths beyond ``fsu b / min_init_disparity``.
         Observations with non-positive disparity are never used.
-    imu_lag : int
+    imu_lag : int or "auto"
         Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
-        the step ``t -> t+1``: ``u[t + imu_lag]``.
+        the step ``t -> t+1``: ``u[t + imu_lag]``, in ``-2 .. 2``. ``"auto"``: the lag the data
+        supports (:func:`visla_edu.diagnostics.calibrate`), 0 without clear evidence.
     extrinsic_correction : str
         Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
@@ -118,14 +128,14 @@ class FilterConfig:
     """
 
     sigma_pixel: float = 1.5
-    sigma_linear_velocity: float = 0.5
-    sigma_angular_velocity: float = 0.05
+    sigma_linear_velocity: object = AUTO
+    sigma_angular_velocity: object = AUTO
     landmark_prior_inflation: float = 1.0
     landmark_prior_sigma: float = 0.1
     initial_pose_sigma: float = 0.0
     gate_probability: float = 0.999
     min_init_disparity: float = 3.0
-    imu_lag: int = 0
+    imu_lag: object = AUTO
     extrinsic_correction: str = "auto"
     landmark_cross_covariance: bool = True
     mapping_motion_noise: bool = True
@@ -137,8 +147,10 @@ class FilterConfig:
 
     def __post_init__(self):
         positive = ["sigma_pixel", "landmark_prior_sigma"]
-        non_negative = ["landmark_prior_inflation", "sigma_linear_velocity", "sigma_angular_velocity",
-                        "initial_pose_sigma", "min_init_disparity"]
+        non_negative = ["landmark_prior_inflation", "initial_pose_sigma", "min_init_disparity"]
+        for name in ("sigma_linear_velocity", "sigma_angular_velocity"):
+            setattr(self, name, _velocity_sigma(name, getattr(self, name)))
+        self.imu_lag = _imu_lag(self.imu_lag)
         for name in positive:
             if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
                 raise ValueError(f"FilterConfig.{name} must be a positive number, got {getattr(self, name)!r}")
@@ -151,8 +163,6 @@ class FilterConfig:
             raise ValueError(f"FilterConfig.landmark_stride must be a positive integer, got {self.landmark_stride!r}")
         if self.slam_error not in ("invariant", "right"):
             raise ValueError(f"FilterConfig.slam_error must be 'invariant' or 'right', got {self.slam_error!r}")
-        if int(self.imu_lag) != self.imu_lag:
-            raise ValueError(f"FilterConfig.imu_lag must be an integer, got {self.imu_lag!r}")
 
     @property
     def pixel_variance(self):
@@ -168,6 +178,48 @@ class FilterConfig:
 
         return float(chi2.ppf(self.gate_probability, 4))
 
+    @property
+    def resolved(self):
+        """True when no setting of :data:`AUTO_FIELDS` is ``"auto"`` (a filter can run with it)."""
+        return not any(isinstance(getattr(self, name), str) for name in AUTO_FIELDS)
+
+    def resolve(self, calibration):
+        """A copy with every ``"auto"`` of :data:`AUTO_FIELDS` replaced by the calibration's value.
+
+        Parameters
+        ----------
+        calibration : object
+            Has the attributes of :data:`AUTO_FIELDS` (e.g. a
+            :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag.
+        """
+        values = {name: getattr(calibration, name) for name in AUTO_FIELDS if getattr(self, name) == AUTO}
+        return replace(self, **values)
+
     def to_dict(self):
         """Plain dict of the settings (for saving with results)."""
         return asdict(self)
+
+
+def _velocity_sigma(name, value):
+    """A velocity noise setting: "auto", a number >= 0 or three of them (one per body axis)."""
+    if isinstance(value, str):
+        if value != AUTO:
+            raise ValueError(f"FilterConfig.{name} must be a number >= 0, three of them (x, y, z) or 'auto', got {value!r}")
+        return value
+    try:
+        sigma = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        sigma = np.full(2, np.nan)  # reported below
+    if sigma.shape not in ((), (3,)) or not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
+        raise ValueError(f"FilterConfig.{name} must be a number >= 0, three of them (x, y, z) or 'auto', got {value!r}")
+    return float(sigma) if sigma.ndim == 0 else tuple(float(x) for x in sigma)
+
+
+def _imu_lag(value):
+    """``imu_lag``: "auto" or an integer in ``-MAX_IMU_LAG .. MAX_IMU_LAG``."""
+    if isinstance(value, str) and value == AUTO:
+        return value
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)) \
+            or int(value) != value or abs(int(value)) > MAX_IMU_LAG:
+        raise ValueError(f"FilterConfig.imu_lag must be an integer in -{MAX_IMU_LAG}..{MAX_IMU_LAG} or 'auto', got {value!r}")
+    return int(value)
