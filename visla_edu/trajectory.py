@@ -24,7 +24,6 @@ file, the line and the value.
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from visla_edu._files import atomic_write
 
@@ -221,6 +220,8 @@ def read_tum(path):
         raise ValueError(f"{path}: line {line_numbers[bad[0]]}: quaternion (qx qy qz qw) has norm {norms[bad[0]]:.6g}, "
                          "expected a unit quaternion")
     _check_increasing(path, table[:, 0], line_numbers)
+    from scipy.spatial.transform import Rotation  # lazy: scipy.spatial takes ~0.5 s to import
+
     return table[:, 0].copy(), _poses(Rotation.from_quat(table[:, 4:]).as_matrix(), table[:, 1:4])
 
 
@@ -303,6 +304,8 @@ def write_tum(path, time_stamps, poses):
     -------
     pathlib.Path
     """
+    from scipy.spatial.transform import Rotation  # lazy, as in read_tum
+
     poses, times = _check_poses(poses, time_stamps)
     quaternions = Rotation.from_matrix(poses[:, :3, :3]).as_quat()
     return _write_rows(path, np.column_stack([times, poses[:, :3, 3], quaternions]))
