@@ -83,8 +83,12 @@ def _blas_threads(text):
 
 
 def _parse_settings(pairs):
-    """``["sigma_pixel=2", ...]`` -> FilterConfig keyword arguments, typed like the defaults."""
-    from visla_edu.filters import FilterConfig
+    """``["sigma_pixel=2", ...]`` -> FilterConfig keyword arguments, typed like the defaults.
+
+    A setting whose default is ``"auto"`` takes ``auto``, a number, or numbers separated by
+    commas (one per body axis, e.g. ``sigma_linear_velocity=0.1,0.02,0.02``).
+    """
+    from visla_edu.filters import AUTO, FilterConfig
 
     fields = {f.name: f for f in dataclasses.fields(FilterConfig)}
     defaults = FilterConfig()
@@ -93,12 +97,28 @@ def _parse_settings(pairs):
         name, sep, value = pair.partition("=")
         if not sep or name not in fields:
             raise SystemExit(f"--set {pair!r}: expected NAME=VALUE with NAME one of {', '.join(fields)}")
-        kind = type(getattr(defaults, name))
+        default = getattr(defaults, name)
+        kind = type(default)
         try:
-            out[name] = (value.lower() in ("1", "true", "yes")) if kind is bool else kind(value)
+            if default == AUTO:
+                out[name] = _auto_or_numbers(value)
+            else:
+                out[name] = (value.lower() in ("1", "true", "yes")) if kind is bool else kind(value)
         except ValueError:
-            raise SystemExit(f"--set {pair!r}: {name} needs a {kind.__name__}, got {value!r}") from None
+            wanted = "'auto' or numbers" if default == AUTO else f"a {kind.__name__}"
+            raise SystemExit(f"--set {pair!r}: {name} needs {wanted}, got {value!r}") from None
     return out
+
+
+def _auto_or_numbers(value):
+    """``"auto"``, an int (``"1"``), a float, or comma-separated floats as a tuple."""
+    if value.strip().lower() == "auto":
+        return "auto"
+    parts = [p.strip() for p in value.split(",")]
+    if len(parts) > 1:
+        return tuple(float(p) for p in parts)
+    number = float(parts[0])
+    return int(number) if number.is_integer() and "." not in parts[0] and "e" not in parts[0].lower() else number
 
 
 def _cmd_info(args):
