@@ -3,8 +3,10 @@
 :func:`make_filter` builds a mode by name (:data:`MODES`, from :mod:`visla_edu.codes`),
 :func:`iterate_filter` steps it, :func:`run_filter` runs it to the end into a
 :class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
-:func:`load_result` write and read it. How the driver runs is in its arguments, not in the
-filter's settings: the BLAS thread limit (:func:`limit_blas_threads`) and the progress bar.
+:func:`load_result` write and read it (atomically, :func:`visla_edu._files.atomic_write`). How
+the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
+(:func:`limit_blas_threads`) and the progress bar. :func:`estimate_dense_work` says what a dense
+run will cost before it starts; :func:`divergence_hint` names the likely cause when a run fails.
 
 >>> from visla_edu import data, run
 >>> ds = data.load("sim-tiny")
@@ -17,16 +19,18 @@ import contextlib
 import functools
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from visla_edu import diagnostics, filters, motion
+from visla_edu import data, diagnostics, filters, motion
+from visla_edu._files import atomic_write
 from visla_edu.camera import StereoCamera
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
-__all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "iterate_filter", "run_filter",
-           "save_result", "load_result"]
+__all__ = ["MODES", "RunArrays", "RunResult", "WorkEstimate", "limit_blas_threads", "make_filter", "iterate_filter",
+           "run_filter", "save_result", "load_result", "estimate_dense_work", "divergence_hint"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
@@ -85,12 +89,23 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     Returns
     -------
     filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
+
+    Raises
+    ------
+    ValueError
+        A bad mode, or a dataset with an implausible calibration
+        (:func:`visla_edu.data.calibration_problems`: in-memory datasets are held to the
+        ranges the loader enforces on files, since the filter would silently turn an absurd
+        focal length, baseline or extrinsic into inf/NaN covariances or a garbage map).
     """
     config = config or FilterConfig()
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if dense and mode != SLAM:
         raise ValueError(f"dense=True is the textbook joint filter and needs mode='slam', got mode={mode!r}")
+    problems = data.calibration_problems(dataset)
+    if problems:
+        raise ValueError(f"cannot run the filter: {problems[0]}")
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
         print(evidence)
@@ -195,6 +210,12 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     Returns
     -------
     RunResult
+
+    Raises
+    ------
+    visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError
+        The filter failed; the exception's ``frame`` attribute is the frame it failed at
+        (see :func:`divergence_hint`).
     """
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
@@ -203,11 +224,15 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     arrays = RunArrays(T)
     show = T > 500 if progress is None else progress
     with limit_blas_threads(blas_threads), _progress_bar(T, show, f"{dataset.name} {mode}") as bar:
-        for _ in range(T):
-            start = time.perf_counter()
-            rec = flt.step()
-            arrays.store(rec, seconds=time.perf_counter() - start)
-            bar.update(1)
+        try:
+            for _ in range(T):
+                start = time.perf_counter()
+                rec = flt.step()
+                arrays.store(rec, seconds=time.perf_counter() - start)
+                bar.update(1)
+        except (filters.FilterDivergedError, np.linalg.LinAlgError, FloatingPointError) as err:
+            err.frame = flt.t  # the frame it failed at, for divergence_hint (the message is unchanged)
+            raise
     landmarks, landmark_cov = flt.landmark_estimates()
     return RunResult(
         name=dataset.name, mode=mode, dense=dense, time_stamps=dataset.time_stamps.copy(),
@@ -285,17 +310,35 @@ def _progress_bar(total, show, desc):
 
 
 def save_result(result, path):
-    """Save a :class:`RunResult` to ``path`` (npz).
+    """Save a :class:`RunResult` to ``path`` (npz), atomically; return the path written.
 
     Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
     initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
     ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
     so the file loads without pickle; files of earlier versions hold ``blas_threads`` so).
+
+    Parameters
+    ----------
+    result : RunResult
+    path : str or os.PathLike
+        ``.npz`` is appended if missing (as ``numpy.savez`` does). The file is written to a
+        temporary file first and then renamed (:func:`visla_edu._files.atomic_write`), so an
+        interrupted save leaves a previous result there intact.
+
+    Returns
+    -------
+    pathlib.Path
+        The absolute path written.
     """
+    path = Path(path).expanduser()
+    if path.suffix != ".npz":
+        path = path.with_name(path.name + ".npz")
     arrays = {k: v for k, v in vars(result).items() if k != "config"}
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
-    np.savez_compressed(path, **arrays)
+    with atomic_write(path) as f:
+        np.savez_compressed(f, **arrays)
+    return path.resolve()
 
 
 def load_result(path):
@@ -308,3 +351,115 @@ def load_result(path):
         fields[key] = str(fields[key])
     fields["dense"] = bool(fields["dense"])
     return RunResult(config=config, **fields)
+
+
+#: Cost model of one dense SLAM frame with a D-dimensional state and m observation rows:
+#: ``D^2 (a + b m)`` seconds (the covariance update ``Sigma -= A^T A`` streams the D x D
+#: covariance and multiplies (D, m) by (m, D)). Fitted on the 2-core development machine with
+#: one BLAS thread; ``benchmarks/bench_dense_estimate.py`` prints estimate against measurement.
+DENSE_SECONDS_PER_ENTRY = 7.3e-9
+DENSE_SECONDS_PER_ENTRY_ROW = 2.2e-10
+#: ``visla-edu run --dense`` refuses runs estimated past these limits unless given ``--force``.
+DENSE_LIMIT_BYTES = 2 * 2**30
+DENSE_LIMIT_SECONDS = 15 * 60
+
+
+@dataclass
+class WorkEstimate:
+    """What a dense SLAM run will cost, estimated before it starts (:func:`estimate_dense_work`).
+
+    Attributes
+    ----------
+    state_dim : int
+        ``D = 6 + 3 n`` for the n landmarks in the state (every strided landmark).
+    frames : int
+    rows_per_frame : float
+        Mean observation rows per update (3 per observation in use).
+    peak_bytes : int
+        The covariance and the same-size product of its update: ``2 D^2 8`` bytes.
+    seconds : float
+        ``frames D^2 (a + b rows)``, see :data:`DENSE_SECONDS_PER_ENTRY`.
+    """
+
+    state_dim: int
+    frames: int
+    rows_per_frame: float
+    peak_bytes: int
+    seconds: float
+
+    def over_limits(self, max_bytes=DENSE_LIMIT_BYTES, max_seconds=DENSE_LIMIT_SECONDS):
+        """What exceeds the limits, as phrases (empty when the run is within them)."""
+        over = []
+        if self.peak_bytes > max_bytes:
+            over.append(f"{self.peak_bytes / 2**30:.1f} GiB of memory (limit {max_bytes / 2**30:.1f} GiB)")
+        if self.seconds > max_seconds:
+            over.append(f"about {_duration(self.seconds)} (limit {_duration(max_seconds)})")
+        return over
+
+    def summary(self):
+        """One line: state size, memory and time."""
+        return (f"dense SLAM: a {self.state_dim}x{self.state_dim} covariance, about "
+                f"{self.peak_bytes / 2**30:.2f} GiB of memory and {_duration(self.seconds)} for {self.frames} frames "
+                f"(estimate)")
+
+
+def estimate_dense_work(dataset, config=None):
+    """Estimate the memory and time of ``run_filter(dataset, "slam", config, dense=True)``.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig, optional
+        Its ``landmark_stride`` decides the landmarks in the state.
+
+    Returns
+    -------
+    WorkEstimate
+    """
+    config = config or FilterConfig()
+    stride = config.landmark_stride
+    n = len(range(0, dataset.num_landmarks, stride))
+    D = 6 + 3 * n
+    T = max(1, dataset.num_frames)
+    in_stride = dataset.obs_ids % stride == 0
+    entering = len(np.unique(dataset.obs_ids[in_stride]))  # each landmark's first observation is consumed
+    rows = 3 * max(0, int(in_stride.sum()) - entering) / T
+    seconds = T * D * D * (DENSE_SECONDS_PER_ENTRY + DENSE_SECONDS_PER_ENTRY_ROW * rows)
+    return WorkEstimate(state_dim=D, frames=T, rows_per_frame=rows, peak_bytes=2 * 8 * D * D, seconds=seconds)
+
+
+def divergence_hint(dataset, config, frame=None):
+    """The likely cause of a filter failure at ``frame``, as one sentence.
+
+    Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`:
+    calibration, time stamps, velocities), else the step into ``frame`` and the settings.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig
+    frame : int, optional
+
+    Returns
+    -------
+    str
+    """
+    problems = data.dataset_problems(dataset)
+    if problems:
+        return "likely cause: " + problems[0]
+    where = ""
+    if frame is not None and 0 < frame < dataset.num_frames:
+        twist = motion.select_twists(dataset.twists, config.imu_lag)[frame - 1]
+        where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
+                 f"{np.linalg.norm(twist[:3]):.4g} m/s and {np.linalg.norm(twist[3:]):.4g} rad/s; ")
+    return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
+            f"velocity noise {config.sigma_linear_velocity:g} m/s and {config.sigma_angular_velocity:g} rad/s) "
+            "and the calibration (visla-edu info shows the diagnostics)")
+
+
+def _duration(seconds):
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
