@@ -20,7 +20,7 @@ import secrets
 import stat
 from pathlib import Path
 
-__all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind"]
+__all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind", "format_bytes"]
 
 #: ``stat`` test -> what to call a path that is not a regular file.
 _KINDS = (
@@ -77,6 +77,14 @@ def atomic_write(path, mode="wb", encoding=None):
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def format_bytes(n):
+    """``n`` bytes as a short text: ``"512 B"``, ``"3.2 MiB"``, ``"7.0 TiB"``."""
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n} B"
 
 
 def file_kind(path):

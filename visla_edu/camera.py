@@ -43,7 +43,7 @@ def _check_calibration(K, b, name):
     if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise ValueError(f"{name}: K needs finite entries and positive focal lengths, got {K.tolist()}")
     if K[0, 1] != 0:
-        raise ValueError(f"{name}: K[0, 1] = {K[0, 1]!r} is a skew, but the stereo model has none "
+        raise ValueError(f"{name}: K[0, 1] = {float(K[0, 1])!r} is a skew, but the stereo model has none "
                          "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]], rectified images); rectify or set it to 0")
     if K[1, 0] != 0 or np.any(K[2] != [0.0, 0.0, 1.0]):
         raise ValueError(f"{name}: K must be [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]], got {K.tolist()}")

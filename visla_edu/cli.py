@@ -31,6 +31,7 @@ import argparse
 import os
 import sys
 import traceback
+import warnings
 
 from visla_edu.codes import MODES, SLAM
 
@@ -251,7 +252,8 @@ def _check_dense_work(dataset, config, force):
         print(f"--force: running anyway ({' and '.join(over)})")
         return
     stride = config.landmark_stride
-    while run.estimate_dense_work(dataset, dataclasses.replace(config, landmark_stride=stride)).over_limits():
+    while stride < dataset.num_landmarks and run.estimate_dense_work(
+            dataset, dataclasses.replace(config, landmark_stride=stride)).over_limits():
         stride *= 2
     raise ValueError(f"--dense on {dataset.name} with landmark stride {config.landmark_stride} would need "
                      f"{' and '.join(over)}; use --landmark-stride {stride} (or more), or the active set (drop "
@@ -298,19 +300,40 @@ _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "relea
 
 
 def main(argv=None):
-    """Entry point of the ``visla-edu`` console script: the one error boundary; returns the exit status."""
+    """Entry point of the ``visla-edu`` console script: the one error boundary; returns the exit status.
+
+    Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected,
+    not printed: a failure is reported by its one line (the filter detects a non-finite state
+    itself), a success by one line counting them. ``--debug`` prints them as they happen.
+    """
     args = build_parser().parse_args(argv)
     debug = getattr(args, "debug", False) or os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
-    try:
-        _HANDLERS[args.command](args)
-    except KeyboardInterrupt:
-        _report(args.command, "interrupted (Ctrl-C); files being written were left as they were", debug)
-        return EXIT_INTERRUPTED
-    except Exception as err:  # noqa: BLE001 - the boundary: every error becomes one line and a status
-        code, message = _describe(err, args)
-        _report(args.command, message, debug)
-        return code
+    with warnings.catch_warnings(record=not debug) as caught:
+        if not debug:
+            warnings.simplefilter("default", RuntimeWarning)  # once per place: bounded
+        try:
+            _HANDLERS[args.command](args)
+        except KeyboardInterrupt:
+            _report(args.command, "interrupted (Ctrl-C); files being written were left as they were", debug)
+            return EXIT_INTERRUPTED
+        except Exception as err:  # noqa: BLE001 - the boundary: every error becomes one line and a status
+            code, message = _describe(err, args)
+            _report(args.command, message, debug)
+            return code
+    _note_warnings(args.command, caught or [])
     return 0
+
+
+def _note_warnings(command, caught):
+    """One line on stderr for the numerical warnings of a successful run, the rest re-issued."""
+    numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+    for w in caught:
+        if not issubclass(w.category, RuntimeWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if numeric:
+        first = str(numeric[0].message)
+        print(f"visla-edu {command}: note: numerical warnings at {len(numeric)} place(s), e.g. {first!r} "
+              "(rerun with --debug to see them)", file=sys.stderr)
 
 
 def _report(command, message, debug):

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from visla_edu import data, diagnostics, filters, motion
-from visla_edu._files import atomic_write
+from visla_edu._files import atomic_write, format_bytes
 from visla_edu.camera import StereoCamera
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
@@ -230,7 +230,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
                 rec = flt.step()
                 arrays.store(rec, seconds=time.perf_counter() - start)
                 bar.update(1)
-        except (filters.FilterDivergedError, np.linalg.LinAlgError, FloatingPointError) as err:
+        except (filters.FilterDivergedError, np.linalg.LinAlgError, ArithmeticError, MemoryError) as err:
             err.frame = flt.t  # the frame it failed at, for divergence_hint (the message is unchanged)
             raise
     landmarks, landmark_cov = flt.landmark_estimates()
@@ -332,7 +332,7 @@ def save_result(result, path):
         The absolute path written.
     """
     path = Path(path).expanduser()
-    if path.suffix != ".npz":
+    if path.suffix.lower() != ".npz":
         path = path.with_name(path.name + ".npz")
     arrays = {k: v for k, v in vars(result).items() if k != "config"}
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
@@ -387,20 +387,24 @@ class WorkEstimate:
     peak_bytes: int
     seconds: float
 
-    def over_limits(self, max_bytes=DENSE_LIMIT_BYTES, max_seconds=DENSE_LIMIT_SECONDS):
-        """What exceeds the limits, as phrases (empty when the run is within them)."""
+    def over_limits(self, max_bytes=None, max_seconds=None):
+        """What exceeds the limits (default :data:`DENSE_LIMIT_BYTES`, :data:`DENSE_LIMIT_SECONDS`), as phrases.
+
+        Empty when the run is within them.
+        """
+        max_bytes = DENSE_LIMIT_BYTES if max_bytes is None else max_bytes
+        max_seconds = DENSE_LIMIT_SECONDS if max_seconds is None else max_seconds
         over = []
         if self.peak_bytes > max_bytes:
-            over.append(f"{self.peak_bytes / 2**30:.1f} GiB of memory (limit {max_bytes / 2**30:.1f} GiB)")
+            over.append(f"{format_bytes(self.peak_bytes)} of memory (limit {format_bytes(max_bytes)})")
         if self.seconds > max_seconds:
             over.append(f"about {_duration(self.seconds)} (limit {_duration(max_seconds)})")
         return over
 
     def summary(self):
         """One line: state size, memory and time."""
-        return (f"dense SLAM: a {self.state_dim}x{self.state_dim} covariance, about "
-                f"{self.peak_bytes / 2**30:.2f} GiB of memory and {_duration(self.seconds)} for {self.frames} frames "
-                f"(estimate)")
+        return (f"dense SLAM: a {self.state_dim}x{self.state_dim} covariance, about {format_bytes(self.peak_bytes)} "
+                f"of memory and {_duration(self.seconds)} for {self.frames} frames (estimate)")
 
 
 def estimate_dense_work(dataset, config=None):
@@ -450,8 +454,9 @@ def divergence_hint(dataset, config, frame=None):
     where = ""
     if frame is not None and 0 < frame < dataset.num_frames:
         twist = motion.select_twists(dataset.twists, config.imu_lag)[frame - 1]
+        speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
         where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
-                 f"{np.linalg.norm(twist[:3]):.4g} m/s and {np.linalg.norm(twist[3:]):.4g} rad/s; ")
+                 f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
     return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
             f"velocity noise {config.sigma_linear_velocity:g} m/s and {config.sigma_angular_velocity:g} rad/s) "
             "and the calibration (visla-edu info shows the diagnostics)")

@@ -50,7 +50,7 @@ from visla_edu.data._format import (
     TEXT_KEYS,
 )
 from visla_edu.data._load import input_files, load
-from visla_edu.data._plausible import calibration_problems, dataset_problems
+from visla_edu.data._plausible import calibration_problems, dataset_problems, magnitude
 from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir
 from visla_edu.data._save import save
 from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, standin_dataset10
@@ -74,6 +74,7 @@ __all__ = [
     "input_files",
     "dataset_problems",
     "calibration_problems",
+    "magnitude",
     "save",
     "available",
     "repeated_frames",

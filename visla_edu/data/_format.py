@@ -20,7 +20,7 @@ from visla_edu.data._plausible import (
     check_time_stamps,
     check_velocities,
 )
-from visla_edu.data._zip import format_bytes
+from visla_edu._files import format_bytes
 
 __all__ = [
     "FORMAT_2021",
@@ -195,7 +195,7 @@ def check_increasing(stamps, path):
         i = int(bad[0])
         raise ValueError(
             f"{path}: key 'time_stamps' must be strictly increasing, but time_stamps[0, {i + 1}] = "
-            f"{stamps[i + 1]!r} is not after time_stamps[0, {i}] = {stamps[i]!r}"
+            f"{float(stamps[i + 1])!r} is not after time_stamps[0, {i}] = {float(stamps[i])!r}"
         )
 
 
@@ -215,7 +215,7 @@ def check_intrinsics(K, path):
         raise ValueError(f"{path}: key 'K' needs positive focal lengths, got fsu = {K[0, 0]}, fsv = {K[1, 1]}")
     if K[0, 1] != 0:
         raise ValueError(
-            f"{path}: key 'K' has a skew K[0, 1] = {K[0, 1]!r}, but the stereo camera model has none "
+            f"{path}: key 'K' has a skew K[0, 1] = {float(K[0, 1])!r}, but the stereo camera model has none "
             "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]; rectified stereo images have zero skew), so it would "
             "be ignored. Rectify the images, or set K[0, 1] = 0 if the skew is a rounding artefact")
 

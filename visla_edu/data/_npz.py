@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from visla_edu import lie
-from visla_edu._files import check_input_file
 from visla_edu.data._features import features_streamed
 from visla_edu.data._format import (
     FORMAT_2019,
@@ -38,7 +37,8 @@ from visla_edu.data._format import (
 )
 from visla_edu.data._plausible import check_observations, check_track_layout
 from visla_edu.data._registry import identify
-from visla_edu.data._zip import ZIP_ERRORS, format_bytes, member_infos, read_header, read_member
+from visla_edu._files import check_input_file, format_bytes
+from visla_edu.data._zip import ZIP_ERRORS, member_infos, read_header, read_member
 from visla_edu.dataset import Dataset, GroundTruth
 
 __all__ = ["load_npz", "read_arrays", "file_sha256", "time_major", "MAX_ARRAY_BYTES"]

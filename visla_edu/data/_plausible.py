@@ -44,6 +44,7 @@ __all__ = [
     "MAX_GAP_STEPS",
     "MAX_SPEED",
     "MAX_ANGULAR_RATE",
+    "magnitude",
     "check_time_stamps",
     "check_velocities",
     "check_calibration",
@@ -97,7 +98,7 @@ def check_time_stamps(stamps, path):
         i = int(gaps[0])
         raise ValueError(
             f"{path}: key 'time_stamps' has a gap of {steps[i]:.6g} s between frames {i} and {i + 1} "
-            f"(time_stamps[0, {i}] = {stamps[i]!r}, time_stamps[0, {i + 1}] = {stamps[i + 1]!r}; the median step "
+            f"(time_stamps[0, {i}] = {float(stamps[i])!r}, time_stamps[0, {i + 1}] = {float(stamps[i + 1])!r}; the median step "
             f"is {median:.4g} s, the most allowed {limit:.4g} s): dead reckoning would carry one velocity sample "
             f"across it. Split the drive at frame {i + 1}, or fix the stamp")
 
@@ -108,12 +109,18 @@ def check_velocities(linear, angular, keys, path):
         (linear, keys[0], MAX_SPEED, "m/s", "the speed of sound; are they in km/h, mm/s or another unit?"),
         (angular, keys[1], MAX_ANGULAR_RATE, "rad/s", "2000 deg/s, a gyro's full range; are they in deg/s?"),
     ):
-        norms = np.linalg.norm(np.asarray(values, dtype=float), axis=0)
+        norms = magnitude(np.asarray(values, dtype=float).T)
         bad = np.flatnonzero(norms > limit)
         if bad.size:
             t = int(bad[0])
             raise ValueError(f"{path}: key '{key}' at frame {t} has magnitude {norms[t]:.6g} {unit}, more than "
                              f"the plausible {limit:g} {unit} ({hint})")
+
+
+def magnitude(vectors):
+    """Euclidean norms of ``vectors`` (..., 3) without overflow (1e200 stays 1e200, not inf)."""
+    v = np.asarray(vectors, dtype=float)
+    return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
 
 
 def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
@@ -141,7 +148,7 @@ def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
                   "truck)", path)
     if pose is None:
         return
-    translation = float(np.linalg.norm(pose[:3, 3]))
+    translation = float(magnitude(pose[:3, 3]))
     _check_length(translation, (0.0, MAX_EXTRINSIC_TRANSLATION), pose_key, "the camera-IMU translation |t|",
                   "(the camera and the IMU ride the same vehicle)", path)
 

@@ -20,7 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ZIP_ERRORS", "NpyHeader", "member_infos", "read_header", "read_member", "format_bytes"]
+from visla_edu._files import format_bytes
+
+__all__ = ["ZIP_ERRORS", "NpyHeader", "member_infos", "read_header", "read_member"]
 
 #: Errors of ``zipfile`` and ``zlib`` that mean the archive is damaged.
 ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError)
@@ -60,14 +62,6 @@ class NpyHeader:
     def nbytes(self):
         """Bytes of array data the header declares."""
         return math.prod(self.shape) * self.dtype.itemsize
-
-
-def format_bytes(n):
-    """``n`` bytes as a short text: ``"512 B"``, ``"3.2 MiB"``, ``"7.0 TiB"``."""
-    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
-        if n >= size:
-            return f"{n / size:.1f} {unit}"
-    return f"{n} B"
 
 
 def member_infos(zf, path):
@@ -128,8 +122,10 @@ def _parse_header(fp, key, path):
         read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
         shape, fortran_order, dtype = read(fp, max_header_size=_MAX_HEADER_BYTES)
         offset = fp.tell()
-    except (ValueError, TypeError, EOFError, OSError, UnicodeError, SyntaxError) as exc:
-        raise ValueError(f"{path}: key '{key}' is not a readable numpy array ({exc})") from None
+    except (zipfile.BadZipFile, zlib.error):
+        raise  # the archive itself is damaged: the caller says so
+    except Exception as exc:  # noqa: BLE001 - numpy parses untrusted bytes (tokenize, literal_eval...)
+        raise ValueError(f"{path}: key '{key}' is not a readable numpy array ({type(exc).__name__}: {exc})") from None
     if dtype.hasobject:
         raise ValueError(f"{path}: key '{key}' is not a readable numpy array (dtype {dtype} holds Python "
                          "objects, which need pickle; loading pickles is refused)")
@@ -152,5 +148,5 @@ def read_member(zf, info, key, path):
     raw = zf.read(info)
     try:
         return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
-    except (ValueError, TypeError, EOFError, OSError, UnicodeError) as exc:
-        raise ValueError(f"{path}: key '{key}' is not a readable numpy array ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - numpy parses untrusted bytes
+        raise ValueError(f"{path}: key '{key}' is not a readable numpy array ({type(exc).__name__}: {exc})") from None
