@@ -204,6 +204,22 @@ def square_drive_arrays():
     return arrays
 
 
+def crowded_arrays(num_landmarks=3000):
+    """Course arrays where every one of ``num_landmarks`` landmarks is seen in every frame (plausible pixels)."""
+    arrays = course_arrays()
+    T = arrays["features"].shape[2]
+    rng = np.random.default_rng(5)
+    uL, v = rng.uniform(100, 1300, (num_landmarks, T)), rng.uniform(50, 400, (num_landmarks, T))
+    arrays["features"] = np.stack([uL, v, uL - rng.uniform(1, 50, (num_landmarks, T)), v])
+    return arrays
+
+
+def _marker(value):
+    def change(arrays):
+        arrays["features"] = np.where(arrays["features"] == -1, value, arrays["features"])
+    return change
+
+
 def _swap_square(arrays):
     square = square_drive_arrays()
     arrays.update(square)
@@ -253,6 +269,12 @@ ARRAY_CASES = {
     "swapped axes M != T": ("3-accepted-but-wrong", _set("features", lambda f: f.transpose(0, 2, 1).copy()),
                             r"axes look swapped"),
     "nan pixel": ("3-accepted-but-wrong", _entry("features", (1, 3, 5), np.inf), r"non-finite value inf"),
+    "missing marked -999": ("3-accepted-but-wrong", _marker(-999.0), r"uL = -999 px, far outside the image"),
+    "missing marked 0": ("3-accepted-but-wrong", _marker(0.0), r"observations are \[x, x, x, x\] with x = 0, which "
+                                                               r"looks like a marker"),
+    "missing marked 5000": ("3-accepted-but-wrong", _marker(5000.0), r"(marker|off the optical axis)"),
+    "negative pixel": ("3-accepted-but-wrong", _entry("features", (0, 0, 0), -50.0),
+                       r"(uL = -50 px, far outside the image|partly observed)"),
 }
 
 

@@ -21,6 +21,7 @@ import pytest
 
 import fuzzgen as fz  # tests/fuzzgen.py
 from visla_edu import data, ekf, motion, release, run
+from visla_edu.data import _features
 from visla_edu.filters import _state
 
 # ======================================================================= outputs (class 1)
@@ -333,22 +334,59 @@ def test_port_out_of_range_is_refused(capsys):
 
 def test_dense_run_past_the_limits_is_refused_then_forced(tmp_path, capsys, monkeypatch):
     path = fz.course_file(tmp_path)
-    monkeypatch.setattr(run, "DENSE_LIMIT_BYTES", 2**16)  # the tiny drive's 2 D^2 8 is about 2.8 MiB
+    monkeypatch.setattr(run, "WORK_LIMIT_BYTES", 2**16)  # the tiny drive's 2 D^2 8 is about 3 MiB
     argv = ["run", path, "--mode", "slam", "--dense", "--quiet", "--set", "extrinsic_correction=none"]
     outcome = fz.cli_run(argv, capsys, measure=False)
-    line = fz.assert_one_line(outcome, 2, r"--dense on drive with landmark stride 1 would need [\d.]+ MiB of memory "
+    line = fz.assert_one_line(outcome, 2, r"--mode slam --dense on drive with landmark stride 1 would need [\d.]+ MiB of memory "
                                        r"\(limit 64.0 KiB\); use --landmark-stride \d+ \(or more\).*--force")
-    assert "dense SLAM: a " in outcome.out and "mode slam" not in outcome.out  # estimated, not run
+    assert "slam (dense): states up to 456 dimensions" in outcome.out and "mode slam" not in outcome.out  # not run
     stride = int(re.search(r"--landmark-stride (\d+)", line).group(1))
-    assert run.estimate_dense_work(data.load(path), run.FilterConfig(landmark_stride=stride)).peak_bytes <= 2**16
+    config = run.FilterConfig(landmark_stride=stride)
+    assert run.estimate_work(data.load(path), "slam", config, dense=True).peak_bytes <= 2**16
     fz.assert_ok(fz.cli_run([*argv, "--force"], capsys, measure=False))
+
+
+@pytest.mark.parametrize("mode", ["slam", "vio"])
+def test_a_crowded_drive_is_refused_before_the_run(mode, tmp_path, capsys, monkeypatch):
+    """5-unbounded-work: 3000 landmarks in every frame: hours and gigabytes, refused in a moment."""
+    path = fz.course_file(tmp_path, fz.crowded_arrays())
+    monkeypatch.setattr(run, "run_filter", _must_not_run)
+    outcome = fz.cli_run(["run", path, "--mode", mode, "--quiet", "--set", "extrinsic_correction=none"], capsys,
+                         measure=False, seconds=10)
+    fz.assert_one_line(outcome, 2, rf"--mode {mode} on drive with landmark stride 1 would need .* GiB of memory .* "
+                                   r"use --landmark-stride \d+ \(or more\)")
+    assert re.search(rf"{mode}: states up to \d+ dimensions, updates up to (9000|12000) rows", outcome.out)
+
+
+def test_too_many_observations_are_refused_while_reading(tmp_path, capsys, monkeypatch):
+    """5-unbounded-work: a file with more observations than the limit stops at the limit."""
+    monkeypatch.setattr(_features, "MAX_OBSERVATIONS", 5000)
+    fz.assert_one_line(fz.cli_run(["info", fz.course_file(tmp_path, fz.crowded_arrays(200))], capsys), 2,
+                       r"holds more than 5000 observations")
+
+
+def test_a_file_name_too_long_for_the_folder(tmp_path, capsys, monkeypatch):
+    """1-results-lost: a name the folder cannot hold (with its temporary file) is refused before the run."""
+    monkeypatch.setattr(run, "run_filter", _must_not_run)
+    out = tmp_path / ("r" * 250 + ".npz")
+    fz.assert_one_line(fz.cli_run(["run", fz.course_file(tmp_path), *fz.RUN, "--out", out], capsys, measure=False), 2,
+                       r"the file name is 254 bytes long, more than the \d+ this folder allows")
+
+
+def test_release_into_a_file_is_refused(tmp_path, capsys):
+    """6-paths: release --dst naming a file."""
+    (tmp_path / "solutions").mkdir()
+    (tmp_path / "notebooks").write_text("not a folder")
+    argv = ["release", "--src", tmp_path / "solutions", "--dst", tmp_path / "notebooks"]
+    fz.assert_one_line(fz.cli_run(argv, capsys, measure=False), 2, r"notebooks.* not a folder")
 
 
 def test_dense_estimate_is_printed_and_within_limits_runs(tmp_path, capsys):
     outcome = fz.cli_run(["run", fz.course_file(tmp_path), "--mode", "slam", "--dense", "--landmark-stride", "4", "--quiet",
                        "--set", "extrinsic_correction=none"], capsys, measure=False)
     fz.assert_ok(outcome)
-    assert re.search(r"dense SLAM: a \d+x\d+ covariance, about [\d.]+ \w+ of memory and \d+ s", outcome.out)
+    assert re.search(r"slam \(dense\): states up to \d+ dimensions, updates up to \d+ rows: about [\d.]+ \w+ of "
+                     r"memory and \d+ s", outcome.out)
 
 
 # ======================================================================= through a subprocess: no traceback

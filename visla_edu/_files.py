@@ -22,6 +22,8 @@ from pathlib import Path
 
 __all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind", "format_bytes"]
 
+#: Bytes the temporary file's name adds to the target's: ``.`` + ``.<pid>.<8 hex>.tmp``.
+_TMP_EXTRA = 1 + 1 + 10 + 1 + 8 + 4
 #: ``stat`` test -> what to call a path that is not a regular file.
 _KINDS = (
     (stat.S_ISDIR, "a directory"),
@@ -197,6 +199,10 @@ def check_output_path(path, suffixes, option, inputs=(), others=()):
         raise ValueError(f"{option} {path}: is {kind}; visla-edu writes a regular file, give another name")
     folder = _writable_folder(given, option, path)
     target = folder / given.name
+    longest = os.pathconf(folder, "PC_NAME_MAX") - _TMP_EXTRA
+    if len(given.name.encode()) > longest:
+        raise ValueError(f"{option} {path}: the file name is {len(given.name.encode())} bytes long, more than the "
+                         f"{longest} this folder allows (with room for the temporary file); choose a shorter name")
     for source in inputs:
         if same_file(target, source):
             raise ValueError(f"{option} {path}: is the input file {Path(source).resolve()}; writing there would "

@@ -28,6 +28,7 @@ where a good one was.
 """
 
 import argparse
+import errno
 import os
 import sys
 import traceback
@@ -41,6 +42,9 @@ EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 1, 2, 3, 130
 #: Environment variable that makes every error print its traceback too (like ``--debug``).
 DEBUG_ENV = "VISLA_EDU_DEBUG"
 _REPORT = "https://github.com/visla-edu/visla-edu/issues"
+#: errno values of an OSError that mean a bad path given by the user (exit 2); others are system failures (exit 1).
+_PATH_ERRNOS = {errno.ENOENT, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EEXIST, errno.ENAMETOOLONG,
+                errno.EROFS, errno.ELOOP, errno.ENXIO}
 
 
 class _UsageExit(SystemExit):
@@ -99,7 +103,7 @@ def _add_run_parser(sub, common):
     run.add_argument("--mode", default=SLAM, choices=MODES)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--force", action="store_true",
-                     help="run a dense filter even when its estimated memory or time exceeds the limits")
+                     help="run even when the estimated memory or time exceeds the limits (2 GiB, 15 min)")
     run.add_argument("--landmark-stride", type=_stride, default=None, metavar="N", help="use every N-th landmark only")
     run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
                      help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
@@ -186,8 +190,7 @@ def _cmd_run(args):
     dataset = data.load(args.dataset, args.data_dir)
     if dataset.label:
         print(dataset.label)
-    if args.dense:
-        _check_dense_work(dataset, config, args.force)
+    _check_work(dataset, args, config)
     try:
         result = run.run_filter(dataset, args.mode, config, dense=args.dense, progress=False if args.quiet else None,
                                 verbose=True, blas_threads=args.blas_threads)
@@ -237,27 +240,30 @@ def _check_outputs(args, inputs):
     return outputs
 
 
-def _check_dense_work(dataset, config, force):
-    """Print the estimated cost of a dense run; refuse one past the limits unless ``force``."""
+def _check_work(dataset, args, config):
+    """Print the estimated cost of a dense (or a heavy) run; refuse one past the limits unless ``--force``."""
     import dataclasses
 
     from visla_edu import run
 
-    estimate = run.estimate_dense_work(dataset, config)
-    print(estimate.summary())
+    estimate = run.estimate_work(dataset, args.mode, config, args.dense)
     over = estimate.over_limits()
+    if args.dense or over:
+        print(estimate.summary())
     if not over:
         return
-    if force:
+    if args.force:
         print(f"--force: running anyway ({' and '.join(over)})")
         return
     stride = config.landmark_stride
-    while stride < dataset.num_landmarks and run.estimate_dense_work(
-            dataset, dataclasses.replace(config, landmark_stride=stride)).over_limits():
+    while stride < dataset.num_landmarks and run.estimate_work(
+            dataset, args.mode, dataclasses.replace(config, landmark_stride=stride), args.dense).over_limits():
         stride *= 2
-    raise ValueError(f"--dense on {dataset.name} with landmark stride {config.landmark_stride} would need "
-                     f"{' and '.join(over)}; use --landmark-stride {stride} (or more), or the active set (drop "
-                     "--dense, same trajectory), or --force to run it anyway")
+    dense = " --dense" if args.dense else ""
+    alternative = "the active set (drop --dense, same trajectory), " if args.dense else ""
+    raise ValueError(f"--mode {args.mode}{dense} on {dataset.name} with landmark stride {config.landmark_stride} would "
+                     f"need {' and '.join(over)}; use --landmark-stride {stride} (or more), or {alternative}or --force "
+                     "to run it anyway")
 
 
 def _save_plot(result, dataset, args, path):
@@ -288,6 +294,9 @@ def _cmd_release(args):
     dst = Path(args.dst) if args.dst else root / "notebooks"
     if not src.is_dir():
         raise FileNotFoundError(f"solutions folder {src} not found (run from a source checkout or pass --src)")
+    if dst.exists() and not dst.is_dir():
+        raise NotADirectoryError(f"release: --dst {dst} is a file, not a folder; give the folder of the student "
+                                 "notebooks")
     if args.check:
         drifted = release.check_in_sync(src, dst)
         print("\n".join(f"drifted: {name}" for name in drifted) or "notebooks/ is in sync with solutions/")
@@ -316,6 +325,9 @@ def main(argv=None):
         except KeyboardInterrupt:
             _report(args.command, "interrupted (Ctrl-C); files being written were left as they were", debug)
             return EXIT_INTERRUPTED
+        except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): stop quietly
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return EXIT_FAILED
         except Exception as err:  # noqa: BLE001 - the boundary: every error becomes one line and a status
             code, message = _describe(err, args)
             _report(args.command, message, debug)
@@ -362,7 +374,7 @@ def _describe(err, args):
         return EXIT_FAILED, f"numerical failure ({type(err).__name__}: {err}){hint}"
     if isinstance(err, MemoryError):
         return EXIT_FAILED, f"out of memory ({err or 'MemoryError'}); {_memory_hint(args)}"
-    if isinstance(err, (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError)):
+    if isinstance(err, OSError) and (err.errno in _PATH_ERRNOS or err.errno is None):
         return EXIT_BAD_INPUT, _os_message(err)
     if isinstance(err, OSError):
         return EXIT_FAILED, f"{_os_message(err)} (a system error: check the disk and the paths)"

@@ -5,8 +5,8 @@
 :class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
 :func:`load_result` write and read it (atomically, :func:`visla_edu._files.atomic_write`). How
 the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
-(:func:`limit_blas_threads`) and the progress bar. :func:`estimate_dense_work` says what a dense
-run will cost before it starts; :func:`divergence_hint` names the likely cause when a run fails.
+(:func:`limit_blas_threads`) and the progress bar. :func:`estimate_work` says what a run will cost
+before it starts; :func:`divergence_hint` names the likely cause when a run fails.
 
 >>> from visla_edu import data, run
 >>> ds = data.load("sim-tiny")
@@ -30,7 +30,7 @@ from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
 __all__ = ["MODES", "RunArrays", "RunResult", "WorkEstimate", "limit_blas_threads", "make_filter", "iterate_filter",
-           "run_filter", "save_result", "load_result", "estimate_dense_work", "divergence_hint"]
+           "run_filter", "save_result", "load_result", "estimate_work", "divergence_hint"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
@@ -353,47 +353,55 @@ def load_result(path):
     return RunResult(config=config, **fields)
 
 
-#: Cost model of one dense SLAM frame with a D-dimensional state and m observation rows:
-#: ``D^2 (a + b m)`` seconds (the covariance update ``Sigma -= A^T A`` streams the D x D
-#: covariance and multiplies (D, m) by (m, D)). Fitted on the 2-core development machine with
-#: one BLAS thread; ``benchmarks/bench_dense_estimate.py`` prints estimate against measurement.
-DENSE_SECONDS_PER_ENTRY = 7.3e-9
-DENSE_SECONDS_PER_ENTRY_ROW = 2.2e-10
-#: ``visla-edu run --dense`` refuses runs estimated past these limits unless given ``--force``.
-DENSE_LIMIT_BYTES = 2 * 2**30
-DENSE_LIMIT_SECONDS = 15 * 60
+#: Cost model of the filter's updates, fitted on the 2-core development machine with one BLAS
+#: thread (``benchmarks/bench_work_estimate.py`` prints estimates against measurements). A joint
+#: update with a D-dimensional state and m observation rows costs ``D^2 (a + b m)`` seconds (the
+#: covariance update ``Sigma -= A^T A`` streams the D x D covariance and multiplies (D, m) by
+#: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``.
+SECONDS_PER_ENTRY = 7.3e-9  # a
+SECONDS_PER_ENTRY_ROW = 2.2e-10  # b
+SECONDS_PER_ROW_CUBED = 6e-11  # c
+SECONDS_PER_ROW_SQUARED = 2e-8  # d
+#: ``visla-edu run`` refuses a run estimated past these limits unless given ``--force``.
+WORK_LIMIT_BYTES = 2 * 2**30
+WORK_LIMIT_SECONDS = 15 * 60
 
 
 @dataclass
 class WorkEstimate:
-    """What a dense SLAM run will cost, estimated before it starts (:func:`estimate_dense_work`).
+    """What a run will cost, estimated from the observations before it starts (:func:`estimate_work`).
 
     Attributes
     ----------
+    mode : str
+    dense : bool
     state_dim : int
-        ``D = 6 + 3 n`` for the n landmarks in the state (every strided landmark).
+        Largest state: ``6 + 3 n`` with n the landmarks in the joint state (SLAM), else 6.
     frames : int
-    rows_per_frame : float
-        Mean observation rows per update (3 per observation in use).
+    max_rows : int
+        Most observation rows of one update (3 per observation in SLAM, 4 in VIO).
     peak_bytes : int
-        The covariance and the same-size product of its update: ``2 D^2 8`` bytes.
+        The largest matrices at once: in SLAM the covariance and the same-size product of its
+        update (``2 D^2 8`` bytes), in VIO the innovation covariance and its factor.
     seconds : float
-        ``frames D^2 (a + b rows)``, see :data:`DENSE_SECONDS_PER_ENTRY`.
+        See :data:`SECONDS_PER_ENTRY`.
     """
 
+    mode: str
+    dense: bool
     state_dim: int
     frames: int
-    rows_per_frame: float
+    max_rows: int
     peak_bytes: int
     seconds: float
 
     def over_limits(self, max_bytes=None, max_seconds=None):
-        """What exceeds the limits (default :data:`DENSE_LIMIT_BYTES`, :data:`DENSE_LIMIT_SECONDS`), as phrases.
+        """What exceeds the limits (default :data:`WORK_LIMIT_BYTES`, :data:`WORK_LIMIT_SECONDS`), as phrases.
 
         Empty when the run is within them.
         """
-        max_bytes = DENSE_LIMIT_BYTES if max_bytes is None else max_bytes
-        max_seconds = DENSE_LIMIT_SECONDS if max_seconds is None else max_seconds
+        max_bytes = WORK_LIMIT_BYTES if max_bytes is None else max_bytes
+        max_seconds = WORK_LIMIT_SECONDS if max_seconds is None else max_seconds
         over = []
         if self.peak_bytes > max_bytes:
             over.append(f"{format_bytes(self.peak_bytes)} of memory (limit {format_bytes(max_bytes)})")
@@ -402,34 +410,63 @@ class WorkEstimate:
         return over
 
     def summary(self):
-        """One line: state size, memory and time."""
-        return (f"dense SLAM: a {self.state_dim}x{self.state_dim} covariance, about {format_bytes(self.peak_bytes)} "
-                f"of memory and {_duration(self.seconds)} for {self.frames} frames (estimate)")
+        """One line: the largest state and update, memory and time."""
+        what = f"{self.mode}{' (dense)' if self.dense else ''}"
+        return (f"{what}: states up to {self.state_dim} dimensions, updates up to {self.max_rows} rows: about "
+                f"{format_bytes(self.peak_bytes)} of memory and {_duration(self.seconds)} for {self.frames} frames "
+                "(estimate)")
 
 
-def estimate_dense_work(dataset, config=None):
-    """Estimate the memory and time of ``run_filter(dataset, "slam", config, dense=True)``.
+def estimate_work(dataset, mode=SLAM, config=None, dense=False):
+    """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
+
+    The dense filter carries every (strided) landmark; the active set those whose track
+    spans the frame; both update with 3 rows per observation. VIO solves one 4-row block
+    per observation; mapping and dead reckoning work in 3x3 and 6x6 blocks (cheap).
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
+    mode : str
     config : visla_edu.filters.FilterConfig, optional
-        Its ``landmark_stride`` decides the landmarks in the state.
+        Its ``landmark_stride`` decides the landmarks used.
+    dense : bool
 
     Returns
     -------
     WorkEstimate
     """
     config = config or FilterConfig()
-    stride = config.landmark_stride
-    n = len(range(0, dataset.num_landmarks, stride))
-    D = 6 + 3 * n
     T = max(1, dataset.num_frames)
-    in_stride = dataset.obs_ids % stride == 0
-    entering = len(np.unique(dataset.obs_ids[in_stride]))  # each landmark's first observation is consumed
-    rows = 3 * max(0, int(in_stride.sum()) - entering) / T
-    seconds = T * D * D * (DENSE_SECONDS_PER_ENTRY + DENSE_SECONDS_PER_ENTRY_ROW * rows)
-    return WorkEstimate(state_dim=D, frames=T, rows_per_frame=rows, peak_bytes=2 * 8 * D * D, seconds=seconds)
+    in_stride = dataset.obs_ids % config.landmark_stride == 0
+    per_frame = np.bincount(dataset.observation_frames()[in_stride], minlength=T).astype(float)
+    if mode == SLAM:
+        landmarks = _landmarks_in_state(dataset, config.landmark_stride, dense)
+        D, m = 6 + 3 * landmarks, 3 * per_frame
+        seconds = np.sum(D * D * (SECONDS_PER_ENTRY + SECONDS_PER_ENTRY_ROW * m) + SECONDS_PER_ROW_CUBED * m**3)
+        peak = 16 * float(D.max()) ** 2 + 24 * float(m.max()) ** 2
+    elif mode == VIO:
+        D, m = np.full(T, 6.0), 4 * per_frame
+        seconds = np.sum(SECONDS_PER_ROW_CUBED * m**3 + SECONDS_PER_ROW_SQUARED * m**2)
+        peak = 24 * float(m.max()) ** 2
+    else:
+        D, m = np.full(T, 6.0), 3 * per_frame
+        seconds, peak = float(np.sum(SECONDS_PER_ROW_SQUARED * m)), 8 * 64 * float(m.max())
+    return WorkEstimate(mode=mode, dense=dense, state_dim=int(D.max()), frames=T, max_rows=int(m.max()),
+                        peak_bytes=int(peak), seconds=float(seconds))
+
+
+def _landmarks_in_state(dataset, stride, dense):
+    """Landmarks in the joint state at each frame (T,): every strided one (dense), else those being tracked."""
+    T = max(1, dataset.num_frames)
+    if dense:
+        return np.full(T, float(len(range(0, dataset.num_landmarks, stride))))
+    spans = dataset.track_spans()[::stride]
+    spans = spans[spans[:, 0] >= 0]
+    change = np.zeros(T + 1)
+    np.add.at(change, spans[:, 0], 1)
+    np.add.at(change, spans[:, 1] + 1, -1)
+    return np.cumsum(change[:T])
 
 
 def divergence_hint(dataset, config, frame=None):

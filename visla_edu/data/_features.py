@@ -14,10 +14,13 @@ import numpy as np
 
 from visla_edu.dataset import frame_major_order
 
-__all__ = ["features_streamed", "features_in_memory"]
+__all__ = ["features_streamed", "features_in_memory", "MAX_OBSERVATIONS"]
 
 #: Bytes of the dense features decoded at a time (tests shrink it to exercise chunking).
 _CHUNK_BYTES = 8 * 2**20
+#: Most observations a file may hold: 50 times dataset 10's (about 400,000); the sparse
+#: arrays of this many take about 1.3 GB.
+MAX_OBSERVATIONS = 20_000_000
 _PLANES = ("uL", "vL", "uR", "vR")
 
 
@@ -122,6 +125,7 @@ def _collect_observations(chunks, T, path):
         if plane == 0:
             rows, frames = np.nonzero(block != -1)
             found.append((rows + first, frames, block[rows, frames]))
+            _check_count(sum(len(f[0]) for f in found), path)
             continue
         if z is None:
             ids, frames, z = _start_observations(found)
@@ -148,6 +152,7 @@ def _collect_frame_blocks(chunks, T, path):
                 t, m = (int(i) for i in np.argwhere(unobserved == observed)[0])
                 raise ValueError(_partial_message(path, plane, m, first + t, block[t, m, plane], observed[t, m]))
         t, m = np.nonzero(observed)
+        _check_count(sum(len(i) for i in ids) + len(m), path)
         ids.append(m)
         frames.append(t + first)
         values.append(block[t, m].astype(float))
@@ -156,6 +161,12 @@ def _collect_frame_blocks(chunks, T, path):
     z = np.concatenate(values) if values else np.zeros((0, 4))
     order, frame_ptr = frame_major_order(ids, frames, T)
     return frame_ptr, ids[order], z[order]
+
+
+def _check_count(count, path):
+    if count > MAX_OBSERVATIONS:
+        raise ValueError(f"{path}: key 'features' holds more than {MAX_OBSERVATIONS} observations (entries other than "
+                         "-1), fifty times the largest course file; is 'not observed' marked with -1?")
 
 
 def _start_observations(found):

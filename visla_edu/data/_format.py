@@ -73,9 +73,9 @@ RIGID_TOL = 1e-6
 #: Most frames a course file may have: 28 hours at 10 Hz. Every per-frame array (and the
 #: filter's per-frame results, about 400 bytes a frame) is bounded by it before it is read.
 MAX_FRAMES = 1_000_000
-#: Largest dense ``features`` array read (8 GiB, six times dataset 10's 1.3 GB). It is
-#: streamed in chunks, so this bounds the time of a load (about a minute), not its memory.
-MAX_FEATURES_BYTES = 8 * 2**30
+#: Largest dense ``features`` array read (4 GiB, three times dataset 10's 1.3 GB). It is
+#: streamed in chunks, so this bounds the time of a load (about 25 s), not its memory.
+MAX_FEATURES_BYTES = 4 * 2**30
 #: Longest ``name``/``label`` string (characters).
 _MAX_TEXT = 10_000
 
@@ -150,7 +150,7 @@ def check_features_header(header, T, path):
     if header.nbytes > MAX_FEATURES_BYTES:
         raise ValueError(f"{path}: key 'features' declares a {shape} {dtype} array of "
                          f"{format_bytes(header.nbytes)}, more than the {format_bytes(MAX_FEATURES_BYTES)} "
-                         "visla-edu reads (six times the largest course file); nothing was read. "
+                         "visla-edu reads (three times the largest course file); nothing was read. "
                          "Is the header damaged, or M or T wrong?")
     return shape[1]
 

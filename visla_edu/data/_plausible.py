@@ -15,6 +15,8 @@ fsv / fsu                 0.2 .. 5              pixels are close to square (1 on
 principal point cu, cv    0 .. 20,000 px        inside an image at most 20,000 px wide, and
                                                 inside the region where features are seen
 off-axis angle of pixels  < 85 deg              a pinhole camera sees less than 170 deg
+observed pixels           >= -10 px             inside the image, give or take a tracker's
+                                                sub-pixel slack; not a 'missing' marker
 baseline b                0.005 .. 5 m          a phone's stereo pair to a rig across a truck
 extrinsic translation     <= 20 m               camera and IMU ride the same vehicle
 median frame step         1 ms .. 10 s          cameras run at 0.1 to 1000 frames per second
@@ -66,6 +68,10 @@ MAX_GAP_STEPS = 100
 MAX_SPEED = 343.0  # m/s
 MAX_ANGULAR_RATE = 35.0  # rad/s
 
+#: Pixels below this are outside any image (a tracker reports at most a pixel or so beyond the border).
+MIN_PIXEL = -10.0
+#: More identical ``[x, x, x, x]`` observations than this count and share are a 'missing' marker.
+_MARKER_MIN_COUNT, _MARKER_SHARE = 10, 0.01
 #: The principal point must lie in the box of the observed left pixels, widened by this
 #: share of its size on every side, once a file has at least this many observations.
 _BOX_MARGIN, _BOX_MIN_OBSERVATIONS = 0.25, 50
@@ -174,6 +180,7 @@ def check_observations(K, obs_z, path):
     """
     if len(obs_z) == 0:
         return
+    _check_marker(obs_z, path)
     f = np.array([K[0, 0], K[1, 1]])
     c = np.array([K[0, 2], K[1, 2]])
     pixels = np.concatenate([obs_z[:, 0:2], obs_z[:, 2:4]])
@@ -195,6 +202,25 @@ def check_observations(K, obs_z, path):
                 f"{path}: key 'K': the principal point {name} = {c[axis]:.6g} px lies outside the observed pixels "
                 f"({low[axis]:.6g} to {high[axis]:.6g} px, {len(obs_z)} observations); it should be near the "
                 "image centre. Are cu and cv swapped, or K from another camera?")
+
+
+def _check_marker(obs_z, path):
+    """Refuse pixels far left of or above the image, and a repeated ``[x, x, x, x]``: another 'missing' marker."""
+    low = obs_z.min(axis=0)
+    if np.any(low < MIN_PIXEL):
+        i, plane = (int(v) for v in np.argwhere(obs_z == low.min())[0])
+        raise ValueError(
+            f"{path}: key 'features': an observation has {('uL', 'vL', 'uR', 'vR')[plane]} = {low.min():.6g} px, far "
+            f"outside the image (pixels are >= 0; the course marks 'not observed' with -1 in all four). Is another "
+            "marker used for missing observations?")
+    same = obs_z[np.all(obs_z == obs_z[:, :1], axis=1), 0]
+    if len(same):
+        values, counts = np.unique(same, return_counts=True)
+        if counts.max() > max(_MARKER_MIN_COUNT, _MARKER_SHARE * len(obs_z)):
+            raise ValueError(
+                f"{path}: key 'features': {counts.max()} observations are [x, x, x, x] with x = "
+                f"{values[counts.argmax()]:.6g}, which looks like a marker for 'not observed' (a real stereo "
+                "observation has u != v); the course marks 'not observed' with -1 in all four")
 
 
 def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
