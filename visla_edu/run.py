@@ -357,11 +357,16 @@ def load_result(path):
 #: thread (``benchmarks/bench_work_estimate.py`` prints estimates against measurements). A joint
 #: update with a D-dimensional state and m observation rows costs ``D^2 (a + b m)`` seconds (the
 #: covariance update ``Sigma -= A^T A`` streams the D x D covariance and multiplies (D, m) by
-#: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``.
-SECONDS_PER_ENTRY = 7.3e-9  # a
-SECONDS_PER_ENTRY_ROW = 2.2e-10  # b
-SECONDS_PER_ROW_CUBED = 6e-11  # c
+#: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``; every
+#: frame some milliseconds more. Estimated/measured time on 40-frame runs (a loaded 2-core
+#: machine): 0.7 to 2.5 for dense SLAM (strides 2 to 8, simulated and dataset 03), 0.8 for
+#: active-set SLAM and 2.8 for VIO with about 700 landmarks in view; dense SLAM on every
+#: landmark of dataset 03 (D = 15321) measured 2.2 s a frame against 3.3 s estimated.
+SECONDS_PER_ENTRY = 1e-8  # a
+SECONDS_PER_ENTRY_ROW = 2e-11  # b
+SECONDS_PER_ROW_CUBED = 4e-11  # c
 SECONDS_PER_ROW_SQUARED = 2e-8  # d
+SECONDS_PER_FRAME = 5e-3  # the rest of a step (prediction, gating, bookkeeping)
 #: ``visla-edu run`` refuses a run estimated past these limits unless given ``--force``.
 WORK_LIMIT_BYTES = 2 * 2**30
 WORK_LIMIT_SECONDS = 15 * 60
@@ -382,7 +387,8 @@ class WorkEstimate:
         Most observation rows of one update (3 per observation in SLAM, 4 in VIO).
     peak_bytes : int
         The largest matrices at once: in SLAM the covariance and the same-size product of its
-        update (``2 D^2 8`` bytes), in VIO the innovation covariance and its factor.
+        update (``2 D^2 8`` bytes) and the (D, m) and (m, m) blocks of the update, in VIO the
+        innovation covariance and its factor.
     seconds : float
         See :data:`SECONDS_PER_ENTRY`.
     """
@@ -444,7 +450,7 @@ def estimate_work(dataset, mode=SLAM, config=None, dense=False):
         landmarks = _landmarks_in_state(dataset, config.landmark_stride, dense)
         D, m = 6 + 3 * landmarks, 3 * per_frame
         seconds = np.sum(D * D * (SECONDS_PER_ENTRY + SECONDS_PER_ENTRY_ROW * m) + SECONDS_PER_ROW_CUBED * m**3)
-        peak = 16 * float(D.max()) ** 2 + 24 * float(m.max()) ** 2
+        peak = 16 * float(D.max()) ** 2 + 24 * float(np.max(D * m)) + 24 * float(m.max()) ** 2
     elif mode == VIO:
         D, m = np.full(T, 6.0), 4 * per_frame
         seconds = np.sum(SECONDS_PER_ROW_CUBED * m**3 + SECONDS_PER_ROW_SQUARED * m**2)
@@ -453,7 +459,7 @@ def estimate_work(dataset, mode=SLAM, config=None, dense=False):
         D, m = np.full(T, 6.0), 3 * per_frame
         seconds, peak = float(np.sum(SECONDS_PER_ROW_SQUARED * m)), 8 * 64 * float(m.max())
     return WorkEstimate(mode=mode, dense=dense, state_dim=int(D.max()), frames=T, max_rows=int(m.max()),
-                        peak_bytes=int(peak), seconds=float(seconds))
+                        peak_bytes=int(peak), seconds=float(seconds) + SECONDS_PER_FRAME * T)
 
 
 def _landmarks_in_state(dataset, stride, dense):
