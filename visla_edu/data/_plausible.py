@@ -19,7 +19,7 @@ observed pixels           >= -10 px             inside the image, give or take a
                                                 sub-pixel slack; not a 'missing' marker
 baseline b                0.005 .. 5 m          a phone's stereo pair to a rig across a truck
 extrinsic translation     <= 20 m               camera and IMU ride the same vehicle
-median frame step         1 ms .. 10 s          cameras run at 0.1 to 1000 frames per second
+median frame step         2 ms .. 10 s          cameras run at 0.1 to 500 frames per second
 largest frame step        <= max(10 s, 100      dead reckoning carries one velocity sample
                           median steps)         across a gap: 1e6 s at 10 m/s is 10,000 km
 speed                     <= 343 m/s            no vehicle carrying a stereo rig is supersonic
@@ -62,7 +62,7 @@ PRINCIPAL_POINT_RANGE = (0.0, 2e4)  # px
 MAX_OFF_AXIS_DEG = 85.0
 BASELINE_RANGE = (0.005, 5.0)  # m
 MAX_EXTRINSIC_TRANSLATION = 20.0  # m
-FRAME_STEP_RANGE = (1e-3, 10.0)  # s, the median step
+FRAME_STEP_RANGE = (2e-3, 10.0)  # s, the median step
 MAX_GAP_SECONDS = 10.0
 MAX_GAP_STEPS = 100
 MAX_SPEED = 343.0  # m/s
@@ -75,6 +75,8 @@ _MARKER_MIN_COUNT, _MARKER_SHARE = 10, 0.01
 #: The principal point must lie in the box of the observed left pixels, widened by this
 #: share of its size on every side, once a file has at least this many observations.
 _BOX_MARGIN, _BOX_MIN_OBSERVATIONS = 0.25, 50
+#: A typical frame step (10 Hz), to choose between units that all give a plausible step.
+_TYPICAL_STEP = 0.1
 #: Units time stamps are sometimes stored in: factor to seconds, name, the fix.
 _TIME_UNITS = ((1e-3, "milliseconds", "/ 1e3"), (1e-6, "microseconds", "/ 1e6"), (1e-9, "nanoseconds", "/ 1e9"),
                (60.0, "minutes", "* 60"), (3600.0, "hours", "* 3600"))
@@ -93,7 +95,8 @@ def check_time_stamps(stamps, path):
     median = float(np.median(steps))
     low, high = FRAME_STEP_RANGE
     if not low <= median <= high:
-        guess = next(((unit, name, fix) for unit, name, fix in _TIME_UNITS if low <= median * unit <= high), None)
+        fits = [(unit, name, fix) for unit, name, fix in _TIME_UNITS if low <= median * unit <= high]
+        guess = min(fits, key=lambda f: abs(np.log10(median * f[0] / _TYPICAL_STEP)), default=None)
         hint = (f"; they look like {guess[1]} ({median * guess[0]:.4g} s per frame): store seconds, "
                 f"time_stamps {guess[2]}") if guess else "; store the time stamps in seconds"
         raise ValueError(f"{path}: key 'time_stamps': the median step between frames is {median:.6g}, but a camera "
