@@ -21,7 +21,7 @@ def test_atomic_write_replaces_and_keeps_permissions(tmp_path):
 def test_atomic_write_of_a_new_file_follows_the_umask(tmp_path):
     previous = os.umask(0o027)
     try:
-        with _files.atomic_write(tmp_path / "b.bin") as f:
+        with _files.atomic_write(tmp_path / "b.bin", "wb") as f:
             f.write(b"\x00\x01")
     finally:
         os.umask(previous)

@@ -1,10 +1,17 @@
 """Files visla-edu reads and writes: atomic writes, and checks of input and output paths.
 
+A leaf module (imports only the standard library).
+
 Every file the package writes (result ``.npz``, figures, saved datasets, exported
 trajectories, released notebooks) goes through :func:`atomic_write`: the bytes go to a
-temporary file in the target's folder, which then replaces the target in one
-``os.replace``. A crash or a kill in the middle leaves the previous file as it was (and at
-most a hidden ``.<name>.*.tmp`` file next to it), never a half-written one.
+temporary file in the target's folder, which then replaces the target with
+:func:`os.replace` (atomic on POSIX and Windows within one file system). A reader therefore
+sees the old file or the whole new one; a crash or a kill in the middle leaves the previous
+file as it was (and at most a hidden ``.<name>.*.tmp`` file next to it).
+
+>>> from visla_edu._files import atomic_write
+>>> with atomic_write("trajectory.txt") as f:    # doctest: +SKIP
+...     f.write("1 0 0 0 0 1 0 0 0 0 1 0\\n")
 
 :func:`check_output_path` and :func:`check_input_file` turn the usual path mistakes (a
 folder, a FIFO, a missing or read-only folder, a wrong suffix, an output that is one of the
@@ -35,50 +42,65 @@ _KINDS = (
 
 
 @contextlib.contextmanager
-def atomic_write(path, mode="wb", encoding=None):
-    """Open a temporary file next to ``path``; on success it replaces ``path`` atomically.
+def atomic_write(path, mode="w", encoding="utf-8"):
+    """Context manager: a file object whose content replaces ``path`` only if the block succeeds.
 
     The temporary file ``.<name>.<pid>.<random>.tmp`` is created in the same folder (so the
     final ``os.replace`` is a rename within one file system), flushed and fsynced, then
     renamed over ``path``. If the body raises (or the process is interrupted), the
     temporary file is removed and ``path`` keeps its previous content. A replaced file keeps
-    its permission bits; a new one gets the default permissions (``0o666`` minus the umask).
+    its permission bits; a new one gets the permissions a plain ``open`` would give
+    (``0o666`` minus the umask).
 
     Parameters
     ----------
     path : str or os.PathLike
-        The file to (re)write. Its folder must exist.
-    mode : {"wb", "w"}
-        Binary or text.
-    encoding : str, optional
-        For text mode (default UTF-8).
+        The target file. Its folder must exist (a missing folder is a ``FileNotFoundError``
+        naming it).
+    mode : {"w", "wb"}
+        Text or binary.
+    encoding : str
+        For text mode.
 
     Yields
     ------
     file object
         Write to it; do not close it.
 
+    Raises
+    ------
+    FileNotFoundError
+        The target's folder does not exist.
+    ValueError
+        ``mode`` is not ``"w"`` or ``"wb"``, or ``path`` is a folder.
+
     Examples
     --------
-    >>> with atomic_write(tmp_path / "result.npz") as f:    # doctest: +SKIP
+    >>> with atomic_write(tmp_path / "result.npz", "wb") as f:    # doctest: +SKIP
     ...     np.savez_compressed(f, x=x)
     """
-    if mode not in ("wb", "w"):
-        raise ValueError(f"atomic_write: mode must be 'wb' or 'w', got {mode!r}")
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_write: mode must be 'w' or 'wb', got {mode!r}")
+    path = Path(path).expanduser()
+    folder = path.parent.resolve()
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{path}: folder {folder} does not exist; create it or choose another path")
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder, not a file: give a file name")
+    tmp = folder / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    # O_EXCL: never reuse someone else's file; 0o666 & ~umask, the permissions open() would give
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
     try:
-        with os.fdopen(fd, mode, encoding=(encoding or "utf-8") if mode == "w" else None) as f:
+        with os.fdopen(fd, mode, encoding=None if "b" in mode else encoding) as f:
             yield f
             f.flush()
             os.fsync(f.fileno())
         with contextlib.suppress(FileNotFoundError):
             os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
 
 
 def format_bytes(n):

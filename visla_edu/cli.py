@@ -7,6 +7,8 @@ Examples::
     visla-edu run 03 --mode mapping --out map.npz
     visla-edu run 03 --dense --landmark-stride 20
     visla-edu run 03 --blas-threads none      # leave numpy's BLAS threads alone (default: 1)
+    visla-edu run 0020                      # ATE and drift against its KITTI ground truth (found beside it)
+    visla-edu run X --ground-truth poses.txt --ground-truth-times times.txt --trajectory-out slam.tum
     visla-edu stepper --port 8866           # the filter stepper page (Voila)
     visla-edu release                       # regenerate notebooks/ from solutions/
 
@@ -33,6 +35,7 @@ import os
 import sys
 import traceback
 import warnings
+from pathlib import Path
 
 from visla_edu.codes import MODES, SLAM
 
@@ -114,6 +117,14 @@ def _add_run_parser(sub, common):
     run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
                      help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
                           "'none' leaves numpy's setting alone)")
+    run.add_argument("--ground-truth", default=None, metavar="FILE",
+                     help="KITTI odometry poses (poses/NN.txt: left-camera poses, row i = frame i) to report ATE and "
+                          "drift against (automatic for a registered drive such as 0020)")
+    run.add_argument("--ground-truth-times", default=None, metavar="FILE",
+                     help="KITTI times.txt of the ground truth, checked against the dataset's time stamps")
+    run.add_argument("--trajectory-out", default=None, metavar="FILE",
+                     help="write the estimated trajectory: .kitti or .txt (KITTI, 12 numbers per row) or .tum "
+                          "(TUM: t x y z qx qy qz qw)")
 
 
 def _blas_threads(text):
@@ -182,12 +193,12 @@ def _cmd_info(args):
 def _cmd_run(args):
     import numpy as np
 
-    from visla_edu import data, run
+    from visla_edu import run
     from visla_edu.filters import FilterDivergedError
 
     config = _run_config(args)
-    outputs = _check_outputs(args, data.input_files(args.dataset, args.data_dir))
-    dataset = data.load(args.dataset, args.data_dir)
+    outputs = _check_outputs(args, _run_inputs(args))
+    dataset = _load_with_ground_truth(args)
     if dataset.label:
         print(dataset.label)
     _check_work(dataset, args, config)
@@ -199,13 +210,14 @@ def _cmd_run(args):
         raise
     print(result.summary())
     if dataset.ground_truth is not None:
-        from visla_edu import metrics
-
-        gt = dataset.ground_truth.world_T_imu
-        print(f"ATE against ground truth: {metrics.ate(result.world_T_imu, gt, align=False):.3f} m "
-              f"(dead reckoning {metrics.ate(result.dead_reckoning, gt, align=False):.3f} m)")
+        _print_evaluation(run.evaluate_result(result, dataset.ground_truth), dataset.ground_truth, args.mode)
     if args.out:
         print(f"saved {run.save_result(result, outputs['--out'])}")
+    if args.trajectory_out:
+        from visla_edu import trajectory
+
+        written = trajectory.write_trajectory(outputs["--trajectory-out"], result.time_stamps, result.world_T_imu)
+        print(f"saved {written}")
     if args.plot:
         _save_plot(result, dataset, args, outputs["--plot"])
 
@@ -226,18 +238,45 @@ def _run_config(args):
     return FilterConfig(**settings)
 
 
+def _run_inputs(args):
+    """Every file ``run`` reads: the dataset, its registered ground truth, ``--ground-truth`` files."""
+    from visla_edu import data
+
+    if args.ground_truth_times and not args.ground_truth:
+        raise ValueError(f"--ground-truth-times {args.ground_truth_times} needs --ground-truth POSES_FILE too")
+    given = [args.ground_truth, args.ground_truth_times]
+    return data.input_files(args.dataset, args.data_dir) + [Path(p) for p in given if p and Path(p).exists()]
+
+
 def _check_outputs(args, inputs):
-    """``{"--out": path, "--plot": path}`` checked before any work (suffix, folder, not an input)."""
+    """``{"--out": path, "--plot": path, "--trajectory-out": path}`` checked before any work.
+
+    Suffix, folder, kind, and that no output is an input or another output.
+    """
     from visla_edu._files import check_output_path
 
+    given = {"--out": args.out, "--plot": args.plot, "--trajectory-out": args.trajectory_out}
     outputs = {}
-    if args.out:
-        outputs["--out"] = check_output_path(args.out, (".npz",), "--out", inputs, [("--plot", args.plot)])
-    if args.plot:
+    for option, path in given.items():
+        if not path:
+            continue
+        others = [(o, p) for o, p in given.items() if o != option and p]
+        outputs[option] = check_output_path(path, _suffixes(option, path), option, inputs, others)
+    return outputs
+
+
+def _suffixes(option, path):
+    """The suffixes allowed for an output option (the trajectory's format is checked by its own rule)."""
+    if option == "--out":
+        return (".npz",)
+    if option == "--plot":
         from visla_edu.plotting import figure_suffixes
 
-        outputs["--plot"] = check_output_path(args.plot, figure_suffixes(), "--plot", inputs, [("--out", args.out)])
-    return outputs
+        return figure_suffixes()
+    from visla_edu import trajectory
+
+    trajectory.trajectory_format(path)
+    return tuple(trajectory.FORMATS)
 
 
 def _check_work(dataset, args, config):
@@ -277,6 +316,26 @@ def _save_plot(result, dataset, args, path):
     print(f"saved {plotting.save_figure(figure, path)}")
 
 
+def _load_with_ground_truth(args):
+    """The dataset of ``args``, with the ground truth of ``--ground-truth`` when given."""
+    from visla_edu import data
+
+    dataset = data.load(args.dataset, args.data_dir)
+    if args.ground_truth:
+        dataset = data.attach_ground_truth(dataset, args.ground_truth, args.ground_truth_times)
+    return dataset
+
+
+def _print_evaluation(evaluations, ground_truth, mode):
+    """The lines ``visla-edu run`` prints about the ground truth, estimate and dead reckoning."""
+    source = Path(ground_truth.source).name if ground_truth.source else "the simulation"
+    print(f"ATE against ground truth ({source}, {ground_truth.num_frames} frames), drift over 100-800 m segments:")
+    rows = {f"{mode} estimate": evaluations["estimate"], "dead reckoning": evaluations["dead_reckoning"]}
+    width = max(map(len, rows)) + 2
+    for label, evaluation in rows.items():
+        print(f"  {label:{width}s}{evaluation.summary()}")
+
+
 def _cmd_stepper(args):
     from visla_edu.stepper import app
 
@@ -285,8 +344,6 @@ def _cmd_stepper(args):
 
 
 def _cmd_release(args):
-    from pathlib import Path
-
     from visla_edu import release
 
     root = Path(__file__).resolve().parent.parent

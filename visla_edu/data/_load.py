@@ -4,8 +4,9 @@ import os
 from pathlib import Path
 
 from visla_edu._files import file_kind
+from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
-from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, STANDIN_INPUTS, resolve_dir
+from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, STANDIN_INPUTS, ground_truth_files, resolve_dir
 from visla_edu.data._standin import load_dataset10
 
 __all__ = ["load", "input_files"]
@@ -17,7 +18,7 @@ def load(name_or_path, data_dir=None):
     Parameters
     ----------
     name_or_path : str or os.PathLike
-        A course name (``"03"``, ``"0022"``, ``"10"``: the file ``<data dir>/<name>.npz``),
+        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"10"``: the file ``<data dir>/<name>.npz``),
         ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated with seed 0), or a path to
         an ``.npz`` file in either course format or written by :func:`~visla_edu.data.save`.
         ``"10"`` falls back to a stand-in when ``10.npz`` is absent: simulated stereo
@@ -29,7 +30,9 @@ def load(name_or_path, data_dir=None):
     -------
     Dataset
         Time-major arrays, sparse observations; ``source`` is the absolute file path and
-        ``label`` describes known files (recognised by sha256).
+        ``label`` describes known files (recognised by sha256). A drive whose KITTI ground
+        truth the registry names (``"0020"``) gets it as ``ground_truth`` when its poses file
+        is beside the npz (:func:`~visla_edu.data.attach_registered_ground_truth`).
 
     Raises
     ------
@@ -42,7 +45,7 @@ def load(name_or_path, data_dir=None):
         not a regular file (a FIFO, a device).
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
-        return load_npz(_find_file(name_or_path, data_dir))
+        return attach_registered_ground_truth(load_npz(_find_file(name_or_path, data_dir)))
     name = _check_name(name_or_path)
     if name in SIMULATED:
         from visla_edu import simulate  # lazy: simulation is optional for loading files
@@ -55,7 +58,7 @@ def load(name_or_path, data_dir=None):
     path = directory / f"{name}.npz"
     if not os.path.lexists(path):
         raise FileNotFoundError(_not_found_message(f"{name}.npz", directory, how))
-    return load_npz(path)
+    return attach_registered_ground_truth(load_npz(path))
 
 
 def input_files(name_or_path, data_dir=None):
@@ -77,7 +80,10 @@ def input_files(name_or_path, data_dir=None):
         candidates = [directory / f"{name}.npz"] + ([directory / f for f in STANDIN_INPUTS] if name == "10" else [])
     else:
         candidates = []
-    return [c for c in candidates if c.exists()]
+    files = [c for c in candidates if c.exists()]
+    for npz in list(files):  # a registered drive's ground truth is read too
+        files.extend(f for f in ground_truth_files(npz.stem, npz.parent) or () if f is not None)
+    return files
 
 
 def _looks_like_path(value):
@@ -88,7 +94,7 @@ def _check_name(value):
     if not isinstance(value, str):
         raise TypeError(f"load: expected a dataset name or a path, got {type(value).__name__} {value!r}")
     if not value.strip():
-        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '10' or 'sim'")
+        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '0020', '10' or 'sim'")
     return value.strip()
 
 
