@@ -245,7 +245,8 @@ ARRAY_CASES = {
     # accepted but wrong, before issue 10
     "uint16 features": ("3-accepted-but-wrong", _set("features", lambda f: np.clip(f, 0, None).astype(np.uint16)),
                         r"dtype uint16, which cannot hold -1"),
-    "boolean features": ("3-accepted-but-wrong", _set("features", lambda f: f > 0), r"dtype bool, which cannot hold -1"),
+    "boolean features": ("3-accepted-but-wrong", _set("features", lambda f: f > 0),
+                         r"dtype bool, which cannot hold -1"),
     "uint8 features": ("3-accepted-but-wrong", _set("features", lambda f: np.clip(f, 0, 255).astype(np.uint8)),
                        r"cannot hold -1"),
     "complex features": ("3-accepted-but-wrong", _set("features", lambda f: f.astype(complex)), r"real numbers"),
@@ -254,7 +255,8 @@ ARRAY_CASES = {
     "focal 1e-12": ("3-accepted-but-wrong", _focal(1e-12), r"focal length .* 1e-12 px is implausible"),
     "focal in mm (4.7)": ("3-accepted-but-wrong", _focal(4.7), r"off the optical axis.*focal length is too small"),
     "aspect 10": ("3-accepted-but-wrong", _entry("K", (1, 1), 5500.0), r"fsv / fsu = 10 is implausible"),
-    "principal point 1e9": ("3-accepted-but-wrong", _entry("K", (0, 2), 1e9), r"principal point cu .* outside any image"),
+    "principal point 1e9": ("3-accepted-but-wrong", _entry("K", (0, 2), 1e9),
+                            r"principal point cu .* outside any image"),
     "principal point off the pixels": ("3-accepted-but-wrong", _entry("K", (1, 2), 15000.0),
                                        r"(principal point cv = 15000 px lies outside the observed pixels"
                                        r"|off the optical axis)"),

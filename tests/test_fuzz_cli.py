@@ -177,7 +177,8 @@ def test_an_interrupted_release_keeps_whole_notebooks(tmp_path, monkeypatch):
     nbformat = pytest.importorskip("nbformat")
     src, dst = tmp_path / "solutions", tmp_path / "notebooks"
     src.mkdir()
-    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("x = 1\n### BEGIN SOLUTION\ny = 2\n### END SOLUTION")])
+    cell = nbformat.v4.new_code_cell("x = 1\n### BEGIN SOLUTION\ny = 2\n### END SOLUTION")
+    nb = nbformat.v4.new_notebook(cells=[cell])
     nbformat.write(nb, src / "a.ipynb")
     release.make_student_notebooks(src, dst)
     good = (dst / "a.ipynb").read_bytes()
@@ -284,7 +285,8 @@ def test_absurd_calibration_past_the_loader_is_refused_before_the_filter(tmp_pat
 
 #: name -> (argv after the dataset, exit status, regex or None for success)
 SETTING_CASES = {
-    "boolean typo": (["--set", "landmark_cross_covariance=Treu"], 2, r"landmark_cross_covariance needs a bool .*'Treu'"),
+    "boolean typo": (["--set", "landmark_cross_covariance=Treu"], 2,
+                     r"landmark_cross_covariance needs a bool .*'Treu'"),
     "boolean yes": (["--set", "skip_repeated_frames=yes"], 0, None),
     "boolean 0": (["--set", "landmark_cross_covariance=0"], 0, None),
     "imu_lag 5000": (["--set", "imu_lag=5000"], 2, r"imu_lag must be an integer in \[-2, 2\].*got 5000"),
@@ -299,7 +301,8 @@ SETTING_CASES = {
     "huge velocity noise": (["--set", "sigma_linear_velocity=1e300"], 2, r"must be a number in \[0, 50\] m/s"),
     "overflowing literal": (["--set", "sigma_angular_velocity=1e400"], 2, r"needs a float .*'1e400'"),
     "nan noise": (["--set", "sigma_pixel=nan"], 2, r"sigma_pixel needs a float"),
-    "negative prior": (["--set", "landmark_prior_sigma=-1"], 2, r"landmark_prior_sigma must be a number in \(0, 10000\]"),
+    "negative prior": (["--set", "landmark_prior_sigma=-1"], 2,
+                       r"landmark_prior_sigma must be a number in \(0, 10000\]"),
     "gate probability 0": (["--set", "gate_probability=0"], 2, r"gate_probability must be a number in \(0, 1\]"),
     "unknown setting": (["--set", "sigma_pxl=2"], 2, r"unknown setting 'sigma_pxl'; settings are sigma_pixel"),
     "no equals sign": (["--set", "sigma_pixel"], 2, r"expected NAME=VALUE"),
@@ -337,7 +340,8 @@ def test_dense_run_past_the_limits_is_refused_then_forced(tmp_path, capsys, monk
     monkeypatch.setattr(run, "WORK_LIMIT_BYTES", 2**16)  # the tiny drive's 2 D^2 8 is about 3 MiB
     argv = ["run", path, "--mode", "slam", "--dense", "--quiet", "--set", "extrinsic_correction=none"]
     outcome = fz.cli_run(argv, capsys, measure=False)
-    line = fz.assert_one_line(outcome, 2, r"--mode slam --dense on drive with landmark stride 1 would need [\d.]+ MiB of memory "
+    line = fz.assert_one_line(outcome, 2, r"--mode slam --dense on drive with landmark stride 1 would need "
+                                          r"[\d.]+ MiB of memory "
                                        r"\(limit 64.0 KiB\); use --landmark-stride \d+ \(or more\).*--force")
     assert "slam (dense): states up to 456 dimensions" in outcome.out and "mode slam" not in outcome.out  # not run
     stride = int(re.search(r"--landmark-stride (\d+)", line).group(1))
@@ -382,8 +386,9 @@ def test_release_into_a_file_is_refused(tmp_path, capsys):
 
 
 def test_dense_estimate_is_printed_and_within_limits_runs(tmp_path, capsys):
-    outcome = fz.cli_run(["run", fz.course_file(tmp_path), "--mode", "slam", "--dense", "--landmark-stride", "4", "--quiet",
-                       "--set", "extrinsic_correction=none"], capsys, measure=False)
+    argv = ["run", fz.course_file(tmp_path), "--mode", "slam", "--dense", "--landmark-stride", "4", "--quiet",
+            "--set", "extrinsic_correction=none"]
+    outcome = fz.cli_run(argv, capsys, measure=False)
     fz.assert_ok(outcome)
     assert re.search(r"slam \(dense\): states up to \d+ dimensions, updates up to \d+ rows: about [\d.]+ \w+ of "
                      r"memory and \d+ s", outcome.out)

@@ -107,7 +107,8 @@ def check_time_stamps(stamps, path):
         i = int(gaps[0])
         raise ValueError(
             f"{path}: key 'time_stamps' has a gap of {steps[i]:.6g} s between frames {i} and {i + 1} "
-            f"(time_stamps[0, {i}] = {float(stamps[i])!r}, time_stamps[0, {i + 1}] = {float(stamps[i + 1])!r}; the median step "
+            f"(time_stamps[0, {i}] = {float(stamps[i])!r}, time_stamps[0, {i + 1}] = {float(stamps[i + 1])!r}; "
+            f"the median step "
             f"is {median:.4g} s, the most allowed {limit:.4g} s): dead reckoning would carry one velocity sample "
             f"across it. Split the drive at frame {i + 1}, or fix the stamp")
 
