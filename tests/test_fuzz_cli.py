@@ -457,3 +457,58 @@ def test_divergence_in_a_subprocess_is_one_line_without_warnings(tmp_path):
     assert done.returncode == 1, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and "Warning" not in done.stderr, done.stderr
     assert re.search(r"the filter diverged: sim-tiny: .* at frame 11.*likely cause: .*magnitude 1e\+200", done.stderr)
+
+
+# ======================================================================= ground-truth inputs, trajectory outputs
+
+
+def _poses_file(tmp_path, name="poses.txt"):
+    from visla_edu import trajectory
+
+    ds = fz.drive()
+    return trajectory.write_kitti(tmp_path / name, data.kitti_poses_from_imu(ds.ground_truth.world_T_imu, ds.imu_T_cam))
+
+
+def _trajectory_over_ground_truth(tmp_path, path):
+    poses = _poses_file(tmp_path)
+    return ["--ground-truth", poses, "--trajectory-out", poses], r"--trajectory-out .*poses.txt: is the input file"
+
+
+def _trajectory_over_registered_ground_truth(tmp_path, path):
+    registered = path.rename(tmp_path / "0020.npz")
+    poses = _poses_file(tmp_path, "kitti_odometry_06_poses.txt")
+    return ["--trajectory-out", poses, "--dataset-is", registered], r"is the input file .*kitti_odometry_06_poses.txt"
+
+
+def _ground_truth_fifo(tmp_path, path):
+    return ["--ground-truth", fz.fifo(tmp_path, "poses.txt")], r"poses.txt: KITTI poses.* is a FIFO"
+
+
+def _ground_truth_folder(tmp_path, path):
+    return ["--ground-truth", tmp_path], r"KITTI poses.* is a folder, not a file"
+
+
+def _trajectory_unknown_format(tmp_path, path):
+    return ["--trajectory-out", tmp_path / "t.csv"], r"unknown trajectory format '.csv'"
+
+
+GROUND_TRUTH_CASES = {
+    "--trajectory-out over the --ground-truth file": ("1-results-lost", _trajectory_over_ground_truth),
+    "--trajectory-out over a registered ground truth": ("1-results-lost", _trajectory_over_registered_ground_truth),
+    "--trajectory-out with an unknown suffix": ("1-results-lost", _trajectory_unknown_format),
+    "--ground-truth is a FIFO": ("6-paths", _ground_truth_fifo),
+    "--ground-truth is a folder": ("6-paths", _ground_truth_folder),
+}
+
+
+@pytest.mark.parametrize("name", list(GROUND_TRUTH_CASES), ids=fz.ids(GROUND_TRUTH_CASES))
+def test_ground_truth_and_trajectory_paths(name, tmp_path, capsys, monkeypatch):
+    path = fz.course_file(tmp_path)
+    extra, pattern = GROUND_TRUTH_CASES[name][1](tmp_path, path)
+    if "--dataset-is" in extra:
+        path = extra.pop()
+        extra.pop()
+    monkeypatch.setattr(run, "run_filter", _must_not_run)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    fz.assert_one_line(fz.cli_run(["run", path, *fz.RUN, *extra], capsys, seconds=10, measure=False), 2, pattern)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
