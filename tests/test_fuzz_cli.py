@@ -241,7 +241,8 @@ FAILURE_CASES = {
         r"^visla-edu run: interrupted \(Ctrl-C\)"),
     "internal error": (
         lambda mp: mp.setattr(motion, "imu_step", _fail_at_call(3, KeyError("oops"))), [], 3,
-        r"internal error \(KeyError: 'oops'\); this is a bug in visla-edu, please report it"),
+        r"internal error \(KeyError: 'oops'\); this is a bug in visla-edu, please report it with the command "
+        r"line and the traceback of --debug"),
 }
 
 

@@ -44,7 +44,6 @@ __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERN
 EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 1, 2, 3, 130
 #: Environment variable that makes every error print its traceback too (like ``--debug``).
 DEBUG_ENV = "VISLA_EDU_DEBUG"
-_REPORT = "https://github.com/visla-edu/visla-edu/issues"
 #: errno values of an OSError that mean a bad path given by the user (exit 2); others are system failures (exit 1).
 _PATH_ERRNOS = {errno.ENOENT, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EEXIST, errno.ENAMETOOLONG,
                 errno.EROFS, errno.ELOOP, errno.ENXIO}
@@ -187,6 +186,7 @@ def _cmd_info(args):
             print(diagnostics.diagnose(dataset))
         except (ArithmeticError, ValueError, MemoryError) as err:
             err.hint = "the file loaded fine; rerun with --no-diagnostics to skip the diagnostics"
+            err.failed = True  # a failure of the diagnostics on a valid file: exit 1, not 2
             raise
 
 
@@ -423,6 +423,8 @@ def _describe(err, args):
 
     hint = getattr(err, "hint", "")
     hint = f"; {hint}" if hint else ""
+    if getattr(err, "failed", False):
+        return EXIT_FAILED, f"{type(err).__name__}: {err}{hint}"
     if isinstance(err, FilterDivergedError):
         return EXIT_FAILED, f"the filter diverged: {err}{hint}"
     if isinstance(err, np.linalg.LinAlgError):
@@ -438,7 +440,7 @@ def _describe(err, args):
     if isinstance(err, ValueError):
         return EXIT_BAD_INPUT, f"{err}{hint}"
     return EXIT_INTERNAL, (f"internal error ({type(err).__name__}: {err}); this is a bug in visla-edu, please report "
-                           f"it with the command line at {_REPORT} (rerun with --debug for the traceback)")
+                           "it with the command line and the traceback of --debug")
 
 
 def _os_message(err):
