@@ -93,6 +93,7 @@ def test_outputs_are_checked_before_any_work(name, tmp_path, capsys, monkeypatch
 
 
 def test_unwritable_folder_is_reported_before_any_work(tmp_path, capsys, monkeypatch):
+    """1-results-lost: a folder this user cannot write to (patched os.access)."""
     path = fz.course_file(tmp_path)
     (tmp_path / "ro").mkdir()
     real_access = os.access
@@ -107,6 +108,7 @@ def _must_not_run(*args, **kwargs):
 
 
 def test_the_path_printed_is_the_path_written(tmp_path, capsys):
+    """1-results-lost: "saved X" names exactly the files written (R.NPZ stays R.NPZ)."""
     path = fz.course_file(tmp_path)
     outcome = fz.cli_run(["run", path, *fz.RUN, "--out", tmp_path / "R.NPZ", "--plot", tmp_path / "map.svg"], capsys,
                       measure=False)
@@ -337,6 +339,7 @@ def test_port_out_of_range_is_refused(capsys):
 
 
 def test_dense_run_past_the_limits_is_refused_then_forced(tmp_path, capsys, monkeypatch):
+    """5-unbounded-work: past the limit (shrunk for the tiny drive) refused with a stride; --force runs."""
     path = fz.course_file(tmp_path)
     monkeypatch.setattr(run, "WORK_LIMIT_BYTES", 2**16)  # the tiny drive's 2 D^2 8 is about 3 MiB
     argv = ["run", path, "--mode", "slam", "--dense", "--quiet", "--set", "extrinsic_correction=none"]
@@ -387,6 +390,7 @@ def test_release_into_a_file_is_refused(tmp_path, capsys):
 
 
 def test_dense_estimate_is_printed_and_within_limits_runs(tmp_path, capsys):
+    """5-unbounded-work: a dense run within the limits prints its estimate and runs."""
     argv = ["run", fz.course_file(tmp_path), "--mode", "slam", "--dense", "--landmark-stride", "4", "--quiet",
             "--set", "extrinsic_correction=none"]
     outcome = fz.cli_run(argv, capsys, measure=False)

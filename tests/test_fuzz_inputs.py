@@ -154,7 +154,7 @@ def test_valid_variants_give_the_file_contents(name, tmp_path, capsys):
 
 @pytest.mark.parametrize("order", ["C", "F"])
 def test_large_features_are_streamed_with_bounded_memory(order, tmp_path, capsys, monkeypatch):
-    """A 36 MiB dense array (few observations) loads within 12 MiB, in either memory order."""
+    """5-unbounded-work: a 36 MiB dense array (few observations) loads within 12 MiB, in either memory order."""
     monkeypatch.setattr(_features, "_CHUNK_BYTES", 2**20)
     arrays = fz.course_arrays()
     T = arrays["features"].shape[2]
@@ -212,6 +212,7 @@ def test_bad_paths(name, command, tmp_path, capsys):
 
 
 def test_unreadable_file_is_not_reported_as_missing(tmp_path, capsys, monkeypatch):
+    """6-paths: an unreadable file is named as such (access refused by a patched os.access)."""
     path = fz.course_file(tmp_path)
     real_access = os.access
     monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if str(p) == str(path) else real_access(p, mode))
@@ -220,6 +221,7 @@ def test_unreadable_file_is_not_reported_as_missing(tmp_path, capsys, monkeypatc
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads files whatever their permissions")
 def test_unreadable_file_for_real(tmp_path, capsys):
+    """6-paths: the same with real permissions (skipped as root)."""
     path = fz.course_file(tmp_path)
     path.chmod(0)
     fz.assert_one_line(fz.cli_run(["info", path], capsys), 2, r"permission denied")
@@ -254,6 +256,7 @@ def _check_random_file(path, reference, capsys):
 @given(edits=st.lists(st.tuples(st.floats(0, 1, exclude_max=True), st.binary(min_size=1, max_size=8)),
                       min_size=1, max_size=4))
 def test_random_bytes_overwritten(stored_file, edits, tmp_path, capsys):
+    """byte-level: random bytes overwritten anywhere in a stored archive."""
     raw, reference = stored_file
     damaged = bytearray(raw)
     for where, new in edits:
@@ -266,6 +269,7 @@ def test_random_bytes_overwritten(stored_file, edits, tmp_path, capsys):
 @_HYPOTHESIS
 @given(share=st.floats(0, 1, exclude_max=True))
 def test_random_truncation(stored_file, share, tmp_path, capsys):
+    """byte-level: the archive cut at a random length."""
     raw, reference = stored_file
     path = fz.write_bytes(tmp_path / "cut.npz", raw[: int(share * len(raw))])
     fz.assert_one_line(fz.cli_run(["info", path, "--no-diagnostics"], capsys, seconds=10), 2, re.escape(str(path)))
@@ -275,7 +279,7 @@ def test_random_truncation(stored_file, share, tmp_path, capsys):
 @given(key=st.sampled_from(sorted(fz.course_arrays())), where=st.integers(0, 10**6), new=st.binary(min_size=1,
                                                                                                     max_size=8))
 def test_random_member_bytes_in_a_valid_archive(key, where, new, tmp_path, capsys):
-    """Damage inside one ``.npy`` member of an archive with valid CRCs: a clear line, or the file's own contents."""
+    """byte-level: damage inside one ``.npy`` member with valid CRCs: a clear line, or the file's own contents."""
     arrays = fz.course_arrays()
     member = bytearray(fz.npy_bytes(arrays[key]))
     start = where % len(member)
