@@ -98,7 +98,7 @@ def _cmd_info(args):
     print(data.format_summary(dataset))
     if not args.no_diagnostics and dataset.num_observations:
         print()
-        print(diagnostics.diagnose(dataset))
+        print(diagnostics.calibrate(dataset).report(dataset.name))
 
 
 def _cmd_run(args):
