@@ -10,7 +10,8 @@ as large as the effects (``0020``'s gyro-bias estimate disagrees with its ground
 
 import numpy as np
 
-from visla_edu.diagnostics._vo import MIN_VO_PAIRS, odometry_of, vo_in_imu_frame, vo_pairs
+from visla_edu import lie
+from visla_edu.diagnostics._vo import MIN_VO_PAIRS, odometry_of, vo_motion_in_imu_frame, vo_pairs
 from visla_edu.motion import select_twists
 
 __all__ = ["robust_location", "gyro_bias", "velocity_scale", "MIN_STEP", "SIGNIFICANCE"]
@@ -48,10 +49,11 @@ def robust_location(samples):
 
 
 def _used_motion(dataset, imu_T_cam, lag):
-    """Odometry twists in the IMU frame, IMU velocity samples and time steps of the usable pairs."""
+    """Odometry motions in the IMU frame (P, 4, 4), IMU velocity samples (P, 6) and time steps (P,)
+    of the usable pairs."""
     vo = odometry_of(dataset)
     used = vo_pairs(vo)
-    return (vo_in_imu_frame(vo, imu_T_cam)[used], select_twists(dataset.twists, lag)[used],
+    return (vo_motion_in_imu_frame(vo, imu_T_cam)[used], select_twists(dataset.twists, lag)[used],
             dataset.time_steps[used])
 
 
@@ -74,8 +76,9 @@ def gyro_bias(dataset, imu_T_cam, lag=0):
         "not enough evidence" (fewer than ``MIN_VO_PAIRS`` pairs), "consistent with zero" or
         "nonzero" (some axis ``SIGNIFICANCE`` standard errors from zero).
     """
-    vo_twist, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
-    bias, stderr = robust_location(imu_twist[:, 3:] - vo_twist[:, 3:] / tau[:, None])
+    vo_motion, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
+    w_vo = lie.so3_log(vo_motion[:, :3, :3]) / tau[:, None]
+    bias, stderr = robust_location(imu_twist[:, 3:] - w_vo)
     pairs = len(tau)
     if pairs < MIN_VO_PAIRS:
         verdict = NOT_ENOUGH
@@ -89,10 +92,11 @@ def gyro_bias(dataset, imu_T_cam, lag=0):
 
 
 def velocity_scale(dataset, imu_T_cam, lag=0):
-    """Velocity scale: the median of ``|p_vo| / |tau v_imu[t + lag]|`` over the usable pairs.
+    """Velocity scale: the median of ``|t_vo| / |tau v_imu[t + lag]|`` over the usable pairs.
 
-    ``p_vo`` is the translation part of the odometry's twist in the IMU frame; steps shorter
-    than :data:`MIN_STEP` by the IMU are left out (the ratio is noise there).
+    ``t_vo`` is the translation of the odometry's motion in the IMU frame
+    (``imu_T_cam cam_T_next cam_T_imu``); steps shorter than :data:`MIN_STEP` by the IMU are left
+    out (the ratio is noise there).
 
     Parameters
     ----------
@@ -106,10 +110,10 @@ def velocity_scale(dataset, imu_T_cam, lag=0):
         ``scale`` and ``stderr`` (None without pairs), ``pairs``, and ``verdict``: "not enough
         evidence", "consistent with 1", or "differs from 1 by x%" (``SIGNIFICANCE`` standard errors).
     """
-    vo_twist, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
+    vo_motion, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
     step = tau * np.linalg.norm(imu_twist[:, :3], axis=1)
     moving = step > MIN_STEP
-    ratio = np.linalg.norm(vo_twist[moving, :3], axis=1) / step[moving]
+    ratio = np.linalg.norm(vo_motion[moving, :3, 3], axis=1) / step[moving]
     scale, stderr = robust_location(ratio)
     pairs = int(moving.sum())
     if pairs < MIN_VO_PAIRS:

@@ -65,7 +65,7 @@ def _vo_lines(vo, repeated):
                  f"({bias['pairs']} pairs): {bias['verdict']} (reported, not applied)")
     scale = vo.velocity_scale
     value = "n/a" if scale["scale"] is None else f"{scale['scale']:.3f} +- {scale['stderr']:.3f}"
-    lines.append(f"  velocity scale |p_vo| / |tau v_imu|: {value} ({scale['pairs']} pairs): {scale['verdict']} "
+    lines.append(f"  velocity scale |t_vo| / |tau v_imu|: {value} ({scale['pairs']} pairs): {scale['verdict']} "
                  f"(reported, not applied)")
     lines.append(f"frames repeating the previous frame exactly: {repeated if repeated else 'none'}")
     return lines
@@ -86,7 +86,8 @@ def calibration_report(calibration, name=""):
     """
     c = calibration
     origin = ("computed" if c.source == "computed" else f"reused from the {c.source}")
-    lines = [f"calibration from the data{' of ' + name if name else ''} ({origin}; computing it took {c.seconds:.2f} s)"]
+    lines = [f"calibration from the data{' of ' + name if name else ''} ({origin}; "
+             f"computing it took {c.seconds:.2f} s)"]
     lines += _track_lines(c.tracks)
     lines += _vo_lines(c.vo, c.repeated_frames)
     lines.append(f"IMU noise per axis from the velocities: white (second differences) linear "

@@ -32,8 +32,8 @@ from visla_edu.diagnostics._bootstrap import cluster_resamples, resampled_median
 from visla_edu.diagnostics._vo import CORRECTIONS, LAGS
 from visla_edu.motion import select_twists
 
-__all__ = ["TrackChoice", "TrackEvidence", "TrackScorer", "track_pairs", "reprojection_errors", "MIN_DISPARITY", "MAX_GAP", "RESAMPLES", "BLOCK", "CONFIDENCE", "MIN_LANDMARKS",
-           "MIN_GROUPS"]
+__all__ = ["TrackChoice", "TrackEvidence", "TrackScorer", "track_pairs", "reprojection_errors", "MIN_DISPARITY",
+           "MAX_GAP", "RESAMPLES", "BLOCK", "CONFIDENCE", "MIN_LANDMARKS", "MIN_GROUPS"]
 
 #: The anchor observation needs a disparity above this (px) for a usable depth.
 MIN_DISPARITY = 2.0

@@ -33,6 +33,7 @@ __all__ = [
     "odometry_of",
     "vo_pairs",
     "vo_in_imu_frame",
+    "vo_motion_in_imu_frame",
     "imu_step_twists",
 ]
 
@@ -76,10 +77,14 @@ def vo_pairs(vo):
     return vo.valid & (vo.inliers >= MIN_INLIERS)
 
 
+def vo_motion_in_imu_frame(vo, imu_T_cam):
+    """VO motions as IMU motions ``imu_T_cam cam_T_next cam_T_imu``, shape (T-1, 4, 4)."""
+    return imu_T_cam @ vo.cam_T_next @ lie.se3_inv(imu_T_cam)
+
+
 def vo_in_imu_frame(vo, imu_T_cam):
-    """VO motions as IMU motions ``imu_T_cam cam_T_next cam_T_imu``, as twists ``[v; w]``, shape (T-1, 6)."""
-    rel = imu_T_cam @ vo.cam_T_next @ lie.se3_inv(imu_T_cam)
-    return lie.se3_log(rel)
+    """VO motions as IMU motions (:func:`vo_motion_in_imu_frame`), as twists ``[v; w]``, shape (T-1, 6)."""
+    return lie.se3_log(vo_motion_in_imu_frame(vo, imu_T_cam))
 
 
 def imu_step_twists(dataset, lag=0):
