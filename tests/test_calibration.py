@@ -108,6 +108,26 @@ def test_velocity_scale_and_gyro_bias_are_measured():
     assert np.all(np.abs(np.array(bias["bias"]) - [0.02, -0.01, 0.0]) < 4 * np.array(bias["stderr"]) + 2e-3), bias
 
 
+def test_bad_input_names_the_problem():
+    ds = simulate.simulate_drive("tiny", 0)
+    v = ds.linear_velocity.copy()
+    v[7, 1] = np.nan
+    with pytest.raises(ValueError, match="non-finite time stamp or velocity at frame 7"):
+        calibrate(_fresh(ds, linear_velocity=v))
+    z = ds.obs_z.copy()
+    z[ds.frame_ptr[3], 0] = np.inf
+    with pytest.raises(ValueError, match="non-finite pixels at frame 3"):
+        calibrate(_fresh(ds, obs_z=z))
+    with pytest.raises(ValueError, match=r"angular_velocity must have shape \(60, 3\)"):
+        calibrate(_fresh(ds, angular_velocity=ds.angular_velocity[:, :2]))
+    stamps = ds.time_stamps.copy()
+    stamps[5] = stamps[4]
+    with pytest.raises(ValueError, match="frame 5"):
+        calibrate(_fresh(ds, time_stamps=stamps))
+    with pytest.raises(TypeError, match="Dataset"):
+        calibrate("03")
+
+
 # ----------------------------------------------------------------------------- noise model
 
 

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from visla_edu import cache as user_cache
-from visla_edu.dataset import repeated_frames
+from visla_edu.dataset import Dataset, repeated_frames
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import imu_noise
 from visla_edu.diagnostics._report import calibration_report
@@ -243,9 +243,32 @@ def _vo_evidence(dataset, check, slope_lag, imu_T_cam, lag):
         gyro_bias=gyro_bias(dataset, imu_T_cam, lag), velocity_scale=velocity_scale(dataset, imu_T_cam, lag))
 
 
+def _check_inputs(dataset):
+    """TypeError for a non-dataset, ValueError naming the first bad time stamp or velocity sample.
+
+    Pixels are checked by the odometry (:func:`visla_edu.odometry.visual_odometry`).
+    """
+    if not isinstance(dataset, Dataset):
+        raise TypeError(f"calibrate: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")
+    stamps = np.asarray(dataset.time_stamps, dtype=float).reshape(-1)
+    for name in ("linear_velocity", "angular_velocity"):
+        shape = np.shape(getattr(dataset, name))
+        if shape != (len(stamps), 3):
+            raise ValueError(f"calibrate: {dataset.name}: {name} must have shape ({len(stamps)}, 3), one sample "
+                             f"per time stamp, got {shape}")
+    bad = ~np.all(np.isfinite(dataset.twists), axis=1) | ~np.isfinite(stamps)
+    if bad.any():
+        raise ValueError(f"calibrate: {dataset.name}: non-finite time stamp or velocity at frame {np.argmax(bad)}; "
+                         f"fix or drop it before calibrating")
+    if np.any(np.diff(stamps) <= 0):
+        raise ValueError(f"calibrate: {dataset.name}: time stamps must increase, but frame "
+                         f"{np.argmax(np.diff(stamps) <= 0) + 1} does not")
+
+
 def _compute(dataset):
     """The calibration of ``dataset`` from its data (no cache)."""
     start = time.perf_counter()
+    odometry_of(dataset)  # checks the pixels
     scorer = TrackScorer(dataset)
     correction_choice = scorer.choose_correction()
     best = correction_choice.best or "none"
@@ -304,7 +327,16 @@ def calibrate(dataset, cache=True):
     Returns
     -------
     Calibration
+
+    Raises
+    ------
+    TypeError
+        ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
+    ValueError
+        A time stamp, velocity or pixel is not finite, the time stamps do not increase, or the
+        velocities have the wrong shape (the message names the frame).
     """
+    _check_inputs(dataset)
     if "calibration" in dataset.extra:
         return dataset.extra["calibration"]
     path = cache_path(dataset) if cache else None
