@@ -28,9 +28,11 @@ def _track_lines(tracks):
         lines.append(f"  {name:10s} {cells}")
     for label, choice in (("extrinsic correction", tracks.correction), ("IMU lag", tracks.lag)):
         margins = ", ".join(f"{k} +{d:.2f} px (95% lower bound {lo:+.2f})" for k, (d, lo) in choice.margins.items())
-        best = "none found" if choice.best is None else (f"{choice.best:+d}" if isinstance(choice.best, int)
-                                                           else repr(choice.best))
-        lines.append(f"  {label}: best {best}, {choice.verdict}" + (f"; others: {margins}" if margins else ""))
+        if choice.best is None:
+            best = "no scored pairs"
+        else:
+            best = "best " + (f"{choice.best:+d}" if isinstance(choice.best, int) else repr(choice.best))
+        lines.append(f"  {label}: {best}, {choice.verdict}" + (f"; others: {margins}" if margins else ""))
     return lines
 
 

@@ -121,6 +121,15 @@ class TrackEvidence:
 def track_pairs(dataset):
     """Anchor and later observations of the scored pairs.
 
+    Each landmark's anchor is its first observation with disparity above
+    :data:`MIN_DISPARITY`; it is paired with the landmark's later observations 1 to
+    :data:`MAX_GAP` frames after it, except stale copies (pixels bit-identical to the
+    landmark's previous observation) and observations with non-positive disparity.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+
     Returns
     -------
     anchor, later : ndarray of int, shape (P,)
@@ -132,15 +141,16 @@ def track_pairs(dataset):
     ids, z = dataset.obs_ids, dataset.obs_z
     order = np.lexsort((frames, ids))  # landmark by landmark, in time
     ids_sorted, frames_sorted, z_sorted = ids[order], frames[order], z[order]
-    same = np.r_[False, ids_sorted[1:] == ids_sorted[:-1]]
-    stale = same & np.r_[False, np.all(z_sorted[1:] == z_sorted[:-1], axis=1)]
+    same = np.zeros(len(order), dtype=bool)  # the same landmark as the observation before
+    same[1:] = ids_sorted[1:] == ids_sorted[:-1]
+    stale = same.copy()
+    stale[1:] &= np.all(z_sorted[1:] == z_sorted[:-1], axis=1)
     disparity = z_sorted[:, 0] - z_sorted[:, 2]
     can_anchor = disparity > MIN_DISPARITY
-    # the first anchor-able observation of each landmark
-    first_of_track = np.flatnonzero(~same)
+    # the first anchor-able observation of each landmark (big: none)
     track = np.cumsum(~same) - 1
     big = len(order)
-    first_anchor = np.full(len(first_of_track), big)
+    first_anchor = np.full(int(track[-1]) + 1 if big else 0, big)
     np.minimum.at(first_anchor, track[can_anchor], np.flatnonzero(can_anchor))
     anchor_pos = first_anchor[track]
     has_anchor = anchor_pos < big
