@@ -6,7 +6,7 @@ could not be measured is printed as "not enough evidence", never as NaN.
 
 import numpy as np
 
-from visla_edu.diagnostics._tracks import MAX_GAP, MIN_DISPARITY
+from visla_edu.diagnostics._tracks import BLOCK, MAX_GAP, MIN_DISPARITY
 from visla_edu.diagnostics._vo import CORRECTIONS, LAGS, MIN_INLIERS
 
 __all__ = ["calibration_report"]
@@ -20,8 +20,9 @@ def _vector(values, digits=4):
 def _track_lines(tracks):
     """Scores of every candidate and the two verdicts."""
     lines = [f"track reprojection: {tracks.pairs} pairs of {tracks.landmarks} landmarks (first observation with "
-             f"disparity > {MIN_DISPARITY:g} px moved 1-{MAX_GAP} frames by the dead-reckoned IMU motion); "
-             f"median left-image error (px) when step t->t+1 uses u[t+lag]:"]
+             f"disparity > {MIN_DISPARITY:g} px moved 1-{MAX_GAP} frames by the dead-reckoned IMU motion), "
+             f"bootstrap over {tracks.groups} blocks of {BLOCK} anchor frames; median left-image error (px) when "
+             f"step t->t+1 uses u[t+lag]:"]
     lines.append("  correction " + " ".join(f"lag {lag:+d}".rjust(8) for lag in tracks.lags))
     for name, scores in tracks.scores.items():
         cells = " ".join(("n/a" if s is None else f"{s:.2f}").rjust(8) for s in scores)

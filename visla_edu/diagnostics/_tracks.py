@@ -89,8 +89,9 @@ class TrackEvidence:
     scores : dict
         Correction name -> median left-image error (px) per lag (in ``lags`` order); None
         without pairs.
-    pairs, landmarks : int
-        Scored pairs and the landmarks they come from.
+    pairs, landmarks, groups : int
+        Scored pairs, the landmarks they come from, and the resampling groups (blocks of
+        :data:`BLOCK` anchor frames) those fall into.
     resamples : int
         Bootstrap resamples (0 when there was not enough evidence to run it).
     correction : TrackChoice
@@ -103,6 +104,7 @@ class TrackEvidence:
     scores: dict
     pairs: int
     landmarks: int
+    groups: int
     resamples: int
     correction: TrackChoice
     lag: TrackChoice = None
@@ -304,5 +306,5 @@ class TrackScorer:
         """The :class:`TrackEvidence` with both verdicts."""
         scores = {name: [None if not np.isfinite(s) else float(s) for s in self.scores[:, c]]
                   for c, name in enumerate(CORRECTIONS)}
-        return TrackEvidence(list(LAGS), scores, int(self.errors.shape[-1]), self.num_landmarks,
+        return TrackEvidence(list(LAGS), scores, int(self.errors.shape[-1]), self.num_landmarks, self.num_groups,
                              RESAMPLES if self._weights is not None else 0, correction_choice, lag_choice)
