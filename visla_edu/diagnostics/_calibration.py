@@ -224,7 +224,7 @@ def _decide_lag(choice):
     """The lag to use and why, from the track choice among the lags."""
     if choice.chosen is None:
         return 0, f"kept lag 0: track reprojection, {choice.verdict}"
-    return int(choice.chosen), ("every other lag has a larger track-reprojection error with 95% confidence")
+    return int(choice.chosen), "every other lag has a larger track-reprojection error with 95% confidence"
 
 
 def _vo_evidence(dataset, check, slope_lag, imu_T_cam, lag):
