@@ -16,10 +16,11 @@ Results that take a while to compute from a dataset (its calibration,
 import hashlib
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from visla_edu._files import atomic_write
 
 __all__ = ["ENV_VAR", "cache_dir", "content_hash", "load_json", "save_json"]
 
@@ -94,7 +95,7 @@ def save_json(path, value):
     """Write ``value`` as JSON to ``path`` atomically; False (and nothing written) on failure.
 
     The folder is created if needed. The text goes to a temporary file in the same folder,
-    which then replaces ``path`` in one step (``os.replace``).
+    which then replaces ``path`` in one step (:func:`visla_edu._files.atomic_write`).
 
     Parameters
     ----------
@@ -113,19 +114,10 @@ def save_json(path, value):
         text = json.dumps(value, allow_nan=False, indent=1)
     except (TypeError, ValueError):  # NaN, infinity or objects JSON cannot hold
         return False
-    tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile("w", encoding="utf-8", dir=path.parent, prefix=path.name + ".",
-                                         suffix=".tmp", delete=False) as handle:
-            tmp = handle.name
+        with atomic_write(path) as handle:
             handle.write(text)
-        os.replace(tmp, path)
-        return True
-    except OSError:
-        if tmp is not None:
-            try:
-                Path(tmp).unlink(missing_ok=True)
-            except OSError:
-                pass
+    except (OSError, ValueError):  # not writable, no space, a folder in the way
         return False
+    return True
