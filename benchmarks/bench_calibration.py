@@ -19,8 +19,8 @@ early):
   min over ``--repeats``) and cached (a fresh dataset object reading the JSON file written by
   a first run into a temporary cache folder);
 * the visual odometry's rotation error against the ground truth of ``0020`` (KITTI odometry
-  sequence 06, ``kitti_odometry_06_poses.txt`` beside the npz) on the pairs the checks use
-  (valid, at least 4 inliers) and on all valid pairs.
+  sequence 06, attached by the loader from ``kitti_odometry_06_poses.txt`` beside the npz) on
+  the pairs the checks use (valid, at least 4 inliers) and on all valid pairs.
 
 Absent files are skipped with a line saying so. Nothing here is asserted: the tests are in
 tests/test_calibration.py.
@@ -35,11 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from visla_edu import diagnostics, lie, odometry, simulate
+from visla_edu import diagnostics, odometry, simulate
 from visla_edu.diagnostics import CORRECTIONS
 
 NOISY_SEEDS = (0, 1, 2)
-COMPARED_PAIRS_0020 = 1100  # KITTI sequence 06 has 1101 poses
 LIVELY = dict(linear_velocity_sigma=0.02, angular_velocity_sigma=0.002, yaw_rate_sigma=0.1, yaw_timescale=1.0)
 
 
@@ -126,26 +125,20 @@ def _noisy(dataset, seed):
                                angular_velocity=w + rng.normal(0, 0.05, w.shape))
 
 
-def _kitti_motion(path):
-    """``cam_T_next`` from a KITTI poses file (row i: camera i in camera 0, 12 numbers)."""
-    rows = np.loadtxt(path).reshape(-1, 3, 4)
-    poses = np.zeros((len(rows), 4, 4))
-    poses[:, :3], poses[:, 3, 3] = rows, 1.0
-    return lie.se3_inv(poses[:-1]) @ poses[1:]
-
-
-def odometry_0020(directory, dataset):
-    poses = directory / "kitti_odometry_06_poses.txt"
-    if not poses.is_file():
-        print(f"  0020 odometry against ground truth: skipped (no {poses})")
+def odometry_0020(dataset):
+    """Rotation error of the odometry against 0020's ground truth (attached by the loader)."""
+    truth = dataset.ground_truth
+    if truth is None:
+        print("  0020 odometry against ground truth: skipped (no ground truth attached: "
+              "kitti_odometry_06_poses.txt missing beside 0020.npz?)")
         return
-    true = _kitti_motion(poses)[:COMPARED_PAIRS_0020]
+    true = odometry.camera_motion(truth.world_T_imu, dataset.imu_T_cam)
     vo = odometry.visual_odometry(dataset)
     n = len(true)
     for label, used in (("pairs the checks use (>= 4 inliers)", vo.valid[:n] & (vo.inliers[:n] >= 4)),
                         ("all valid pairs", vo.valid[:n])):
         rotation, translation = odometry.motion_errors(vo.cam_T_next[:n][used], true[used])
-        print(f"  0020 odometry vs KITTI 06, {label}: {used.sum()} of {n} pairs, rotation median "
+        print(f"  0020 odometry vs its ground truth (KITTI 06), {label}: {used.sum()} of {n} pairs, rotation median "
               f"{1e3 * np.median(rotation):.2f} mrad, rms {1e3 * np.sqrt(np.mean(rotation**2)):.2f} mrad, "
               f"translation median {np.median(translation):.3f} m")
 
@@ -164,7 +157,7 @@ def bench_course(directory, repeats):
         if name == "0020":
             for seed in NOISY_SEEDS:
                 bench_drive(f"0020 noisy twin (seed {seed})", _noisy(dataset, seed), 1)
-            odometry_0020(directory, dataset)
+            odometry_0020(dataset)
     if (directory / "10_imu_only.npz").is_file() and (directory / "03.npz").is_file():
         standin = data.load("10", directory)
         bench_drive("10 stand-in", standin, repeats, truth=("flip_yz", 0))

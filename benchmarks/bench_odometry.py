@@ -8,8 +8,9 @@ Measures :func:`visla_edu.odometry.visual_odometry` (RANSAC + Gauss-Newton on SE
 odometry the diagnostics use, and prints (the Kabsch odometry it replaced is gone; its figures
 are in the history of this file, commit 22f67b5):
 
-* ``0020`` against KITTI odometry sequence 06 (``kitti_odometry_06_poses.txt`` beside it; the
-  npz has 3 extra frames, the first 1100 pairs are compared): share of valid pairs, rotation
+* ``0020`` against KITTI odometry sequence 06 (attached by the loader from
+  ``kitti_odometry_06_poses.txt`` beside it; the npz has 3 extra frames, the first 1100 pairs
+  are compared): share of valid pairs, rotation
   error (mrad per frame) and translation error (m per frame), median and RMS over valid pairs;
   NEES of the stated covariance; coverage (stale pairs, tracked points, error by inlier count);
   the forward translation against the truth (scale); what a rotation from bearings alone
@@ -38,16 +39,7 @@ import numpy as np
 from visla_edu import lie, odometry, simulate
 from visla_edu.metrics import chi2_bounds
 
-COMPARED_PAIRS_0020 = 1100  # KITTI sequence 06 has 1101 poses
 SEEDS = (0, 1, 2)
-
-
-def _kitti_motion(path):
-    """``cam_T_next`` from a KITTI poses file (row i: camera i in camera 0, 12 numbers)."""
-    rows = np.loadtxt(path).reshape(-1, 3, 4)
-    poses = np.zeros((len(rows), 4, 4))
-    poses[:, :3], poses[:, 3, 3] = rows, 1.0
-    return lie.se3_inv(poses[:-1]) @ poses[1:]
 
 
 def _errors_line(cam_T_next, valid, true):
@@ -95,12 +87,12 @@ def _timed(run, repeats):
 def bench_0020(directory, repeats):
     from visla_edu import data
 
-    path, poses = directory / "0020.npz", directory / "kitti_odometry_06_poses.txt"
-    if not (path.is_file() and poses.is_file()):
-        print(f"0020: skipped (need {path} and {poses})")
+    path = directory / "0020.npz"
+    dataset = data.load(path) if path.is_file() else None
+    if dataset is None or dataset.ground_truth is None:
+        print(f"0020: skipped (need {path} and its ground truth kitti_odometry_06_poses.txt beside it)")
         return
-    dataset = data.load(path)
-    true = _kitti_motion(poses)[:COMPARED_PAIRS_0020]
+    true = odometry.camera_motion(dataset.ground_truth.world_T_imu, dataset.imu_T_cam)
     vo, best, median = _timed(lambda: odometry.visual_odometry(dataset), repeats)
     print(f"0020 against KITTI 06 ground truth, first {len(true)} pairs; runtime {best:.3f} s (median {median:.3f})")
     print(f"  RANSAC + GN                {_errors_line(vo.cam_T_next, vo.valid, true)}")
