@@ -17,7 +17,7 @@ early):
   default for lack of evidence, or wrong;
 * the time of ``calibrate``: cold (a fresh dataset object, ``cache=False``: wall and CPU,
   min over ``--repeats``) and cached (a fresh dataset object reading the JSON file written by
-  a first run into a temporary cache folder);
+  a first run; the whole script uses a temporary cache folder, never the user's);
 * the visual odometry's rotation error against the ground truth of ``0020`` (KITTI odometry
   sequence 06, attached by the loader from ``kitti_odometry_06_poses.txt`` beside the npz) on
   the pairs the checks use (valid, at least 4 inliers) and on all valid pairs.
@@ -58,18 +58,9 @@ def _timed(run, repeats):
 
 
 def _cached_time(dataset, repeats):
-    """Wall time of a cached calibrate (min over repeats), with a first run filling a temporary cache."""
-    previous = os.environ.get("VISLA_EDU_CACHE")
-    with tempfile.TemporaryDirectory() as folder:
-        os.environ["VISLA_EDU_CACHE"] = folder
-        try:
-            diagnostics.calibrate(_fresh(dataset), cache=True)
-            result, wall, _ = _timed(lambda: diagnostics.calibrate(_fresh(dataset), cache=True), repeats)
-        finally:
-            if previous is None:
-                os.environ.pop("VISLA_EDU_CACHE")
-            else:
-                os.environ["VISLA_EDU_CACHE"] = previous
+    """Wall time of a cached calibrate (min over repeats), after a first run filled the cache."""
+    diagnostics.calibrate(_fresh(dataset), cache=True)
+    result, wall, _ = _timed(lambda: diagnostics.calibrate(_fresh(dataset), cache=True), repeats)
     return result, wall
 
 
@@ -195,11 +186,14 @@ def main():
     directory = Path(folder).expanduser().resolve() if folder else None
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; calibration version "
           f"{diagnostics.CALIBRATION_VERSION}")
-    if directory is None or not directory.is_dir():
-        print("course drives skipped: set VISLA_EDU_DATA (or --data) to the folder with the course files")
-    else:
-        bench_course(directory, args.repeats)
-    bench_simulated(1 if args.quick else args.repeats, (0,) if args.quick else (0, 1, 2))
+    # a private cache folder: the user's cache is neither read (cold means cold) nor written
+    with tempfile.TemporaryDirectory(prefix="bench-calibration-") as cache:
+        os.environ["VISLA_EDU_CACHE"] = cache
+        if directory is None or not directory.is_dir():
+            print("course drives skipped: set VISLA_EDU_DATA (or --data) to the folder with the course files")
+        else:
+            bench_course(directory, args.repeats)
+        bench_simulated(1 if args.quick else args.repeats, (0,) if args.quick else (0, 1, 2))
 
 
 if __name__ == "__main__":
