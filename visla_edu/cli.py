@@ -183,7 +183,7 @@ def _cmd_info(args):
     if not args.no_diagnostics and dataset.num_observations:
         print()
         try:
-            print(diagnostics.diagnose(dataset))
+            print(diagnostics.calibrate(dataset).report(dataset.name))
         except (ArithmeticError, ValueError, MemoryError) as err:
             err.hint = "the file loaded fine; rerun with --no-diagnostics to skip the diagnostics"
             err.failed = True  # a failure of the diagnostics on a valid file: exit 1, not 2
