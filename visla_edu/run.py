@@ -123,6 +123,11 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
 def resolve_config(dataset, config):
     """``config`` with its ``"auto"`` settings measured from ``dataset``.
 
+    The velocity noise and the IMU lag come from :func:`visla_edu.diagnostics.calibrate`
+    (cached by the data's content); ``extrinsic_correction="auto"`` stays as it is and is
+    resolved with the camera (:func:`visla_edu.diagnostics.resolve_extrinsics`, the same
+    calibration).
+
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
@@ -135,21 +140,7 @@ def resolve_config(dataset, config):
     """
     if config.resolved:
         return config
-    return config.resolve(_measured_settings(dataset))
-
-
-def _measured_settings(dataset):
-    # TEMPORARY (replaced by diagnostics.calibrate when it lands): per-axis velocity noise =
-    # white noise (second differences) and the change within a step (first differences); lag 0.
-    from types import SimpleNamespace
-
-    u = dataset.twists
-    second = np.diff(u, n=2, axis=0)
-    white = 1.4826 * np.median(np.abs(second - np.median(second, axis=0)), axis=0) / np.sqrt(6)
-    first = np.sqrt(np.mean(np.diff(u, axis=0) ** 2, axis=0))
-    hold = np.sqrt(np.maximum(first**2 - 2 * white**2, 0.0)) / 2
-    sigma = np.maximum(np.sqrt(white**2 + hold**2), [1e-3] * 3 + [1e-4] * 3)
-    return SimpleNamespace(sigma_linear_velocity=tuple(sigma[:3]), sigma_angular_velocity=tuple(sigma[3:]), imu_lag=0)
+    return config.resolve(diagnostics.calibrate(dataset))
 
 
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
