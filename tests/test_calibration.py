@@ -297,3 +297,16 @@ def test_standin_flip_yz(require_data):
     cal = calibrate(ds)
     assert cal.extrinsic_correction == "flip_yz" and cal.imu_lag == 0, cal.report()
     np.testing.assert_allclose(cal.imu_T_cam, ds.extra["simulated_imu_T_cam"], atol=1e-12)
+
+
+def test_lag_rule_takes_the_best_lag_when_it_clearly_beats_lag_zero():
+    """Undecided between +1 and +2, both confidently better than 0: +1 (the best) is used;
+    undecided against 0 itself: 0 is kept."""
+    beats_zero = _tracks.TrackChoice(None, 1, f"{_tracks.NOT_ENOUGH}: +2 not worse with 95% confidence",
+                                     {"+0": [0.9, 0.4], "+2": [0.1, -0.2], "-1": [1.5, 1.0]})
+    lag, why = _calibration._decide_lag(beats_zero)
+    assert lag == 1 and "beats lag 0" in why
+    undecided = _tracks.TrackChoice(None, 1, f"{_tracks.NOT_ENOUGH}: +0 not worse with 95% confidence",
+                                    {"+0": [0.4, -0.7], "+2": [0.1, -0.7]})
+    assert _calibration._decide_lag(undecided)[0] == 0
+    assert _calibration._decide_lag(_tracks.TrackChoice(2, 2, "chosen", {"+0": [1.0, 0.5]}))[0] == 2
