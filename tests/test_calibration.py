@@ -153,6 +153,17 @@ def test_white_and_hold_noise_of_known_signals():
         diagnostics.imu_noise(np.zeros((10, 3)))
 
 
+def test_one_glitched_sample_does_not_set_the_noise():
+    """A single absurd velocity (past the loader's checks) leaves the measured noise as it was."""
+    rng = np.random.default_rng(1)
+    t = 0.1 * np.arange(2000)
+    twists = np.zeros((2000, 6))
+    twists[:, 0] = 10 + 2 * np.sin(0.5 * t) + 0.05 * rng.standard_normal(2000)
+    clean = diagnostics.imu_noise(twists)["sigma"]
+    twists[700, 0] = 1e200
+    np.testing.assert_allclose(diagnostics.imu_noise(twists)["sigma"], clean, rtol=0.02)
+
+
 # ----------------------------------------------------------------------------- bootstrap and track pairs
 
 

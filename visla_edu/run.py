@@ -563,15 +563,29 @@ def divergence_hint(dataset, config, frame=None):
     problems = data.dataset_problems(dataset)
     if problems:
         return "likely cause: " + problems[0]
+    calibration = dataset.extra.get("calibration")  # what the run resolved "auto" with, if it got that far
+    if calibration is not None and not config.resolved:
+        config = config.resolve(calibration)
     where = ""
     if frame is not None and 0 < frame < dataset.num_frames:
-        twist = motion.select_twists(dataset.twists, config.imu_lag)[frame - 1]
+        lag = config.imu_lag if isinstance(config.imu_lag, int) else 0
+        twist = motion.select_twists(dataset.twists, lag)[frame - 1]
         speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
         where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
                  f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
     return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
-            f"velocity noise {config.sigma_linear_velocity:g} m/s and {config.sigma_angular_velocity:g} rad/s) "
+            f"velocity noise {_setting_text(config.sigma_linear_velocity)} m/s and "
+            f"{_setting_text(config.sigma_angular_velocity)} rad/s) "
             "and the calibration (visla-edu info shows the diagnostics)")
+
+
+def _setting_text(value):
+    """A setting for a message: ``0.5``, ``[0.05 0.006 0.014]`` or ``auto``."""
+    if isinstance(value, str):
+        return value
+    if np.ndim(value):
+        return np.array2string(np.asarray(value, dtype=float), precision=3)
+    return f"{value:g}"
 
 
 def _duration(seconds):

@@ -42,7 +42,7 @@ __all__ = ["CALIBRATION_VERSION", "CACHED_ARRAYS", "VoEvidence", "Calibration", 
 
 #: Bump whenever the diagnostics change what they compute: cached calibrations of older
 #: versions are then ignored.
-CALIBRATION_VERSION = 2
+CALIBRATION_VERSION = 3
 #: The dataset arrays the cache key is computed from.
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
                  "obs_ids", "obs_z")
