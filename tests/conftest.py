@@ -2,8 +2,8 @@
 
 The suite never writes to the user's cache folder: the calibration cache
 (``VISLA_EDU_CACHE``, see :mod:`visla_edu.cache`) points at a temporary folder for the whole
-session (which the notebook kernels and subprocesses inherit), and at each test's own
-``tmp_path`` while that test runs.
+session (which the notebook kernels and subprocesses inherit), and at a fresh temporary
+folder of each test while that test runs.
 """
 
 import os
@@ -38,9 +38,10 @@ def pytest_unconfigure(config):
 
 
 @pytest.fixture(autouse=True)
-def _private_calibration_cache(tmp_path, monkeypatch):
-    """Each test caches calibrations in its own temporary folder."""
-    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "visla-edu-cache"))
+def _private_calibration_cache(tmp_path_factory, monkeypatch):
+    """Each test caches calibrations in its own temporary folder (beside its tmp_path, not in it:
+    tests that list what they wrote there must not see the cache)."""
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.mktemp("visla-edu-cache")))
 
 
 def _course_dir():

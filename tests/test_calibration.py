@@ -153,6 +153,17 @@ def test_white_and_hold_noise_of_known_signals():
         diagnostics.imu_noise(np.zeros((10, 3)))
 
 
+def test_one_glitched_sample_does_not_set_the_noise():
+    """A single absurd velocity (past the loader's checks) leaves the measured noise as it was."""
+    rng = np.random.default_rng(1)
+    t = 0.1 * np.arange(2000)
+    twists = np.zeros((2000, 6))
+    twists[:, 0] = 10 + 2 * np.sin(0.5 * t) + 0.05 * rng.standard_normal(2000)
+    clean = diagnostics.imu_noise(twists)["sigma"]
+    twists[700, 0] = 1e200
+    np.testing.assert_allclose(diagnostics.imu_noise(twists)["sigma"], clean, rtol=0.02)
+
+
 # ----------------------------------------------------------------------------- bootstrap and track pairs
 
 
@@ -297,3 +308,16 @@ def test_standin_flip_yz(require_data):
     cal = calibrate(ds)
     assert cal.extrinsic_correction == "flip_yz" and cal.imu_lag == 0, cal.report()
     np.testing.assert_allclose(cal.imu_T_cam, ds.extra["simulated_imu_T_cam"], atol=1e-12)
+
+
+def test_lag_rule_takes_the_best_lag_when_it_clearly_beats_lag_zero():
+    """Undecided between +1 and +2, both confidently better than 0: +1 (the best) is used;
+    undecided against 0 itself: 0 is kept."""
+    beats_zero = _tracks.TrackChoice(None, 1, f"{_tracks.NOT_ENOUGH}: +2 not worse with 95% confidence",
+                                     {"+0": [0.9, 0.4], "+2": [0.1, -0.2], "-1": [1.5, 1.0]})
+    lag, why = _calibration._decide_lag(beats_zero)
+    assert lag == 1 and "beats lag 0" in why
+    undecided = _tracks.TrackChoice(None, 1, f"{_tracks.NOT_ENOUGH}: +0 not worse with 95% confidence",
+                                    {"+0": [0.4, -0.7], "+2": [0.1, -0.7]})
+    assert _calibration._decide_lag(undecided)[0] == 0
+    assert _calibration._decide_lag(_tracks.TrackChoice(2, 2, "chosen", {"+0": [1.0, 0.5]}))[0] == 2

@@ -42,7 +42,7 @@ def test_values_in_range_parse(pair, value):
 
 
 @pytest.mark.parametrize("pair, message", [
-    ("imu_lag=5000", r"imu_lag must be an integer in \[-2, 2\] \(which velocity sample.*got 5000"),
+    ("imu_lag=5000", r"imu_lag must be an integer in \[-2, 2\] or 'auto' \(which velocity sample.*got 5000"),
     ("imu_lag=2.0", r"imu_lag needs an int"),
     ("landmark_stride=1_0", r"landmark_stride needs an int"),
     ("sigma_pixel=inf", r"sigma_pixel needs a float"),

@@ -28,6 +28,9 @@ __all__ = [
     "landmark_update",
     "pose_update",
     "joint_update",
+    "joint_correction",
+    "invariant_pose_jacobian",
+    "invariant_retract",
 ]
 
 #: Dimension of the pose perturbation ``[v; w]``: the first columns of the joint state.
@@ -286,9 +289,38 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     nis : float
         ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
     """
-    k = len(obs_slots)
     if prediction is None:
         prediction = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
+    delta, nis = joint_correction(Sigma, obs_slots, z, noise_var, prediction)
+    p_new = p_active + delta[POSE_DIM:].reshape(-1, 3)
+    return world_T_imu @ lie.se3_exp(delta[:POSE_DIM]), p_new, nis
+
+
+def joint_correction(Sigma, obs_slots, z, noise_var, prediction):
+    """The gain step of :func:`joint_update`: the state correction ``K r``, covariance in place.
+
+    Shared by both forms of the joint filter: the right-perturbation form applies the
+    correction as ``mu exp(hat(delta_pose))``, ``m + delta_m`` (:func:`joint_update`), the
+    invariant form as :func:`invariant_retract`; they differ only in the Jacobians passed in
+    ``prediction``.
+
+    Parameters
+    ----------
+    Sigma : ndarray, shape (D, D)
+        Joint covariance, overwritten with the posterior.
+    obs_slots : ndarray of int, shape (k,)
+    z : ndarray, shape (k, 4)
+    noise_var : float
+    prediction : tuple of ndarray
+        ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``.
+
+    Returns
+    -------
+    delta : ndarray, shape (D,)
+    nis : float
+        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
+    """
+    k = len(obs_slots)
     z_pred, J_landmark, J_pose = prediction
     r4 = z - z_pred
     J_pose3 = (STEREO_ROWS @ J_pose).reshape(3 * k, 6)  # (m, 6), m = 3k
@@ -303,5 +335,40 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     S[np.diag_indices(3 * k)] += noise_var
     delta, nis = _gain_update(Sigma, Sigma_Ht, S, (r4 @ STEREO_ROWS.T).ravel())
     nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
-    p_new = p_active + delta[6:].reshape(-1, 3)
-    return world_T_imu @ lie.se3_exp(delta[:6]), p_new, nis
+    return delta, nis
+
+
+def invariant_pose_jacobian(J_landmark):
+    """Pose Jacobian of the invariant form, ``[-J_landmark, 0]``, shape (k, 4, 6).
+
+    With ``T = exp(hat(xi)) mu`` and ``m_j = exp(hat(theta)) mu_j + e_j`` the point seen by the
+    camera is ``inv(T) m_j ~ inv(mu) (mu_j + e_j - p)`` to first order, ``xi = [p; theta]``: the
+    observation depends on the pose error only through ``p``, with minus the landmark
+    Jacobian, and not at all on ``theta``. Moving the whole world (the same ``p`` and ``e_j``)
+    changes nothing, whatever the estimate: that is what keeps the invariant filter consistent.
+    """
+    return np.concatenate([-J_landmark, np.zeros_like(J_landmark)], axis=-1)
+
+
+def invariant_retract(world_T_imu, p_active, delta):
+    """Apply an invariant correction: ``mu <- exp(hat(xi)) mu``, ``mu_j <- R_xi mu_j + J_l(theta) e_j``.
+
+    The group update of the invariant filter (pose and landmarks move together, ``R_xi`` the
+    rotation of ``exp(hat(xi))``, ``J_l`` :func:`visla_edu.lie.so3_left_jacobian`).
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (4, 4)
+    p_active : ndarray, shape (n, 3)
+    delta : ndarray, shape (6 + 3 n,)
+        ``[xi (6); e_0 (3); e_1 (3); ...]``.
+
+    Returns
+    -------
+    world_T_imu_new : ndarray, shape (4, 4)
+    p_active_new : ndarray, shape (n, 3)
+    """
+    step = lie.se3_exp(delta[:POSE_DIM])
+    J_l = lie.so3_left_jacobian(delta[3:POSE_DIM])
+    e = delta[POSE_DIM:].reshape(-1, 3)
+    return step @ world_T_imu, p_active @ step[:3, :3].T + e @ J_l.T

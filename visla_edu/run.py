@@ -29,8 +29,9 @@ from visla_edu.camera import StereoCamera
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
-__all__ = ["MODES", "RunArrays", "RunResult", "WorkEstimate", "limit_blas_threads", "make_filter", "iterate_filter",
-           "run_filter", "evaluate_result", "save_result", "load_result", "estimate_work", "divergence_hint"]
+__all__ = ["MODES", "RunArrays", "RunResult", "WorkEstimate", "limit_blas_threads", "make_filter", "resolve_config",
+           "iterate_filter", "run_filter", "evaluate_result", "save_result", "load_result", "estimate_work",
+           "divergence_hint"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
@@ -73,7 +74,10 @@ def _blas_controller():
 
 
 def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
-    """Build the filter object for ``mode`` with the corrected calibration.
+    """Build the filter object for ``mode`` with the settings and calibration resolved.
+
+    Settings left at ``"auto"`` (the velocity noise, the IMU lag, the extrinsic correction)
+    are measured from the data first (:func:`resolve_config`).
 
     Parameters
     ----------
@@ -84,11 +88,12 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     dense : bool
         Textbook joint EKF over all (strided) landmarks; only for ``mode="slam"``.
     verbose : bool
-        Print the extrinsic diagnostic's evidence when a correction is applied.
+        Print the evidence of an automatic extrinsic correction.
 
     Returns
     -------
     filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
+        Its ``config`` is the resolved one (no ``"auto"`` left but ``extrinsic_correction``).
 
     Raises
     ------
@@ -98,7 +103,6 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
         ranges the loader enforces on files, since the filter would silently turn an absurd
         focal length, baseline or extrinsic into inf/NaN covariances or a garbage map).
     """
-    config = config or FilterConfig()
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if dense and mode != SLAM:
@@ -106,6 +110,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     problems = data.calibration_problems(dataset)
     if problems:
         raise ValueError(f"cannot run the filter: {problems[0]}")
+    config = resolve_config(dataset, config or FilterConfig())
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
         print(evidence)
@@ -113,6 +118,29 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     if mode == SLAM:
         return filters.JointSlam(dataset, camera, config, dense=dense)
     return _MODE_CLASSES[mode](dataset, camera, config)
+
+
+def resolve_config(dataset, config):
+    """``config`` with its ``"auto"`` settings measured from ``dataset``.
+
+    The velocity noise and the IMU lag come from :func:`visla_edu.diagnostics.calibrate`
+    (cached by the data's content); ``extrinsic_correction="auto"`` stays as it is and is
+    resolved with the camera (:func:`visla_edu.diagnostics.resolve_extrinsics`, the same
+    calibration).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig
+
+    Returns
+    -------
+    visla_edu.filters.FilterConfig
+        The same object when nothing was ``"auto"``.
+    """
+    if config.resolved:
+        return config
+    return config.resolve(diagnostics.calibrate(dataset))
 
 
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
@@ -225,6 +253,8 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense, verbose=verbose)
+    config = flt.config
+    flt.record_landmarks = False  # a whole run keeps no per-frame landmarks
     T = dataset.num_frames
     arrays = RunArrays(T)
     show = T > 500 if progress is None else progress
@@ -373,11 +403,17 @@ def save_result(result, path):
     return path.resolve()
 
 
+def _setting(array):
+    """A saved setting back: None (empty), a number or string, or a per-axis tuple."""
+    if array.size == 0:
+        return None
+    return array.item() if array.size == 1 else tuple(array.tolist())
+
+
 def load_result(path):
     """Load a :class:`RunResult` written by :func:`save_result`."""
     with np.load(path, allow_pickle=False) as f:
-        config = {k[len("config_"):]: (None if f[k].size == 0 else f[k].item())
-                  for k in f.files if k.startswith("config_")}
+        config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
         evaluation = {k[len("eval_"):]: f[k].item() for k in f.files if k.startswith("eval_")}
         fields = {k: f[k] for k in f.files if not k.startswith(("config_", "eval_"))}
     for key in ("name", "mode"):
@@ -527,15 +563,29 @@ def divergence_hint(dataset, config, frame=None):
     problems = data.dataset_problems(dataset)
     if problems:
         return "likely cause: " + problems[0]
+    calibration = dataset.extra.get("calibration")  # what the run resolved "auto" with, if it got that far
+    if calibration is not None and not config.resolved:
+        config = config.resolve(calibration)
     where = ""
     if frame is not None and 0 < frame < dataset.num_frames:
-        twist = motion.select_twists(dataset.twists, config.imu_lag)[frame - 1]
+        lag = config.imu_lag if isinstance(config.imu_lag, int) else 0
+        twist = motion.select_twists(dataset.twists, lag)[frame - 1]
         speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
         where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
                  f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
     return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
-            f"velocity noise {config.sigma_linear_velocity:g} m/s and {config.sigma_angular_velocity:g} rad/s) "
+            f"velocity noise {_setting_text(config.sigma_linear_velocity)} m/s and "
+            f"{_setting_text(config.sigma_angular_velocity)} rad/s) "
             "and the calibration (visla-edu info shows the diagnostics)")
+
+
+def _setting_text(value):
+    """A setting for a message: ``0.5``, ``[0.05 0.006 0.014]`` or ``auto``."""
+    if isinstance(value, str):
+        return value
+    if np.ndim(value):
+        return np.array2string(np.asarray(value, dtype=float), precision=3)
+    return f"{value:g}"
 
 
 def _duration(seconds):

@@ -26,7 +26,7 @@ from visla_edu.dataset import Dataset, repeated_frames
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import imu_noise
 from visla_edu.diagnostics._report import calibration_report
-from visla_edu.diagnostics._tracks import TrackEvidence, TrackScorer
+from visla_edu.diagnostics._tracks import NOT_ENOUGH, TrackEvidence, TrackScorer
 from visla_edu.diagnostics._vo import (
     CORRECTIONS,
     DISAGREES,
@@ -42,7 +42,7 @@ __all__ = ["CALIBRATION_VERSION", "CACHED_ARRAYS", "VoEvidence", "Calibration", 
 
 #: Bump whenever the diagnostics change what they compute: cached calibrations of older
 #: versions are then ignored.
-CALIBRATION_VERSION = 1
+CALIBRATION_VERSION = 3
 #: The dataset arrays the cache key is computed from.
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
                  "obs_ids", "obs_z")
@@ -221,10 +221,21 @@ def _decide_correction(choice, check):
 
 
 def _decide_lag(choice):
-    """The lag to use and why, from the track choice among the lags."""
-    if choice.chosen is None:
-        return 0, f"kept lag 0: track reprojection, {choice.verdict}"
-    return int(choice.chosen), "every other lag has a larger track-reprojection error with 95% confidence"
+    """The lag to use and why, from the track choice among the lags.
+
+    A lag that beats every other with 95% confidence is used. Failing that, the best lag is
+    still used when it beats the course's convention (lag 0) with 95% confidence: the lags
+    it could not separate from are then about as good as it, and all better than 0 (on
+    dataset 0022, +1 and +2 both beat 0 but not each other).
+    """
+    if choice.chosen is not None:
+        return int(choice.chosen), "every other lag has a larger track-reprojection error with 95% confidence"
+    over_zero = choice.margins.get("+0")
+    if choice.best not in (None, 0) and over_zero is not None and over_zero[1] > 0:
+        return int(choice.best), (f"lag {int(choice.best):+d} beats lag 0 with 95% confidence "
+                                  f"(by {over_zero[0]:.2f} px, 95% lower bound {over_zero[1]:+.2f} px); "
+                                  f"{choice.verdict.removeprefix(NOT_ENOUGH + ': ')}")
+    return 0, f"kept lag 0: track reprojection, {choice.verdict}"
 
 
 def _vo_evidence(dataset, check, slope_lag, imu_T_cam, lag):

@@ -9,7 +9,10 @@ Two parts add up (in variance):
   its step while the true velocity changes within it; the first differences measure by how
   much: ``rms(x[t+1] - x[t])^2 = change^2 + 2 white^2``, and holding a linearly changing
   velocity at one end of the step is wrong by half the change on average:
-  ``hold = sqrt(max(rms(diff)^2 - 2 white^2, 0)) / 2``.
+  ``hold = sqrt(max(rms(diff)^2 - 2 white^2, 0)) / 2``. The rms leaves out first differences
+  beyond :data:`GLITCH_MADS` robust standard deviations of the axis's first differences: one
+  glitched sample must not set the noise of a whole drive (the filter's divergence check
+  reports it at its frame instead).
 
 The filter's noise is ``sqrt(white^2 + hold^2)`` per axis, floored at
 :data:`MIN_SIGMA_LINEAR` and :data:`MIN_SIGMA_ANGULAR` (a velocity known better than that is
@@ -25,6 +28,9 @@ MIN_SIGMA_LINEAR = 1e-3
 #: Floor of the angular velocity noise (rad/s).
 MIN_SIGMA_ANGULAR = 1e-4
 _MAD_TO_SIGMA = 1.4826
+#: First differences farther than this many robust standard deviations from their median are
+#: glitches, not motion (a car's acceleration and turn rate stay well inside it).
+GLITCH_MADS = 20.0
 
 
 def imu_noise(twists):
@@ -50,6 +56,14 @@ def imu_noise(twists):
         return {"white": zero, "hold": zero.copy(), "sigma": floor}
     second = np.diff(twists, n=2, axis=0)
     white = _MAD_TO_SIGMA * np.median(np.abs(second - np.median(second, axis=0)), axis=0) / np.sqrt(6)
-    first_rms = np.sqrt(np.mean(np.diff(twists, axis=0) ** 2, axis=0))
+    first_rms = _rms_without_glitches(np.diff(twists, axis=0))
     hold = np.sqrt(np.maximum(first_rms**2 - 2 * white**2, 0.0)) / 2
     return {"white": white, "hold": hold, "sigma": np.maximum(np.hypot(white, hold), floor)}
+
+
+def _rms_without_glitches(first):
+    """Per-axis rms of ``first`` (n, 6), leaving out values beyond :data:`GLITCH_MADS` robust sigmas."""
+    centre = np.median(first, axis=0)
+    scale = _MAD_TO_SIGMA * np.median(np.abs(first - centre), axis=0)
+    keep = np.abs(first - centre) <= GLITCH_MADS * scale
+    return np.sqrt(np.sum(np.where(keep, first, 0.0) ** 2, axis=0) / np.maximum(keep.sum(axis=0), 1))

@@ -27,13 +27,16 @@ from visla_edu.codes import (
     STATUS_NAMES,
 )
 from visla_edu.filters._base import MAX_DISTANCE, MIN_DEPTH, FilterDivergedError, StepRecord
-from visla_edu.filters._config import FilterConfig
+from visla_edu.filters._config import AUTO, AUTO_FIELDS, MAX_IMU_LAG, FilterConfig
 from visla_edu.filters._maps import DeadReckoning, LandmarkMapping, VisualInertialOdometry
 from visla_edu.filters._slam import DENSE_PLACEHOLDER_VARIANCE, MAX_DENSE_BYTES, JointSlam
 from visla_edu.filters._state import ActiveSet
 
 __all__ = [
     "FilterConfig",
+    "AUTO",
+    "AUTO_FIELDS",
+    "MAX_IMU_LAG",
     "FilterDivergedError",
     "StepRecord",
     "OBS_USED",

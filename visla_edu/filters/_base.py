@@ -54,7 +54,8 @@ class StepRecord:
     nis_dof : int
         Its degrees of freedom (4 per used observation).
     active_ids : ndarray of int, shape (n,)
-        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO).
+        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO);
+        empty when the filter's ``record_landmarks`` is off.
     active_means : ndarray, shape (n, 3)
     active_covs : ndarray, shape (n, 3, 3)
         Marginal covariance of each active landmark.
@@ -95,9 +96,15 @@ class _Filter(abc.ABC):
     landmark_cov : ndarray, shape (M, 3, 3)
         Landmark covariances of the modes that keep them per landmark (in SLAM: of retired
         landmarks only, see :meth:`landmark_estimates`).
+    record_landmarks : bool
+        Fill the active landmarks of each :class:`StepRecord` (the stepper draws them); the
+        whole-run driver, which keeps none of them, turns this off (they are then empty).
     """
 
     def __init__(self, dataset, camera, config):
+        if not config.resolved:
+            raise ValueError("a filter needs its 'auto' settings measured first: build it with "
+                             "visla_edu.run.make_filter, or pass config=run.resolve_config(dataset, config)")
         self.dataset = dataset
         self.camera = camera
         self.config = config
@@ -112,6 +119,7 @@ class _Filter(abc.ABC):
         self.landmark_cov = np.full((M, 3, 3), np.nan)
         self.last_frame = dataset.track_spans()[:, 1]
         self.skip_frames = set(repeated_frames(dataset)) if config.skip_repeated_frames else set()
+        self.record_landmarks = True
 
     # -- the hooks step() calls ---------------------------------------------------------
     @property
@@ -266,7 +274,10 @@ class _Filter(abc.ABC):
                 f"(diagonal {np.array2string(variances, precision=3)})")
 
     def _record(self, ids, z, z_pred, status, nis, dof):
-        active_ids, active_covs = self._active()
+        if self.record_landmarks:
+            active_ids, active_covs = self._active()
+        else:
+            active_ids, active_covs = np.zeros(0, dtype=np.int64), np.zeros((0, 3, 3))
         return StepRecord(
             t=self.t, world_T_imu=self.world_T_imu.copy(), pose_cov=self.pose_cov.copy(),
             ids=ids.copy(), z=z.copy(), z_pred=z_pred, status=status, nis=nis, nis_dof=dof,

@@ -1,12 +1,19 @@
 """The filter modes' settings: noise, initialisation, gating, and the teaching comparisons."""
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from visla_edu.filters._settings import check_settings, setting
 
-__all__ = ["FilterConfig"]
+__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS"]
+
+#: The value of a setting the driver measures from the data (:func:`visla_edu.diagnostics.calibrate`).
+AUTO = "auto"
+#: ``imu_lag`` is searched and accepted in ``-MAX_IMU_LAG .. MAX_IMU_LAG`` frames.
+MAX_IMU_LAG = 2
+#: Settings that may be ``"auto"`` and their attribute on the calibration that resolves them.
+AUTO_FIELDS = ("sigma_linear_velocity", "sigma_angular_velocity", "imu_lag")
 
 
 @dataclass
@@ -59,11 +66,13 @@ class FilterConfig:
     sigma_pixel : float
         Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate (px);
         ``R = sigma_pixel^2 I4``.
-    sigma_linear_velocity : float
-        Modes: all. White noise on each linear-velocity sample (m/s); ``W`` scales it by the
-        time step.
-    sigma_angular_velocity : float
-        Modes: all. White noise on each angular-velocity sample (rad/s).
+    sigma_linear_velocity : float, (float, float, float) or "auto"
+        Modes: all. Noise on each linear-velocity sample (m/s), one value for every axis or one
+        per body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
+        axis (:func:`visla_edu.diagnostics.calibrate`: the samples' white noise and how much
+        the velocity changes within a step, which the model holds constant).
+    sigma_angular_velocity : float, (float, float, float) or "auto"
+        Modes: all. Noise on each angular-velocity sample (rad/s), as above.
     landmark_prior_inflation : float
         Modes: mapping, vio, slam. A landmark enters the state at its first observation (which
         it consumes) with its mean at the stereo triangulation and the covariance
@@ -85,9 +94,10 @@ class FilterConfig:
         Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` (px) to triangulate a new
         landmark; smaller disparities give depths beyond ``fsu b / min_init_disparity``.
         Observations with non-positive disparity are never used.
-    imu_lag : int
+    imu_lag : int or "auto"
         Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
-        the step ``t -> t+1``: ``u[t + imu_lag]``, -2 to 2.
+        the step ``t -> t+1``: ``u[t + imu_lag]``, in ``-2 .. 2``. ``"auto"``: the lag the data
+        supports (:func:`visla_edu.diagnostics.calibrate`), 0 without clear evidence.
     extrinsic_correction : str
         Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
@@ -112,14 +122,25 @@ class FilterConfig:
     landmark_stride : int
         Modes: mapping, vio, slam. Use only landmarks whose index is a multiple of this (the
         textbook workaround for the dense filter's memory; 1 = every landmark).
+    slam_error : {"invariant", "right"}
+        Mode: slam. What the joint state's error means (:mod:`visla_edu.filters._forms`):
+        ``"invariant"`` (world-frame error, ``T = exp(hat(xi)) mu``: the invariant EKF, consistent)
+        or ``"right"`` (the right perturbation ``T = mu exp(hat(delta))`` notebooks 05-06 derive,
+        whose estimate-dependent unobservable directions make it overconfident: pose NEES in the
+        hundreds on 1100-frame simulated drives, against 4-6 for the invariant form).
+    reinit_gated_landmarks : bool
+        Mode: slam. A landmark no update has used yet (only its first observation placed it) is
+        placed again from its next observation when that one falls outside the gate: the first
+        observation was the outlier. False keeps the first placement, so a landmark born from
+        a bad observation gates its whole track.
     """
 
     sigma_pixel: float = setting(1.5, float, 1e-3, 100.0, unit="px",
                                  why="no tracker locates a feature to a thousandth of a pixel; 100 px is no location")
-    sigma_linear_velocity: float = setting(0.5, float, 0.0, 50.0, unit="m/s",
-                                           why="0 trusts the velocities; 50 m/s (180 km/h) of noise is no measurement")
-    sigma_angular_velocity: float = setting(0.05, float, 0.0, 5.0, unit="rad/s",
-                                            why="5 rad/s of noise is almost a turn per second")
+    sigma_linear_velocity: object = setting(AUTO, float, 0.0, 50.0, words=(AUTO,), per_axis=True, unit="m/s",
+                                            why="0 trusts the velocities; 50 m/s (180 km/h) of noise is no measurement")
+    sigma_angular_velocity: object = setting(AUTO, float, 0.0, 5.0, words=(AUTO,), per_axis=True, unit="rad/s",
+                                             why="5 rad/s of noise is almost a turn per second")
     landmark_prior_inflation: float = setting(1.0, float, 0.0, 1000.0,
                                               why="a factor on the triangulation's standard deviation")
     landmark_prior_sigma: float = setting(0.1, float, 0.0, 1e4, low_open=True, unit="m",
@@ -130,8 +151,8 @@ class FilterConfig:
                                       why="a probability; 1 disables gating")
     min_init_disparity: float = setting(3.0, float, 0.0, 1000.0, unit="px",
                                         why="no image is wider than the range")
-    imu_lag: int = setting(0, int, -2, 2,
-                           why="which velocity sample near the step drives it; a larger shift is a broken file")
+    imu_lag: object = setting(AUTO, int, -MAX_IMU_LAG, MAX_IMU_LAG, words=(AUTO,),
+                              why="which velocity sample near the step drives it; a larger shift is a broken file")
     extrinsic_correction: str = setting("auto", str,
                                         why="'auto', 'none' or a correction of visla_edu.diagnostics.CORRECTIONS")
     landmark_cross_covariance: bool = setting(True, bool)
@@ -139,6 +160,9 @@ class FilterConfig:
     vio_refine_landmarks: bool = setting(False, bool)
     skip_repeated_frames: bool = setting(True, bool)
     landmark_stride: int = setting(1, int, 1, 1_000_000, why="1 uses every landmark")
+    slam_error: str = setting("invariant", str, words=("invariant", "right"),
+                              why="the invariant EKF, or the right perturbation notebooks 05-06 derive")
+    reinit_gated_landmarks: bool = setting(True, bool)
 
     def __post_init__(self):
         check_settings(self)
@@ -157,6 +181,24 @@ class FilterConfig:
 
         return float(chi2.ppf(self.gate_probability, 4))
 
+    @property
+    def resolved(self):
+        """True when no setting of :data:`AUTO_FIELDS` is ``"auto"`` (a filter can run with it)."""
+        return not any(isinstance(getattr(self, name), str) for name in AUTO_FIELDS)
+
+    def resolve(self, calibration):
+        """A copy with every ``"auto"`` of :data:`AUTO_FIELDS` replaced by the calibration's value.
+
+        Parameters
+        ----------
+        calibration : object
+            Has the attributes of :data:`AUTO_FIELDS` (e.g. a
+            :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag.
+        """
+        values = {name: getattr(calibration, name) for name in AUTO_FIELDS if getattr(self, name) == AUTO}
+        return replace(self, **values)
+
     def to_dict(self):
         """Plain dict of the settings (for saving with results)."""
         return asdict(self)
+

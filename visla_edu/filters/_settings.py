@@ -44,6 +44,9 @@ class SettingSpec:
         means any text (checked where it is used).
     optional : bool
         None is allowed (``none`` on the command line).
+    per_axis : bool
+        A number setting that also takes three numbers, one per body axis ``(x, y, z)``
+        (``0.1,0.02,0.02`` on the command line), each within the range.
     unit, why : str
         For messages: the unit of the value and why the range is what it is.
     """
@@ -56,6 +59,7 @@ class SettingSpec:
     optional: bool = False
     unit: str = ""
     why: str = ""
+    per_axis: bool = False
 
     def describe(self):
         """What is valid, e.g. ``"a number in (0.001, 100] px"`` or ``"an integer in [-2, 2] or 'auto'"``."""
@@ -66,6 +70,8 @@ class SettingSpec:
         else:
             noun = "an integer" if self.kind is int else "a number"
             text = noun + _range_text(self.low, self.high, self.low_open) + (f" {self.unit}" if self.unit else "")
+            if self.per_axis:
+                text += " (or three, x, y, z)"
             text += "".join(f" or {w!r}" for w in self.words)
         return text + (" or none" if self.optional else "")
 
@@ -73,12 +79,18 @@ class SettingSpec:
         """``value`` if valid (an integral float becomes an int for int settings), else ValueError."""
         if value is None and self.optional or (isinstance(value, str) and value in self.words):
             return value
+        if self.per_axis and isinstance(value, (tuple, list, np.ndarray)) and np.ndim(value) == 1 and len(value) == 3:
+            return tuple(self._check_one(name, v, value) for v in value)
+        return self._check_one(name, value, value)
+
+    def _check_one(self, name, value, shown):
+        """One number (or value) of the setting, checked; ``shown`` is what the message quotes."""
         ok, value = _coerce(self.kind, value)
         if ok and self.kind in (int, float):
             ok = math.isfinite(value) and _in_range(value, self.low, self.high, self.low_open)
         if not ok or (self.kind is str and self.words and value not in self.words):
             why = f" ({self.why})" if self.why else ""
-            raise ValueError(f"FilterConfig.{name} must be {self.describe()}{why}, got {value!r}")
+            raise ValueError(f"FilterConfig.{name} must be {self.describe()}{why}, got {_shown(shown)!r}")
         return value
 
     def parse(self, name, text):
@@ -89,7 +101,11 @@ class SettingSpec:
         if word.lower() in self.words:
             return word.lower()
         try:
-            value = _from_text(self.kind, word)
+            parts = word.split(",") if self.per_axis and "," in word else [word]
+            if len(parts) not in (1, 3):
+                raise ValueError(word)
+            values = [_from_text(self.kind, part.strip()) for part in parts]
+            value = values[0] if len(values) == 1 else tuple(values)
         except ValueError:
             why = f"; {self.why}" if self.why else ""
             article = "an" if self.kind is int else "a"
@@ -101,9 +117,10 @@ class SettingSpec:
             raise ValueError(str(err).removeprefix("FilterConfig.")) from None
 
 
-def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why=""):
+def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why="",
+            per_axis=False):
     """A dataclass field with its :class:`SettingSpec` (arguments as its attributes)."""
-    spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why)
+    spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why, per_axis)
     return dataclasses.field(default=default, metadata={SPEC: spec})
 
 
@@ -139,6 +156,13 @@ def parse_settings(cls, pairs):
             raise ValueError(f"{pair!r}: {name} is set twice")
         out[name] = value
     return out
+
+
+def _shown(value):
+    """A value for a message: numpy scalars and arrays as plain Python numbers."""
+    if isinstance(value, np.ndarray):
+        return tuple(value.tolist())
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _range_text(low, high, low_open):

@@ -368,7 +368,7 @@ class Stepper:
         """IMU-only trajectory of the whole run, shape (T, 4, 4) (computed once per reset)."""
         if self._dead_reckoning is None:
             ds = self._dataset
-            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self._config.imu_lag)
+            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self.filter.config.imu_lag)
         return self._dead_reckoning
 
     def position_covariance(self):

@@ -165,10 +165,11 @@ class StepperWidget(w.VBox):
 
     def _build_noise_box(self):
         """One slider per noise setting and a defaults button, in a closed accordion."""
-        defaults = FilterConfig()
+        in_use = self.stepper.filter.config  # resolved: "auto" settings carry the measured values
         self.noise_sliders = {}
         for name in NOISE_FIELDS:
-            slider = _noise_slider(name, getattr(self.stepper.config, name), getattr(defaults, name))
+            value = _slider_value(getattr(in_use, name))
+            slider = _noise_slider(name, value, value)
             slider.observe(self._on_noise, names="value")
             self.noise_sliders[name] = slider
         self.defaults_button = w.Button(description="defaults", tooltip="restore the default noise settings",
@@ -226,10 +227,11 @@ class StepperWidget(w.VBox):
 
     def _on_defaults(self, _):
         defaults = FilterConfig()
+        self._reconfigure({name: getattr(defaults, name) for name in self.noise_sliders}, keep_time=True)
+        in_use = self.stepper.filter.config
         with self._busy():
             for name, slider in self.noise_sliders.items():
-                slider.value = getattr(defaults, name)
-        self._reconfigure({name: getattr(defaults, name) for name in self.noise_sliders}, keep_time=True)
+                slider.value = _slider_value(getattr(in_use, name))
 
     def _on_view(self, change):
         self.figure.follow = bool(change["new"])
@@ -294,6 +296,11 @@ def _button(text, tooltip, handler):
     b = w.Button(description=text, tooltip=tooltip, layout=w.Layout(width="auto"))
     b.on_click(handler)
     return b
+
+
+def _slider_value(value):
+    """One number for a slider: a per-axis setting shows its largest axis."""
+    return float(np.max(value))
 
 
 def _noise_slider(name, value, default):
