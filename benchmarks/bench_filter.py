@@ -35,7 +35,7 @@ def _measure(name, mode, dense, stride, repeat):
     import numpy as np
 
     from visla_edu import data, run
-    from visla_edu.ekf import FilterConfig
+    from visla_edu.filters import FilterConfig
 
     dataset = data.load(name)
     config = FilterConfig(landmark_stride=stride)

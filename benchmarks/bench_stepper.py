@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from visla_edu import data
-from visla_edu.widgets import StepperWidget
+from visla_edu.stepper.widget import StepperWidget
 
 
 def _stats(seconds):

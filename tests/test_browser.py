@@ -70,7 +70,7 @@ def page_url(tmp_path_factory):
     reason = _skip_reason()
     if reason:
         pytest.skip(reason)
-    from visla_edu.widgets import serve
+    from visla_edu.stepper.app import serve
 
     port = _free_port()
     log = tmp_path_factory.mktemp("voila") / "voila.log"

@@ -7,6 +7,7 @@ from scipy import stats
 from scipy.linalg import block_diag
 
 from visla_edu import ekf, lie, simulate
+from visla_edu.filters import FilterConfig
 from visla_edu.camera import StereoCamera, triangulate_disparity, triangulation_jacobian
 
 K_RIG, B_RIG, IMU_T_CAM = simulate.default_rig()
@@ -333,18 +334,18 @@ def test_triangulation_covariance_matches_monte_carlo(camera):
 ])
 def test_filter_config_rejects_bad_values_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
-        ekf.FilterConfig(**{field: value})
+        FilterConfig(**{field: value})
 
 
 def test_filter_config_accepts_edge_values():
-    cfg = ekf.FilterConfig(sigma_linear_velocity=0.0, sigma_angular_velocity=0.0, gate_probability=1.0,
-                           imu_lag=-1, landmark_stride=20, min_init_disparity=0.0)
+    cfg = FilterConfig(sigma_linear_velocity=0.0, sigma_angular_velocity=0.0, gate_probability=1.0,
+                       imu_lag=-1, landmark_stride=20, min_init_disparity=0.0)
     assert cfg.gate_threshold == np.inf
     assert cfg.to_dict()["landmark_stride"] == 20
 
 
 @pytest.mark.parametrize("p", [0.5, 0.95, 0.999])
 def test_gate_threshold_is_chi2_quantile(p):
-    cfg = ekf.FilterConfig(gate_probability=p, sigma_pixel=2.0)
+    cfg = FilterConfig(gate_probability=p, sigma_pixel=2.0)
     assert cfg.gate_threshold == pytest.approx(stats.chi2.ppf(p, 4), rel=1e-12)
     assert cfg.pixel_variance == 4.0

@@ -1,11 +1,15 @@
 """Tests of visla_edu.stepper: the filter stepper model (history, frontier, resets)."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from visla_edu import data, filters, lie, run
-from visla_edu.ekf import FilterConfig, FilterDivergedError
-from visla_edu.stepper import NOISE_FIELDS, Stepper, dataset_choices, nis_band, world_position_covariance
+from visla_edu.filters import FilterConfig, FilterDivergedError
+from visla_edu.metrics import nis_band
+from visla_edu.stepper import NOISE_FIELDS, Stepper, dataset_choices, world_position_covariance
 
 
 @pytest.fixture(scope="module")
@@ -253,6 +257,19 @@ def test_ground_truth_and_dead_reckoning(tiny):
     assert "t = 7 / " in s.summary()
 
 
+def test_ground_truth_of_fewer_frames_than_the_drive(tiny):
+    import dataclasses
+
+    from visla_edu.dataset import GroundTruth
+
+    real_like = dataclasses.replace(tiny, ground_truth=GroundTruth(world_T_imu=tiny.ground_truth.world_T_imu[:40]))
+    s = Stepper(real_like)
+    s.goto(39)
+    np.testing.assert_array_equal(s.ground_truth_pose(), tiny.ground_truth.world_T_imu[39])
+    s.goto(40)
+    assert s.ground_truth_pose() is None  # past the frames the ground truth covers
+
+
 def test_divergence_stops_at_last_good_frame(tiny):
     s = Stepper(tiny)
     original = s.filter.step
@@ -267,6 +284,19 @@ def test_divergence_stops_at_last_good_frame(tiny):
         s.goto(20)
     assert (s.t, s.frontier) == (5, 5)
     assert s.goto(2).t == 2
+
+
+def test_blas_threads_argument(tiny):
+    assert Stepper(tiny, blas_threads=None).goto(5).t == 5
+    with pytest.raises(ValueError, match="blas_threads"):
+        Stepper(tiny, blas_threads=0)
+
+
+def test_model_imports_no_gui():
+    code = ("import sys, visla_edu.stepper; "
+            "gui = [m for m in ('ipywidgets', 'matplotlib') if m in sys.modules]; assert not gui, gui")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
 
 
 def test_dataset_choices_list_available_and_small_simulations(data_dir):

@@ -13,16 +13,14 @@ The observation of landmark ``m`` from pose ``T`` is ``z = Ks pi(cam_T_imu T^{-1
 applied on the right, ``mu <- mu @ se3_exp(delta_pose)``; landmark corrections are added.
 """
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 from scipy import linalg
 
 from visla_edu import lie
 
 __all__ = [
-    "FilterConfig",
-    "FilterDivergedError",
+    "POSE_DIM",
+    "slot_columns",
     "cholesky_update",
     "innovation_covariances",
     "mahalanobis_squared",
@@ -30,147 +28,29 @@ __all__ = [
     "landmark_update",
     "pose_update",
     "joint_update",
+    "joint_correction",
+    "invariant_pose_jacobian",
+    "invariant_retract",
 ]
 
+#: Dimension of the pose perturbation ``[v; w]``: the first columns of the joint state.
+POSE_DIM = 6
 
-class FilterDivergedError(RuntimeError):
-    """The filter produced a non-finite state or a covariance that is not positive definite."""
 
+def slot_columns(slots):
+    """Columns of landmark slots in the joint state ``[pose (6); slot 0 (3); slot 1 (3); ...]``.
 
-@dataclass
-class FilterConfig:
-    """Noise, initialisation and gating parameters of every filter mode.
+    Slot ``s`` occupies columns ``6 + 3 s``, ``6 + 3 s + 1`` and ``6 + 3 s + 2``.
 
-    The defaults work without per-dataset tuning on the simulated drives, datasets 03 and
-    0022 and the dataset-10 stand-in. They were chosen from evidence, not guessed (notebook 07
-    recomputes each figure):
-
-    * ``visla-edu info`` measures the IMU noise from second differences of the velocities:
-      up to 0.5 m/s and 0.05 rad/s (dataset 0022, the noisiest file), so those are the
-      velocity noise settings. With 0.02 rad/s instead, 03 and 0022 gate about twice as many
-      observations (15.7% and 14.9%, against 8.0% and 4.5%), and the 03 trajectory ends 36 m
-      below its start height after 1.3 km (4 m with 0.05 rad/s).
-    * The gated share grows with a track's age (tracker drift: roughly 10% after ten frames
-      on 03), and the distances are heavy-tailed (about 1% of them above 100 for a
-      chi-square(4) variable), so gating stays on.
-    * ``sigma_pixel`` 1.5 gives accepted observations a NIS per degree of freedom of 0.9 on
-      03 (1.5 at 1 px): slightly conservative, as it should be with drifting tracks.
-    * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
-      far landmark triangulated from a 2 px disparity is a poor Gaussian in x, y, z that makes
-      joint SLAM overconfident and less accurate, while fixed far landmarks help VIO hold its
-      orientation. Against 2 px, SLAM's error on the dataset-10 stand-in drops from 24 m to
-      15 m and the NEES on 300-frame drives falls by a third; 5 px helps SLAM a little more
-      but makes VIO worse than dead reckoning on some simulated drives. 03 and 0022 gate
-      8.0% and 4.5% of their observations (7.5% and 4.4% at 2 px).
-    * The extrinsic check finds dataset 03's ``imu_T_cam`` axes flipped (rotation slope -0.78,
-      +0.83 after the ``flip_yz`` correction), hence ``extrinsic_correction="auto"``.
-    * The time-alignment check prefers ``imu_lag=+1`` by only 0.2% (03) and 1% (0022) of
-      the rotation residual: too weak to leave the course's convention ``u[t]`` for ``t->t+1``.
-
-    Attributes
+    Parameters
     ----------
-    sigma_pixel : float
-        Standard deviation of each stereo pixel coordinate (px); ``R = sigma_pixel^2 I4``.
-    sigma_linear_velocity : float
-        White noise on each linear-velocity sample (m/s); ``W`` scales it by the time step.
-    sigma_angular_velocity : float
-        White noise on each angular-velocity sample (rad/s).
-    landmark_prior_inflation : float
-        A landmark enters the state at its first observation (which it consumes) with its mean
-        at the stereo triangulation and the covariance ``inflation^2 C_tri + sigma^2 I`` from
-        the pixels, plus, in SLAM, the pose's uncertainty and correlation carried through the
-        triangulation (see :func:`initialize_landmarks`). ``C_tri`` is long along the viewing
-        ray and grows with depth squared; the inflation allows for the linearisation error of
-        far points.
-    landmark_prior_sigma : float
-        Isotropic part of a new landmark's covariance (m).
-    initial_pose_sigma : float
-        Standard deviation of the first pose; 0 because ``world`` is the first IMU frame.
-    gate_probability : float
-        Observations whose Mahalanobis distance exceeds the chi-square quantile with 4 degrees
-        of freedom at this probability are rejected as outliers (1.0 disables gating).
-    min_init_disparity : float
-        Minimum disparity ``uL - uR`` (px) to triangulate a new landmark; smaller disparities
-        give depths beyond ``fsu b / min_init_disparity``. Observations with non-positive
-        disparity are never used.
-    imu_lag : int
-        Which velocity sample drives the step ``t -> t+1``: ``u[t + imu_lag]``.
-    extrinsic_correction : str
-        ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
-        finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
-        of a correction (``"flip_yz"``, ...), see :data:`visla_edu.diagnostics.CORRECTIONS`.
-    landmark_cross_covariance : bool
-        Joint SLAM: a new landmark enters correlated with the state (``G_pose Sigma_pose,x``).
-        False is the textbook shortcut (pixel covariance only, no correlation), which makes
-        the filter overconfident; kept for comparison.
-    mapping_motion_noise : bool
-        Mapping: widen each observation's noise by the dead-reckoning motion noise since the
-        landmark's first sighting. False takes the dead-reckoned poses as exact.
-    vio_refine_landmarks : bool
-        VIO: also update the landmarks with the observations that just corrected the pose.
-        This counts each observation twice (kept for comparison; off by default).
-    skip_repeated_frames : bool
-        Make no update at frames whose observations exactly repeat the previous frame's
-        (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
-    landmark_stride : int
-        Use only landmarks whose index is a multiple of this (the textbook workaround for the
-        dense filter's memory; 1 = every landmark).
-    blas_threads : int or None
-        BLAS threads while the filter runs (the per-step matrices are small, so 1 is fastest);
-        None leaves numpy's setting alone.
+    slots : array_like of int, shape (k,)
+
+    Returns
+    -------
+    ndarray of int, shape (k, 3)
     """
-
-    sigma_pixel: float = 1.5
-    sigma_linear_velocity: float = 0.5
-    sigma_angular_velocity: float = 0.05
-    landmark_prior_inflation: float = 1.0
-    landmark_prior_sigma: float = 0.1
-    initial_pose_sigma: float = 0.0
-    gate_probability: float = 0.999
-    min_init_disparity: float = 3.0
-    imu_lag: int = 0
-    extrinsic_correction: str = "auto"
-    landmark_cross_covariance: bool = True
-    mapping_motion_noise: bool = True
-    vio_refine_landmarks: bool = False
-    skip_repeated_frames: bool = True
-    landmark_stride: int = 1
-    blas_threads: int = 1
-
-    def __post_init__(self):
-        positive = ["sigma_pixel", "landmark_prior_sigma"]
-        non_negative = ["landmark_prior_inflation", "sigma_linear_velocity", "sigma_angular_velocity", "initial_pose_sigma",
-                        "min_init_disparity"]
-        for name in positive:
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
-                raise ValueError(f"FilterConfig.{name} must be a positive number, got {getattr(self, name)!r}")
-        for name in non_negative:
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise ValueError(f"FilterConfig.{name} must be >= 0, got {getattr(self, name)!r}")
-        if not 0 < self.gate_probability <= 1:
-            raise ValueError(f"FilterConfig.gate_probability must be in (0, 1], got {self.gate_probability!r}")
-        if int(self.landmark_stride) != self.landmark_stride or self.landmark_stride < 1:
-            raise ValueError(f"FilterConfig.landmark_stride must be a positive integer, got {self.landmark_stride!r}")
-        if int(self.imu_lag) != self.imu_lag:
-            raise ValueError(f"FilterConfig.imu_lag must be an integer, got {self.imu_lag!r}")
-
-    @property
-    def pixel_variance(self):
-        """``sigma_pixel^2``."""
-        return self.sigma_pixel**2
-
-    @property
-    def gate_threshold(self):
-        """Chi-square (4 dof) quantile at ``gate_probability``; ``inf`` when gating is off."""
-        if self.gate_probability >= 1:
-            return np.inf
-        from scipy.stats import chi2
-
-        return float(chi2.ppf(self.gate_probability, 4))
-
-    def to_dict(self):
-        """Plain dict of the settings (for saving with results)."""
-        return asdict(self)
+    return POSE_DIM + 3 * np.asarray(slots, dtype=np.int64)[:, None] + np.arange(3)
 
 
 def cholesky_update(Sigma, H, cols, innovation, R):
@@ -385,7 +265,7 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
 
     Parameters
     ----------
-    Sigma : ndarray, shape (D, D), D = 6 + 3 n
+    Sigma : ndarray, shape (D, D), D = 6 + 3 n (columns of slot s: :func:`slot_columns`)
         Joint covariance, overwritten with the posterior.
     world_T_imu : ndarray, shape (4, 4)
         Pose mean.
@@ -409,14 +289,43 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     nis : float
         ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
     """
-    k = len(obs_slots)
     if prediction is None:
         prediction = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
+    delta, nis = joint_correction(Sigma, obs_slots, z, noise_var, prediction)
+    p_new = p_active + delta[POSE_DIM:].reshape(-1, 3)
+    return world_T_imu @ lie.se3_exp(delta[:POSE_DIM]), p_new, nis
+
+
+def joint_correction(Sigma, obs_slots, z, noise_var, prediction):
+    """The gain step of :func:`joint_update`: the state correction ``K r``, covariance in place.
+
+    Shared by both forms of the joint filter: the right-perturbation form applies the
+    correction as ``mu exp(hat(delta_pose))``, ``m + delta_m`` (:func:`joint_update`), the
+    invariant form as :func:`invariant_retract`; they differ only in the Jacobians passed in
+    ``prediction``.
+
+    Parameters
+    ----------
+    Sigma : ndarray, shape (D, D)
+        Joint covariance, overwritten with the posterior.
+    obs_slots : ndarray of int, shape (k,)
+    z : ndarray, shape (k, 4)
+    noise_var : float
+    prediction : tuple of ndarray
+        ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``.
+
+    Returns
+    -------
+    delta : ndarray, shape (D,)
+    nis : float
+        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
+    """
+    k = len(obs_slots)
     z_pred, J_landmark, J_pose = prediction
     r4 = z - z_pred
     J_pose3 = (STEREO_ROWS @ J_pose).reshape(3 * k, 6)  # (m, 6), m = 3k
     J_lm3 = STEREO_ROWS @ J_landmark  # (k, 3, 3)
-    lm_cols = (6 + 3 * np.asarray(obs_slots)[:, None] + np.arange(3)).ravel()
+    lm_cols = slot_columns(obs_slots).ravel()
     D = Sigma.shape[0]
     Sigma_lm = Sigma[:, lm_cols].reshape(D, k, 3)
     # per observation i: Sigma[:, cols_i] @ J_lm3_i^T, batched as matmuls (einsum is 10x slower here)
@@ -426,5 +335,40 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     S[np.diag_indices(3 * k)] += noise_var
     delta, nis = _gain_update(Sigma, Sigma_Ht, S, (r4 @ STEREO_ROWS.T).ravel())
     nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
-    p_new = p_active + delta[6:].reshape(-1, 3)
-    return world_T_imu @ lie.se3_exp(delta[:6]), p_new, nis
+    return delta, nis
+
+
+def invariant_pose_jacobian(J_landmark):
+    """Pose Jacobian of the invariant form, ``[-J_landmark, 0]``, shape (k, 4, 6).
+
+    With ``T = exp(hat(xi)) mu`` and ``m_j = exp(hat(theta)) mu_j + e_j`` the point seen by the
+    camera is ``inv(T) m_j ~ inv(mu) (mu_j + e_j - p)`` to first order, ``xi = [p; theta]``: the
+    observation depends on the pose error only through ``p``, with minus the landmark
+    Jacobian, and not at all on ``theta``. Moving the whole world (the same ``p`` and ``e_j``)
+    changes nothing, whatever the estimate: that is what keeps the invariant filter consistent.
+    """
+    return np.concatenate([-J_landmark, np.zeros_like(J_landmark)], axis=-1)
+
+
+def invariant_retract(world_T_imu, p_active, delta):
+    """Apply an invariant correction: ``mu <- exp(hat(xi)) mu``, ``mu_j <- R_xi mu_j + J_l(theta) e_j``.
+
+    The group update of the invariant filter (pose and landmarks move together, ``R_xi`` the
+    rotation of ``exp(hat(xi))``, ``J_l`` :func:`visla_edu.lie.so3_left_jacobian`).
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (4, 4)
+    p_active : ndarray, shape (n, 3)
+    delta : ndarray, shape (6 + 3 n,)
+        ``[xi (6); e_0 (3); e_1 (3); ...]``.
+
+    Returns
+    -------
+    world_T_imu_new : ndarray, shape (4, 4)
+    p_active_new : ndarray, shape (n, 3)
+    """
+    step = lie.se3_exp(delta[:POSE_DIM])
+    J_l = lie.so3_left_jacobian(delta[3:POSE_DIM])
+    e = delta[POSE_DIM:].reshape(-1, 3)
+    return step @ world_T_imu, p_active @ step[:3, :3].T + e @ J_l.T

@@ -26,6 +26,7 @@ __all__ = [
     "vee",
     "so3_exp",
     "so3_log",
+    "so3_left_jacobian",
     "twist_hat",
     "twist_vee",
     "se3_exp",
@@ -182,6 +183,29 @@ def so3_exp(w):
     B = _one_minus_cos_over_theta2(theta, theta2)[..., None, None]
     W = hat(w)
     return np.eye(3) + A * W + B * (W @ W)
+
+
+def so3_left_jacobian(w):
+    """Left Jacobian of SO(3): ``J_l(w) = I + B hat(w) + C hat(w)^2``.
+
+    ``exp(hat(w + d)) ~ exp(hat(J_l(w) d)) exp(hat(w))`` to first order, and the translation
+    of ``se3_exp([v; w])`` is ``J_l(w) v`` (the ``V`` of :func:`se3_exp`).
+
+    Parameters
+    ----------
+    w : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        With ``B = (1 - cos t)/t^2`` and ``C = (t - sin t)/t^3`` (series for small ``t``).
+    """
+    w = _as_vectors(w, 3, "so3_left_jacobian")
+    theta, theta2 = _angle(w)
+    B = _one_minus_cos_over_theta2(theta, theta2)[..., None, None]
+    C = _theta_minus_sin_over_theta3(theta, theta2)[..., None, None]
+    W = hat(w)
+    return np.eye(3) + B * W + C * (W @ W)
 
 
 def so3_log(R):

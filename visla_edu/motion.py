@@ -9,8 +9,13 @@ With the right perturbation ``T = mu exp(hat(delta))`` the perturbation evolves 
 
     F_t = exp(-tau_t curly_hat(u_t)) = adjoint(exp(-tau_t twist_hat(u_t)))
 
-and ``n_t ~ N(0, W_t)``, ``W_t = tau_t^2 diag(sigma_v^2 I, sigma_w^2 I)`` for white noise of
-standard deviation ``sigma_v`` (m/s) and ``sigma_w`` (rad/s) on each velocity sample.
+and ``n_t ~ N(0, W_t)``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` for white noise of
+standard deviation ``sigma_v`` (m/s) and ``sigma_w`` (rad/s) on each velocity sample (one value
+for all three axes, or one per axis).
+
+The invariant joint filter (:func:`predict_invariant_covariance`) measures the pose error in
+the world frame instead, ``T = exp(hat(xi)) mu``: then the error does not change along a
+noise-free step (its transition is the identity) and the noise enters through ``Ad(mu)``.
 """
 
 import numpy as np
@@ -26,6 +31,8 @@ __all__ = [
     "predict_pose",
     "predict_pose_covariance",
     "predict_joint_covariance",
+    "invariant_noise_factor",
+    "predict_invariant_covariance",
 ]
 
 
@@ -78,9 +85,24 @@ def dead_reckon(time_stamps, twists, world_T_imu0=None, lag=0):
     return poses
 
 
+def _noise_sigmas(sigma_linear, sigma_angular):
+    """``[sigma_v (3); sigma_w (3)]`` from scalars (every axis) or per-axis triples."""
+    parts = []
+    for name, sigma in (("sigma_linear", sigma_linear), ("sigma_angular", sigma_angular)):
+        sigma = np.asarray(sigma, dtype=float)
+        if sigma.shape not in ((), (3,)):
+            raise ValueError(f"motion_noise: {name} must be a number or 3 numbers (x, y, z), got shape {sigma.shape}")
+        parts.append(np.broadcast_to(sigma, (3,)))
+    return np.concatenate(parts)
+
+
 def motion_noise(tau, sigma_linear, sigma_angular):
-    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2 I3, sigma_w^2 I3)``, (6, 6)."""
-    return np.diag(np.repeat([(tau * sigma_linear) ** 2, (tau * sigma_angular) ** 2], 3))
+    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2, sigma_w^2)``, (6, 6).
+
+    ``sigma_linear`` (m/s) and ``sigma_angular`` (rad/s) are numbers (the same on every
+    axis) or per-axis triples ``(x, y, z)`` of the body frame.
+    """
+    return np.diag((tau * _noise_sigmas(sigma_linear, sigma_angular)) ** 2)
 
 
 def pose_transition(u, tau):
@@ -136,4 +158,64 @@ def predict_joint_covariance(Sigma, F, W):
     Sigma[6:, :6] = Sigma[:6, 6:].T
     Sigma_pp = F @ Sigma[:6, :6] @ F.T + W
     Sigma[:6, :6] = 0.5 * (Sigma_pp + Sigma_pp.T)  # keep the joint covariance exactly symmetric
+    return Sigma
+
+
+def invariant_noise_factor(world_T_imu, p_landmarks, W):
+    """``B`` with ``B B^T`` the noise one IMU step adds to the invariant errors, (6 + 3n, 6).
+
+    The invariant joint filter's errors are ``xi`` of the pose (``T = exp(hat(xi)) mu``, world
+    frame, ``xi = [p; theta]``) and ``e_j = m_j - exp(hat(theta)) mu_j`` of each landmark. A
+    noise ``n ~ N(0, W)`` on the step's twist (body frame) moves them by ``Ad(mu) n`` and
+    ``hat(mu_j) R n_w`` (``R`` the rotation of ``mu``, ``n_w`` the angular part), so::
+
+        B = [[Ad(mu) L]; [hat(mu_j) R L_w] for each landmark],   W = L L^T, L_w = L[3:]
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (4, 4)
+        The pose mean after the step.
+    p_landmarks : ndarray, shape (n, 3)
+        Landmark means in state order (non-finite rows, the dense filter's placeholders, get
+        zero rows: their covariance is written at their first observation).
+    W : ndarray, shape (6, 6)
+        The step's noise covariance (:func:`motion_noise`).
+
+    Returns
+    -------
+    ndarray, shape (6 + 3 n, 6)
+    """
+    L = np.linalg.cholesky(W) if np.any(W != np.diag(np.diag(W))) else np.diag(np.sqrt(np.diag(W)))
+    R = world_T_imu[:3, :3]
+    m = np.where(np.isfinite(p_landmarks), p_landmarks, 0.0)
+    B = np.empty((6 + 3 * len(m), 6))
+    B[:6] = lie.adjoint(world_T_imu) @ L
+    B[6:] = (lie.hat(m) @ (R @ L[3:])).reshape(-1, 6)
+    return B
+
+
+def predict_invariant_covariance(Sigma, world_T_imu, p_landmarks, W):
+    """Invariant covariance prediction, in place: ``Sigma <- Sigma + B B^T``.
+
+    The invariant errors do not change along a noise-free step (the transition is the
+    identity, whatever the state), so only the step's noise is added
+    (:func:`invariant_noise_factor`). Unlike the right-perturbation prediction, the directions
+    a filter can never observe (moving the whole world: the same translation in the pose's
+    ``p`` and every landmark's ``e_j``, and a rotation ``theta``) do not depend on the estimate,
+    which keeps the filter consistent along them.
+
+    Parameters
+    ----------
+    Sigma : ndarray, shape (6 + 3 n, 6 + 3 n)
+        Modified in place.
+    world_T_imu, p_landmarks, W
+        As in :func:`invariant_noise_factor`.
+
+    Returns
+    -------
+    ndarray
+        ``Sigma`` (the same object).
+    """
+    B = invariant_noise_factor(world_T_imu, p_landmarks, W)
+    Sigma += B @ B.T
     return Sigma

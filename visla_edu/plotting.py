@@ -4,10 +4,43 @@ All functions draw into a given ``Axes`` (or a new figure) and return it; nothin
 or saved unless asked, so notebooks, the CLI and the widgets share them.
 """
 
+from pathlib import Path
+
 import numpy as np
 
-__all__ = ["covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
-           "covariance_ellipses", "plot_nis"]
+from visla_edu._files import atomic_write
+from visla_edu.codes import DEADRECKON, OBS_GATED
+
+__all__ = ["GROUND_TRUTH_STYLE", "covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
+           "covariance_ellipses", "plot_nis", "figure_suffixes", "save_figure"]
+
+
+def figure_suffixes():
+    """File suffixes matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
+
+    ``.pgf`` is left out: it needs a LaTeX installation.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    first = ("png", "pdf", "svg")
+    others = sorted(set(FigureCanvasBase.get_supported_filetypes()) - set(first) - {"pgf"})
+    return tuple(f".{ext}" for ext in (*first, *others))
+
+
+def save_figure(fig, path, dpi=120):
+    """Save ``fig`` to ``path`` atomically (format from the suffix); return the absolute path.
+
+    The image is written to a temporary file and renamed over ``path``
+    (:func:`visla_edu._files.atomic_write`), so a failed save never leaves a broken image.
+    """
+    path = Path(path).expanduser()
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, dpi=dpi, format=path.suffix.lstrip(".").lower() or "png")
+    return path.resolve()
+
+#: How the true trajectory is drawn in every view (these plots and the stepper's map): green
+#: dash-dot, unlike the estimate (blue, solid), dead reckoning (red, dashed) and landmarks (grey dots).
+GROUND_TRUTH_STYLE = {"color": "C2", "linestyle": "-.", "linewidth": 2.2, "alpha": 0.9}
 
 
 def _axes(ax, figsize=(8, 7)):
@@ -51,8 +84,9 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     ax : matplotlib Axes, optional
     reference : ndarray, shape (T, 4, 4), optional
         A second trajectory (e.g. dead reckoning), drawn dashed.
-    ground_truth : visla_edu.dataset.GroundTruth, optional
-        True trajectory (and landmarks) drawn in black.
+    ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
+        True trajectory, drawn in :data:`GROUND_TRUTH_STYLE` (green, dash-dot) with a legend
+        entry; it may cover fewer frames than the estimate.
 
     Returns
     -------
@@ -63,22 +97,34 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
         ok = np.isfinite(landmarks[:, 0])
         ax.scatter(landmarks[ok, 0], landmarks[ok, 1], s=2, c=landmark_color, label=f"landmarks ({ok.sum()})",
                    zorder=1)
+    paths = []
     if ground_truth is not None:
-        p = ground_truth.world_T_imu[:, :3, 3]
-        ax.plot(p[:, 0], p[:, 1], "-", color="0.1", lw=4, alpha=0.35, label="ground truth", zorder=2)
+        p = _truth_poses(ground_truth)[:, :3, 3]
+        ax.plot(p[:, 0], p[:, 1], label="ground truth", zorder=2, **GROUND_TRUTH_STYLE)
+        paths.append(p)
     if reference is not None:
         p = reference[:, :3, 3]
         ax.plot(p[:, 0], p[:, 1], "--", color="C3", lw=1.5, label=reference_label, zorder=3)
+        paths.append(p)
     p = world_T_imu[:, :3, 3]
     ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
     ax.plot(p[0, 0], p[0, 1], "o", color="k", ms=5, zorder=5)
     ax.set_xlabel("x (m, world = first IMU frame)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal", adjustable="box")
-    _limit_to_path(ax, [p] + ([reference[:, :3, 3]] if reference is not None else []))
+    _limit_to_path(ax, [p] + paths)
     ax.legend(loc="best", fontsize="small")
     ax.grid(True, alpha=0.3)
     return ax
+
+
+def _truth_poses(ground_truth):
+    """The ``(n, 4, 4)`` true poses of a :class:`~visla_edu.dataset.GroundTruth` or of an array."""
+    poses = getattr(ground_truth, "world_T_imu", ground_truth)
+    poses = np.asarray(poses, dtype=float)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise ValueError(f"ground_truth: expected a GroundTruth or poses of shape (n, 4, 4), got shape {poses.shape}")
+    return poses
 
 
 def _limit_to_path(ax, paths, margin=0.15):
@@ -97,8 +143,10 @@ def plot_result(result, path=None, ground_truth=None, title=None):
     ----------
     result : visla_edu.run.RunResult
     path : str or Path, optional
-        Save the figure there (PNG, 120 dpi).
-    ground_truth : visla_edu.dataset.GroundTruth, optional
+        Save the figure there (format from the suffix, see :func:`figure_suffixes`; 120 dpi),
+        atomically (:func:`save_figure`).
+    ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
+        Drawn in :data:`GROUND_TRUTH_STYLE` with a legend entry.
     title : str, optional
 
     Returns
@@ -109,12 +157,12 @@ def plot_result(result, path=None, ground_truth=None, title=None):
 
     fig, ax = plt.subplots(figsize=(8, 7))
     plot_trajectory_map(result.world_T_imu, result.landmarks, ax=ax, label=f"{result.mode} estimate",
-                        reference=result.dead_reckoning if result.mode != "deadreckon" else None,
+                        reference=result.dead_reckoning if result.mode != DEADRECKON else None,
                         ground_truth=ground_truth)
     ax.set_title(title or f"{result.name}: {result.mode}{' (dense)' if result.dense else ''}")
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=120)
+        save_figure(fig, path)
     return fig
 
 
@@ -128,7 +176,7 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     z_pred : ndarray, shape (k, 4), optional
         Predicted pixels (NaN rows skipped); a line joins each prediction to its observation.
     status : ndarray of int, shape (k,), optional
-        ``visla_edu.filters.OBS_*`` codes; gated observations are drawn as red crosses.
+        ``OBS_*`` codes (:mod:`visla_edu.codes`); gated observations are drawn as red crosses.
     image_size : (width, height)
     ax : matplotlib Axes, optional
 
@@ -136,8 +184,6 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     -------
     matplotlib Axes
     """
-    from visla_edu.filters import OBS_GATED
-
     ax = _axes(ax, figsize=(10, 4))
     gated = np.zeros(len(z), dtype=bool) if status is None else status == OBS_GATED
     ax.scatter(z[~gated, 0], z[~gated, 1], s=14, facecolors="none", edgecolors="C0", label="observed")
@@ -187,8 +233,9 @@ def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
 def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     """NIS per degree of freedom over time, with the ``probability`` band of ``chi2(dof)/dof``.
 
-    A consistent filter keeps NIS/dof inside the band about ``probability`` of the time;
-    above it the filter is over-confident (noise too small), below it too cautious.
+    A consistent filter keeps NIS/dof inside the band (:func:`visla_edu.metrics.nis_band`)
+    about ``probability`` of the time; above it the filter is over-confident (noise too
+    small), below it too cautious.
 
     Parameters
     ----------
@@ -204,7 +251,7 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     -------
     matplotlib Axes
     """
-    from scipy.stats import chi2
+    from visla_edu.metrics import nis_band
 
     ax = _axes(ax, figsize=(8, 3))
     nis = np.asarray(nis, dtype=float)
@@ -213,11 +260,7 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     ok = dof > 0
     ratio = np.full(len(nis), np.nan)
     ratio[ok] = nis[ok] / dof[ok]
-    tail = (1 - probability) / 2
-    lo = np.full(len(nis), np.nan)
-    hi = np.full(len(nis), np.nan)
-    lo[ok] = chi2.ppf(tail, dof[ok]) / dof[ok]
-    hi[ok] = chi2.ppf(1 - tail, dof[ok]) / dof[ok]
+    lo, hi = nis_band(dof, probability)
     ax.fill_between(x, lo, hi, color="C2", alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
     ax.plot(x, ratio, ".-", color="C0", ms=3, lw=0.8, label="NIS / dof")
     ax.axhline(1.0, color="0.4", lw=0.8, ls=":")

@@ -3,11 +3,13 @@
 import os
 from pathlib import Path
 
+from visla_edu._files import file_kind
+from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
-from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, resolve_dir
+from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, STANDIN_INPUTS, ground_truth_files, resolve_dir
 from visla_edu.data._standin import load_dataset10
 
-__all__ = ["load"]
+__all__ = ["load", "input_files"]
 
 
 def load(name_or_path, data_dir=None):
@@ -16,7 +18,7 @@ def load(name_or_path, data_dir=None):
     Parameters
     ----------
     name_or_path : str or os.PathLike
-        A course name (``"03"``, ``"0022"``, ``"10"``: the file ``<data dir>/<name>.npz``),
+        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"10"``: the file ``<data dir>/<name>.npz``),
         ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated with seed 0), or a path to
         an ``.npz`` file in either course format or written by :func:`~visla_edu.data.save`.
         ``"10"`` falls back to a stand-in when ``10.npz`` is absent: simulated stereo
@@ -28,29 +30,60 @@ def load(name_or_path, data_dir=None):
     -------
     Dataset
         Time-major arrays, sparse observations; ``source`` is the absolute file path and
-        ``label`` describes known files (recognised by sha256).
+        ``label`` describes known files (recognised by sha256). A drive whose KITTI ground
+        truth the registry names (``"0020"``) gets it as ``ground_truth`` when its poses file
+        is beside the npz (:func:`~visla_edu.data.attach_registered_ground_truth`).
 
     Raises
     ------
     FileNotFoundError
         The file is not there (the message says where it looked).
+    IsADirectoryError, NotADirectoryError, PermissionError
+        The path is a folder, the data directory is not one, or the file is not readable.
     ValueError
-        The file is not a valid course file (the message names key, expected and actual).
+        The file is not a valid course file (the message names key, expected and actual), or
+        not a regular file (a FIFO, a device).
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
-        return load_npz(_find_file(name_or_path, data_dir))
+        return attach_registered_ground_truth(load_npz(_find_file(name_or_path, data_dir)))
     name = _check_name(name_or_path)
     if name in SIMULATED:
         from visla_edu import simulate  # lazy: simulation is optional for loading files
 
         return simulate.simulate_drive(preset=SIMULATED[name], seed=0)
     directory, how = resolve_dir(data_dir)
+    _check_data_dir(directory, how)
     if name == "10":
         return load_dataset10(directory, how)
     path = directory / f"{name}.npz"
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise FileNotFoundError(_not_found_message(f"{name}.npz", directory, how))
-    return load_npz(path)
+    return attach_registered_ground_truth(load_npz(path))
+
+
+def input_files(name_or_path, data_dir=None):
+    """The existing files :func:`load` would read for ``name_or_path`` (none for simulated drives).
+
+    Lets a caller refuse to write over an input before loading anything.
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
+    if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
+        given = Path(name_or_path).expanduser()
+        directory = resolve_dir(data_dir)[0]
+        candidates = [given] if given.is_absolute() else [given, directory / given]
+    elif isinstance(name_or_path, str) and name_or_path.strip() in COURSE_NAMES:
+        directory = resolve_dir(data_dir)[0]
+        name = name_or_path.strip()
+        candidates = [directory / f"{name}.npz"] + ([directory / f for f in STANDIN_INPUTS] if name == "10" else [])
+    else:
+        candidates = []
+    files = [c for c in candidates if c.exists()]
+    for npz in list(files):  # a registered drive's ground truth is read too
+        files.extend(f for f in ground_truth_files(npz.stem, npz.parent) or () if f is not None)
+    return files
 
 
 def _looks_like_path(value):
@@ -61,7 +94,7 @@ def _check_name(value):
     if not isinstance(value, str):
         raise TypeError(f"load: expected a dataset name or a path, got {type(value).__name__} {value!r}")
     if not value.strip():
-        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '10' or 'sim'")
+        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '0020', '10' or 'sim'")
     return value.strip()
 
 
@@ -74,14 +107,22 @@ def _not_found_message(filename, directory, how):
     )
 
 
+def _check_data_dir(directory, how):
+    """The data directory, if it exists, must be a folder."""
+    kind = file_kind(directory)
+    if kind not in ("missing", "a directory"):
+        raise NotADirectoryError(f"the data directory {directory} (from {how}) is {kind}, not a folder; "
+                                 f"set {ENV_VAR} or --data-dir to the folder with the course files")
+
+
 def _find_file(path, data_dir):
-    """An existing file given as a path: as given, else relative to the data directory."""
+    """A path as given if anything is there, else relative to the data directory (load_npz checks its kind)."""
     given = Path(path).expanduser()
-    if given.is_file():
-        return given.resolve()
+    if os.path.lexists(given):
+        return given
     directory, how = resolve_dir(data_dir)
-    if not given.is_absolute() and (directory / given).is_file():
-        return (directory / given).resolve()
+    if not given.is_absolute() and os.path.lexists(directory / given):
+        return directory / given
     where = f"{given.resolve()}" if given.is_absolute() else f"{given.resolve()} nor in {directory} ({how})"
     raise FileNotFoundError(
         f"no data file {str(path)!r}: not found at {where}. "

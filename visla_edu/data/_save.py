@@ -1,10 +1,10 @@
 """Write a Dataset as a course file that :func:`~visla_edu.data.load` reads back exactly."""
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from visla_edu._files import atomic_write
 from visla_edu.data._format import GROUND_TRUTH_KEYS
 
 __all__ = ["save"]
@@ -13,12 +13,16 @@ __all__ = ["save"]
 def save(dataset, path):
     """Write a dataset as a 2021+ course file (plus ground truth and its name and label).
 
+    The ground truth of a simulated drive is written with it; a real drive's KITTI poses
+    (landmarks unknown, possibly fewer frames) are not: load them again from their files.
+
     Parameters
     ----------
     dataset : Dataset
     path : str or os.PathLike
-        Target file; ``.npz`` is appended if missing. Written atomically (temporary
-        file, then rename). The dense features ``(4, M, T)`` are built in memory.
+        Target file; ``.npz`` is appended if missing. Written atomically
+        (:func:`visla_edu._files.atomic_write`: a kill mid-write leaves any previous file as it
+        was). The dense features ``(4, M, T)`` are built in memory.
 
     Returns
     -------
@@ -29,17 +33,12 @@ def save(dataset, path):
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
     arrays = _course_arrays(dataset)
-    if dataset.ground_truth is not None:
+    if _saved_ground_truth(dataset) is not None:
         arrays.update(_ground_truth_arrays(dataset.ground_truth))
     arrays["name"] = np.array(str(dataset.name))
     arrays["label"] = np.array(str(dataset.label))
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, **arrays)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    with atomic_write(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
     return path.resolve()
 
 
@@ -54,6 +53,14 @@ def _course_arrays(dataset):
         "b": np.array(float(dataset.b)),
         "imu_T_cam": np.asarray(dataset.imu_T_cam, dtype=float),
     }
+
+
+def _saved_ground_truth(dataset):
+    """The ground truth :func:`save` writes: a simulated drive's, complete for every frame; else None."""
+    gt = dataset.ground_truth
+    if gt is None or not gt.simulated or gt.num_frames != dataset.num_frames:
+        return None
+    return gt
 
 
 def _ground_truth_arrays(gt):

@@ -1,4 +1,4 @@
-"""The filter stepper: a filter you can move through in time, forwards and backwards.
+"""The filter stepper's model: a filter you can move through in time, forwards and backwards.
 
 A :class:`Stepper` owns one filter object (see :func:`visla_edu.run.make_filter`) and the
 history of what it produced: the :class:`~visla_edu.filters.StepRecord` of every frame
@@ -10,8 +10,9 @@ observations and the active landmarks). The *frontier* is the last frame process
   further, so a step forward costs one filter step, never a re-run;
 * changing the dataset, the mode or the noise settings resets the filter to frame 0.
 
-This module is the model behind :mod:`visla_edu.widgets`; it has no ipywidgets or
-matplotlib dependency, so it can be scripted and tested on its own::
+This module is the model behind the view (:mod:`visla_edu.stepper.figure`,
+:mod:`visla_edu.stepper.widget`); it has no ipywidgets or matplotlib dependency, so it can
+be scripted and tested on its own::
 
     >>> from visla_edu.stepper import Stepper
     >>> s = Stepper("sim-tiny", mode="slam")
@@ -24,15 +25,15 @@ matplotlib dependency, so it can be scripted and tested on its own::
     True
 """
 
-import contextlib
 import time
 from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
 
-from visla_edu import filters, motion, run
-from visla_edu.ekf import FilterConfig
+from visla_edu import metrics, motion, run
+from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
+from visla_edu.filters import FilterConfig
 
 __all__ = [
     "MODE_LABELS",
@@ -40,15 +41,14 @@ __all__ = [
     "Stepper",
     "dataset_choices",
     "world_position_covariance",
-    "nis_band",
 ]
 
-#: Human-readable names of the filter modes (keys: :data:`visla_edu.run.MODES`).
+#: Human-readable names of the filter modes (keys: :data:`visla_edu.codes.MODES`).
 MODE_LABELS = {
-    "deadreckon": "dead reckoning (IMU only)",
-    "mapping": "landmark mapping (poses from IMU)",
-    "vio": "visual-inertial odometry",
-    "slam": "SLAM (joint EKF)",
+    DEADRECKON: "dead reckoning (IMU only)",
+    MAPPING: "landmark mapping (poses from IMU)",
+    VIO: "visual-inertial odometry",
+    SLAM: "SLAM (joint EKF)",
 }
 
 #: The FilterConfig fields the stepper's noise and initialisation controls change (those
@@ -86,6 +86,8 @@ def dataset_choices(data_dir=None):
     labels = {
         "03": "03 (KITTI-360 drive 0003)",
         "0022": "0022 (KITTI drive 0022, 2019 format)",
+        "0020": "0020 (KITTI drive 0020 = odometry 06, ground truth)"
+        if data.ground_truth_files("0020", directory) else "0020 (KITTI drive 0020 = odometry 06)",
         "10": "10 (KITTI-360 drive 0010)" if (directory / "10.npz").is_file()
         else "10 (STAND-IN: simulated tracks on its real IMU drive)",
         "sim": "sim (simulated, ground truth)",
@@ -110,49 +112,6 @@ def world_position_covariance(world_T_imu, pose_cov):
     return R @ np.asarray(pose_cov)[:3, :3] @ R.T
 
 
-def nis_band(dof, probability=0.95):
-    """Two-sided ``probability`` band of ``chi2(dof) / dof`` (what NIS/dof should stay in).
-
-    Parameters
-    ----------
-    dof : int or array_like of int
-        Degrees of freedom; entries ``<= 0`` give NaN.
-    probability : float
-
-    Returns
-    -------
-    lower, upper : ndarray (same shape as ``dof``)
-    """
-    from scipy.stats import chi2
-
-    dof = np.asarray(dof, dtype=float)
-    ok = dof > 0
-    lower = np.full(dof.shape, np.nan)
-    upper = np.full(dof.shape, np.nan)
-    tail = (1 - probability) / 2
-    lower[ok] = chi2.ppf(tail, dof[ok]) / dof[ok]
-    upper[ok] = chi2.ppf(1 - tail, dof[ok]) / dof[ok]
-    return lower, upper
-
-
-_CONTROLLER = []
-
-
-def _blas_threads(n):
-    """Like :func:`visla_edu.run.blas_threads`, with the BLAS libraries looked up only once.
-
-    Looking them up costs ~1.5 ms, as much as a filter step; the stepper enters the limit
-    once per :meth:`Stepper.goto`, so it keeps one controller.
-    """
-    if n is None:
-        return contextlib.nullcontext()
-    if not _CONTROLLER:
-        from threadpoolctl import ThreadpoolController
-
-        _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0].limit(limits=int(n), user_api="blas")
-
-
 class Stepper:
     """A filter run you can step through: the filter, its history, and the current time.
 
@@ -162,15 +121,18 @@ class Stepper:
         A name :func:`visla_edu.data.load` understands (``"sim-tiny"``, ``"03"``, ``"10"``...)
         or a loaded dataset.
     mode : {"deadreckon", "mapping", "vio", "slam"}
-    config : FilterConfig, optional
+        One of :data:`visla_edu.codes.MODES`.
+    config : visla_edu.filters.FilterConfig, optional
     data_dir : str or os.PathLike, optional
         Folder of the course files when ``dataset`` is a name.
+    blas_threads : int or None
+        BLAS threads while the filter steps (see :func:`visla_edu.run.limit_blas_threads`).
 
     Attributes
     ----------
     records : list of StepRecord
         ``records[k]`` is frame ``k``'s snapshot, for ``k = 0 .. frontier``.
-    filter : filters.DeadReckoning or subclass, or filters.JointSlam
+    filter : visla_edu.filters.DeadReckoning, LandmarkMapping, VisualInertialOdometry or JointSlam
         The filter object; its state is at the frontier.
     steps_computed : int
         Filter steps run since the last reset (each frame is computed once).
@@ -178,10 +140,13 @@ class Stepper:
         Wall time of the last :meth:`goto`.
     generation : int
         Counts the resets (0 after construction); views redraw their static parts when it changes.
+    blas_threads : int or None
+        The BLAS thread limit :meth:`goto` applies while it steps the filter.
     """
 
-    def __init__(self, dataset="sim-tiny", mode="slam", config=None, data_dir=None):
+    def __init__(self, dataset="sim-tiny", mode=SLAM, config=None, data_dir=None, blas_threads=1):
         self.data_dir = data_dir
+        self.blas_threads = blas_threads
         self._cache = {}
         self._dataset = self._load(dataset)
         self._mode = self._check_mode(mode)
@@ -197,12 +162,12 @@ class Stepper:
 
     @property
     def mode(self):
-        """The filter mode (one of :data:`visla_edu.run.MODES`)."""
+        """The filter mode (one of :data:`visla_edu.codes.MODES`)."""
         return self._mode
 
     @property
     def config(self):
-        """The :class:`~visla_edu.ekf.FilterConfig` in use (replace it via :meth:`configure`)."""
+        """The :class:`~visla_edu.filters.FilterConfig` in use (replace it via :meth:`configure`)."""
         return self._config
 
     def configure(self, dataset=None, mode=None, config=None, **settings):
@@ -246,10 +211,7 @@ class Stepper:
         self.generation = getattr(self, "generation", -1) + 1
         self.records = []
         self.steps_computed = 0
-        self._poses = np.empty((T, 4, 4))
-        self._nis = np.full(T, np.nan)
-        self._nis_dof = np.zeros(T, dtype=np.int64)
-        self._status_counts = np.zeros((T, len(filters.STATUS_NAMES)), dtype=np.int64)
+        self._arrays = run.RunArrays(T)
         # Landmarks that left the active set: their estimate when they left, and the frame.
         self._retired_frame = np.full(ds.num_landmarks, np.iinfo(np.int64).max)
         self._retired_means = np.full((ds.num_landmarks, 3), np.nan)
@@ -299,7 +261,7 @@ class Stepper:
         ------
         IndexError
             ``t`` out of range.
-        visla_edu.ekf.FilterDivergedError
+        visla_edu.filters.FilterDivergedError
             The filter diverged on the way; the stepper stays at the last good frame.
         """
         if isinstance(t, (bool, np.bool_)) or int(t) != t:
@@ -310,9 +272,11 @@ class Stepper:
         start = time.perf_counter()
         try:
             if t > self.frontier:
-                with _blas_threads(self._config.blas_threads):
+                with run.limit_blas_threads(self.blas_threads):
                     while self.frontier < t:
-                        self._append(self.filter.step())
+                        step_start = time.perf_counter()
+                        rec = self.filter.step()
+                        self._append(rec, time.perf_counter() - step_start)
         except Exception:
             self._t = max(self.frontier, 0)
             raise
@@ -329,15 +293,12 @@ class Stepper:
         """Move ``n`` frames back (clipped at 0); return the record."""
         return self.step(-int(n))
 
-    def _append(self, rec):
+    def _append(self, rec, seconds):
         self.steps_computed += 1
         t = rec.t
         if t != len(self.records):
             raise RuntimeError(f"Stepper: the filter returned frame {t}, expected {len(self.records)}")
-        self._poses[t] = rec.world_T_imu
-        self._nis[t] = rec.nis
-        self._nis_dof[t] = rec.nis_dof
-        self._status_counts[t] = np.bincount(rec.status, minlength=len(filters.STATUS_NAMES))
+        self._arrays.store(rec, seconds)
         if self.records:
             prev = self.records[-1]
             gone = ~np.isin(prev.active_ids, rec.active_ids, assume_unique=True)
@@ -359,37 +320,37 @@ class Stepper:
     @property
     def trajectory(self):
         """Estimated poses of frames ``0..t``, shape (t + 1, 4, 4) (read-only view)."""
-        return self._readonly(self._poses[: self._t + 1])
+        return self._readonly(self._arrays.world_T_imu[: self._t + 1])
 
     @property
     def nis(self):
         """NIS of frames ``0..t`` (NaN where there was no update), shape (t + 1,)."""
-        return self._readonly(self._nis[: self._t + 1])
+        return self._readonly(self._arrays.nis[: self._t + 1])
 
     @property
     def nis_dof(self):
         """Degrees of freedom of each NIS value, shape (t + 1,) (0 where there was no update)."""
-        return self._readonly(self._nis_dof[: self._t + 1])
+        return self._readonly(self._arrays.nis_dof[: self._t + 1])
 
     def nis_band_series(self, probability=0.95):
         """The ``probability`` band of ``chi2(dof)/dof`` for frames ``0..t``: lower, upper (t + 1,).
 
-        NaN where there was no update. NIS/dof of a consistent filter stays inside it about
-        ``probability`` of the time.
+        NaN where there was no update (:func:`visla_edu.metrics.nis_band`). NIS/dof of a
+        consistent filter stays inside it about ``probability`` of the time.
         """
         if probability not in self._bands:
             self._bands[probability] = [0, np.full(self.num_frames, np.nan), np.full(self.num_frames, np.nan)]
         band = self._bands[probability]
         done, stop = band[0], self.frontier + 1
         if stop > done:  # computed once per frame, when first asked for
-            band[1][done:stop], band[2][done:stop] = nis_band(self._nis_dof[done:stop], probability)
+            band[1][done:stop], band[2][done:stop] = metrics.nis_band(self._arrays.nis_dof[done:stop], probability)
             band[0] = stop
         return self._readonly(band[1][: self._t + 1]), self._readonly(band[2][: self._t + 1])
 
     @property
     def status_counts(self):
-        """Observations per frame by status (:data:`visla_edu.filters.STATUS_NAMES`), (t + 1, 6)."""
-        return self._readonly(self._status_counts[: self._t + 1])
+        """Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`), (t + 1, 6)."""
+        return self._readonly(self._arrays.status_counts[: self._t + 1])
 
     @property
     def time_stamps(self):
@@ -399,7 +360,7 @@ class Stepper:
 
     @property
     def ground_truth(self):
-        """The dataset's :class:`~visla_edu.dataset.GroundTruth`, or None (course data)."""
+        """The dataset's :class:`~visla_edu.dataset.GroundTruth`, or None (course data without KITTI poses)."""
         return self._dataset.ground_truth
 
     @property
@@ -407,7 +368,7 @@ class Stepper:
         """IMU-only trajectory of the whole run, shape (T, 4, 4) (computed once per reset)."""
         if self._dead_reckoning is None:
             ds = self._dataset
-            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self._config.imu_lag)
+            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self.filter.config.imu_lag)
         return self._dead_reckoning
 
     def position_covariance(self):
@@ -425,15 +386,16 @@ class Stepper:
         return ids, self._retired_means[ids]
 
     def ground_truth_pose(self):
-        """True pose of the current frame, (4, 4), or None."""
+        """True pose of the current frame, (4, 4), or None (no ground truth, or the frame is past
+        the ones a real drive's ground truth covers)."""
         gt = self.ground_truth
-        return None if gt is None else gt.world_T_imu[self._t]
+        return None if gt is None or self._t >= gt.num_frames else gt.world_T_imu[self._t]
 
     def summary(self):
         """One line about the current frame: time, observations by status, NIS, active set."""
         rec = self.record
-        counts = self._status_counts[self._t]
-        obs = ", ".join(f"{name} {c}" for name, c in zip(filters.STATUS_NAMES, counts) if c)
+        counts = self._arrays.status_counts[self._t]
+        obs = ", ".join(f"{name} {c}" for name, c in zip(STATUS_NAMES, counts) if c)
         nis = f"NIS/dof {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof})" if rec.nis_dof else "no update"
         return (f"t = {self._t} / {self.num_frames - 1} ({self.time_stamps[self._t]:.2f} s): "
                 f"{len(rec.ids)} observations{' (' + obs + ')' if obs else ''}; {nis}; "
@@ -459,8 +421,8 @@ class Stepper:
 
     @staticmethod
     def _check_mode(mode):
-        if mode not in run.MODES:
-            raise ValueError(f"Stepper: mode must be one of {run.MODES}, got {mode!r}")
+        if mode not in MODES:
+            raise ValueError(f"Stepper: mode must be one of {MODES}, got {mode!r}")
         return mode
 
     @staticmethod

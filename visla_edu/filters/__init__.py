@@ -1,0 +1,58 @@
+"""The four filter modes as small state machines that advance one frame per ``step()``.
+
+* :class:`DeadReckoning` - IMU prediction only (mean and covariance).
+* :class:`LandmarkMapping` - poses fixed to dead reckoning, one 3x3 EKF per landmark.
+* :class:`VisualInertialOdometry` - pose EKF against landmarks fixed at their first
+  triangulation.
+* :class:`JointSlam` - the joint EKF over the pose and the landmarks, on the active set
+  (:class:`ActiveSet`) or dense (the textbook form).
+
+Each ``step()`` returns a :class:`StepRecord` (what the stepper, the driver and the metrics
+read), its observations marked with the status codes of :mod:`visla_edu.codes` (re-exported
+here). :class:`FilterConfig` holds the modes' settings; :func:`visla_edu.run.make_filter`
+builds a mode by name.
+
+Where each piece lives: ``_config`` the settings, ``_base`` the step loop and its declared
+hooks, the record and the divergence error, ``_state`` the joint state's covariance
+bookkeeping, ``_maps`` dead reckoning, mapping and VIO, ``_slam`` joint SLAM.
+"""
+
+from visla_edu.codes import (
+    OBS_FAR,
+    OBS_GATED,
+    OBS_IGNORED,
+    OBS_NEW,
+    OBS_NO_DEPTH,
+    OBS_USED,
+    STATUS_NAMES,
+)
+from visla_edu.filters._base import MAX_DISTANCE, MIN_DEPTH, FilterDivergedError, StepRecord
+from visla_edu.filters._config import AUTO, AUTO_FIELDS, MAX_IMU_LAG, FilterConfig
+from visla_edu.filters._maps import DeadReckoning, LandmarkMapping, VisualInertialOdometry
+from visla_edu.filters._slam import DENSE_PLACEHOLDER_VARIANCE, MAX_DENSE_BYTES, JointSlam
+from visla_edu.filters._state import ActiveSet
+
+__all__ = [
+    "FilterConfig",
+    "AUTO",
+    "AUTO_FIELDS",
+    "MAX_IMU_LAG",
+    "FilterDivergedError",
+    "StepRecord",
+    "OBS_USED",
+    "OBS_GATED",
+    "OBS_NEW",
+    "OBS_NO_DEPTH",
+    "OBS_FAR",
+    "OBS_IGNORED",
+    "STATUS_NAMES",
+    "DeadReckoning",
+    "LandmarkMapping",
+    "VisualInertialOdometry",
+    "JointSlam",
+    "ActiveSet",
+    "MAX_DISTANCE",
+    "MIN_DEPTH",
+    "DENSE_PLACEHOLDER_VARIANCE",
+    "MAX_DENSE_BYTES",
+]

@@ -1,0 +1,146 @@
+"""The joint state's bookkeeping: one covariance over the pose and the landmarks in the state.
+
+:class:`ActiveSet` owns the covariance surgery of the joint EKF (in the manner of OpenVINS's
+``StateHelper``): which slot holds which landmark, appending slots, filling a new landmark's
+rows, deleting a landmark's rows (marginalising it) and reading marginals. The filter
+(:class:`visla_edu.filters.JointSlam`) only decides *when* to do each; the update itself is
+:func:`visla_edu.ekf.joint_update`, which works on the same layout.
+
+The state is ``[pose perturbation (6); slot 0 (3); slot 1 (3); ...]``; slot ``s`` occupies the
+columns :func:`visla_edu.ekf.slot_columns` gives (``6 + 3 s .. 6 + 3 s + 2``).
+"""
+
+import numpy as np
+
+from visla_edu.ekf import POSE_DIM, slot_columns
+
+__all__ = ["ActiveSet"]
+
+
+class ActiveSet:
+    """Covariance of ``[pose; landmarks in the state]`` and the landmark of each slot.
+
+    Parameters
+    ----------
+    num_landmarks : int
+        ``M``, the number of landmark ids of the dataset.
+    pose_cov : array_like, shape (6, 6)
+        Covariance of the first pose.
+
+    Attributes
+    ----------
+    Sigma : ndarray, shape (D, D), D = 6 + 3 n
+        The joint covariance; the update and the prediction change it in place.
+    active_ids : ndarray of int, shape (n,)
+        Landmark id in each slot, in slot order.
+    slot_of : ndarray of int, shape (M,)
+        Slot of each landmark id, -1 when it is not in the state.
+    """
+
+    def __init__(self, num_landmarks, pose_cov):
+        self.Sigma = np.array(pose_cov, dtype=float)
+        if self.Sigma.shape != (POSE_DIM, POSE_DIM):
+            raise ValueError(f"ActiveSet: pose_cov must have shape (6, 6), got {self.Sigma.shape}")
+        self.active_ids = np.zeros(0, dtype=np.int64)
+        self.slot_of = np.full(num_landmarks, -1)
+
+    @classmethod
+    def dense(cls, num_landmarks, ids, pose_cov, placeholder_variance):
+        """Every landmark of ``ids`` in the state from the start (the textbook filter).
+
+        Their slots have zero correlation and ``placeholder_variance`` on the diagonal until
+        :meth:`augment` fills them at the landmark's first observation (a landmark never
+        observed is uncorrelated with everything, so filling its rows then is exact).
+        """
+        state = cls(num_landmarks, pose_cov)
+        state.enter(ids)
+        diagonal = np.arange(POSE_DIM, state.dim)
+        state.Sigma[diagonal, diagonal] = placeholder_variance
+        return state
+
+    @property
+    def dim(self):
+        """``D = 6 + 3 n``, the dimension of the state."""
+        return self.Sigma.shape[0]
+
+    @property
+    def pose_cov(self):
+        """The pose block of the joint covariance, (6, 6) (a view)."""
+        return self.Sigma[:POSE_DIM, :POSE_DIM]
+
+    def columns(self, ids):
+        """State columns of landmarks ``ids`` (all in the state), shape (k, 3)."""
+        return slot_columns(self.slot_of[ids])
+
+    def marginals(self, ids):
+        """Marginal covariances of landmarks ``ids`` (all in the state), shape (k, 3, 3)."""
+        cols = self.columns(ids)
+        return self.Sigma[cols[:, :, None], cols[:, None, :]]
+
+    def pose_cross(self, ids):
+        """Cross-covariances ``Sigma_pose,landmark`` of landmarks ``ids``, shape (k, 6, 3)."""
+        return np.swapaxes(self.Sigma[:POSE_DIM][:, self.columns(ids)], 0, 1)
+
+    def enter(self, ids):
+        """Append one slot per landmark of ``ids`` (zero rows and columns, filled by :meth:`augment`)."""
+        ids = np.asarray(ids, dtype=np.int64)
+        D_old = self.dim
+        Sigma = np.zeros((D_old + 3 * len(ids),) * 2)
+        Sigma[:D_old, :D_old] = self.Sigma
+        self.Sigma = Sigma
+        self.slot_of[ids] = len(self.active_ids) + np.arange(len(ids))
+        self.active_ids = np.concatenate([self.active_ids, ids])
+
+    def augment(self, ids, G_pose, C_new):
+        """Fill the rows of new landmarks placed from the current pose.
+
+        A landmark placed as ``m = f(pose, z)`` with pose sensitivity ``G_pose`` and pixel
+        covariance ``C_new`` (see :func:`visla_edu.ekf.initialize_landmarks`) has::
+
+            Sigma_new,x   = G_pose Sigma_pose,x          (every state entry x)
+            Sigma_new,new = G_pose Sigma_pp G_pose^T + C_new   (C_new block diagonal)
+
+        Parameters
+        ----------
+        ids : ndarray of int, shape (k,)
+            Landmarks already in the state (:meth:`enter`), never updated since.
+        G_pose : ndarray, shape (k, 3, 6)
+            Zero gives the uncorrelated textbook shortcut.
+        C_new : ndarray, shape (k, 3, 3)
+        """
+        k = len(ids)
+        cols = self.columns(ids).ravel()
+        G = G_pose.reshape(3 * k, POSE_DIM)
+        cross = G @ self.Sigma[:POSE_DIM]  # (3k, D)
+        self.Sigma[cols] = cross
+        self.Sigma[:, cols] = cross.T
+        block = G @ self.pose_cov @ G.T
+        block.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += C_new
+        self.Sigma[np.ix_(cols, cols)] = block
+
+    def retire(self, ids):
+        """Marginalise landmarks ``ids`` out of the state (delete their rows and columns).
+
+        Marginalising a Gaussian in covariance form is deleting rows and columns, so the
+        remaining entries are unchanged; the slots after a deleted one move down.
+
+        Parameters
+        ----------
+        ids : ndarray of int, shape (k,)
+            Landmarks in the state.
+
+        Returns
+        -------
+        ndarray, shape (k, 3, 3)
+            Their marginal covariances at the moment they leave.
+        """
+        covs = self.marginals(ids)
+        leaving = np.zeros(len(self.active_ids), dtype=bool)
+        leaving[self.slot_of[ids]] = True
+        keep_slots = np.nonzero(~leaving)[0]
+        keep = np.concatenate([np.arange(POSE_DIM), slot_columns(keep_slots).ravel()])
+        self.Sigma = self.Sigma.take(keep, axis=0).take(keep, axis=1)
+        self.slot_of[ids] = -1
+        self.active_ids = self.active_ids[keep_slots]
+        self.slot_of[self.active_ids] = np.arange(len(self.active_ids))
+        return covs

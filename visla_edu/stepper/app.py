@@ -1,0 +1,72 @@
+"""The stepper as a page of its own: the Voila app notebook and the server that shows it.
+
+    visla-edu stepper --port 8866          # or: python -c "from visla_edu.stepper.app import serve; serve(wait=True)"
+
+The page is ``visla_edu/stepper_app.ipynb`` (package data), one cell that shows a
+:class:`~visla_edu.stepper.widget.StepperWidget`.
+"""
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["serve", "app_notebook_path"]
+
+
+def app_notebook_path():
+    """Path of the standalone stepper page (``stepper_app.ipynb``, shipped in the package)."""
+    return Path(__file__).resolve().parent.parent / "stepper_app.ipynb"
+
+
+def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None, wait=False, **popen_options):
+    """Serve the stepper as a standalone page with Voila (``voila stepper_app.ipynb --port N``).
+
+    Parameters
+    ----------
+    port : int
+    open_browser : bool
+        Let Voila open the page in a browser.
+    data_dir : str or os.PathLike, optional
+        Folder of the course files, passed to the page as ``VISLA_EDU_DATA``.
+    dataset : str, optional
+        Dataset the page opens with (default ``"sim"``), via ``VISLA_EDU_STEPPER_DATASET``.
+    mode : str, optional
+        Filter mode the page opens with (default ``"slam"``), via ``VISLA_EDU_STEPPER_MODE``.
+    wait : bool
+        Block until the server exits (Ctrl-C stops it); otherwise return at once.
+    **popen_options
+        Passed to :class:`subprocess.Popen` (e.g. ``stdout=``, ``stderr=`` to capture the log).
+
+    Returns
+    -------
+    subprocess.Popen
+        The Voila process (the page is at ``http://localhost:<port>/``); stop it with
+        ``terminate()``.
+    """
+    notebook = app_notebook_path()
+    if not notebook.is_file():
+        raise FileNotFoundError(f"the stepper page {notebook} is missing from the installed package")
+    cmd = [sys.executable, "-m", "voila", str(notebook), f"--port={int(port)}"]
+    if not open_browser:
+        cmd.append("--no-browser")
+    env = dict(os.environ)
+    if data_dir is not None:
+        from visla_edu import data
+
+        env[data.ENV_VAR] = str(Path(data_dir).expanduser().resolve())
+    if dataset is not None:
+        env["VISLA_EDU_STEPPER_DATASET"] = str(dataset)
+    if mode is not None:
+        env["VISLA_EDU_STEPPER_MODE"] = str(mode)
+    if importlib.util.find_spec("voila") is None:
+        raise RuntimeError("the stepper page needs Voila: pip install voila")
+    proc = subprocess.Popen(cmd, env=env, cwd=str(notebook.parent), **popen_options)
+    if wait:
+        try:
+            proc.wait()
+        except KeyboardInterrupt:
+            proc.terminate()
+            proc.wait(timeout=10)
+    return proc
