@@ -23,7 +23,8 @@ import numpy as np
 from scipy import stats
 
 from visla_edu.smoother import _normal
-from visla_edu.smoother._config import SmootherConfig, blas_threads
+from visla_edu._blas import limit_blas_threads
+from visla_edu.smoother._config import SmootherConfig
 from visla_edu.smoother._factors import motion_steps
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
                                          far_landmarks, observation_status, rig_camera, triangulate_landmarks)
@@ -43,8 +44,7 @@ ROUGH_ITERATIONS = 2
 
 def motion_information(tau, config):
     """Diagonal of ``W_t^{-1/2}`` for each step: ``1 / (tau_t sigma)``, shape (K, 6)."""
-    sigma = np.repeat([config.sigma_linear_velocity, config.sigma_angular_velocity], 3)
-    return 1.0 / (np.asarray(tau)[:, None] * sigma)
+    return 1.0 / (np.asarray(tau)[:, None] * config.velocity_sigmas)
 
 
 def _state_norm(problem, world_T_imu, landmarks):
@@ -195,7 +195,7 @@ def _setup(dataset, world_T_imu, landmarks, camera, config):
     return problem, initial[problem.landmark_ids], status, rejected
 
 
-def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
+def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None, blas_threads=1):
     """Batch smoother: the course objective over all poses and landmarks.
 
     Minimises ``sum_obs rho(|z - h(T_t, m_j)|^2_V) + sum_t |log((T_t exp(tau_t u_t^))^{-1} T_{t+1})|^2_{W_t}``
@@ -216,13 +216,18 @@ def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
         Calibration to use (e.g. ``RunResult.imu_T_cam``, after the extrinsic correction);
         default the dataset's.
     config : SmootherConfig, optional
+    blas_threads : int or None
+        BLAS threads while it runs (:func:`visla_edu.run.limit_blas_threads`): its dense blocks
+        are small (6x6 to a few hundred rows), where a second thread costs far more in
+        synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
+        12 s with two on a busy 2-core machine); None leaves numpy's setting alone.
 
     Returns
     -------
     SmootherResult
     """
     config = config or SmootherConfig()
-    with blas_threads(config.blas_threads):
+    with limit_blas_threads(blas_threads):
         return _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config)
 
 

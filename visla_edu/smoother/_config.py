@@ -1,11 +1,10 @@
 """Settings of the batch and sliding-window smoothers: :class:`SmootherConfig`."""
 
-import contextlib
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "blas_threads"]
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
 LOSSES = ("cauchy", "huber", "none")
@@ -24,9 +23,11 @@ class SmootherConfig:
     ----------
     sigma_pixel : float
         Standard deviation of each stereo pixel coordinate (px): ``V = sigma_pixel^2 I4``.
-    sigma_linear_velocity, sigma_angular_velocity : float
-        White noise on each velocity sample (m/s, rad/s):
-        ``W_t = tau_t^2 diag(sigma_v^2 I3, sigma_w^2 I3)``.
+    sigma_linear_velocity, sigma_angular_velocity : float or (float, float, float)
+        Noise on each velocity sample (m/s, rad/s), one value or one per body axis:
+        ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` (:func:`visla_edu.motion.motion_noise`).
+        :meth:`from_filter_config` takes the filter's values, measured from the data when the
+        filter's are ``"auto"``.
     imu_lag : int
         The step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
     loss : {"cauchy", "huber", "none"}
@@ -74,11 +75,6 @@ class SmootherConfig:
         Gauss-Newton iterations per new frame in the sliding window.
     window_mode : {"fix", "marginalize"}
         What happens to a pose leaving the window, see :func:`smooth_window`.
-    blas_threads : int or None
-        BLAS threads while a smoother runs. Its dense blocks are small (6x6 to a few hundred
-        rows), where a second BLAS thread costs far more in synchronisation than it saves
-        (the 60-frame simulated drive: 0.46 s with one thread, 12 s with two on a busy
-        2-core machine); None leaves numpy's setting alone.
     """
 
     sigma_pixel: float = 1.5
@@ -102,14 +98,14 @@ class SmootherConfig:
     window_size: int = 20
     window_iterations: int = 1
     window_mode: str = "fix"
-    blas_threads: int = 1
 
     def __post_init__(self):
-        for name in ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity", "loss_scale",
-                     "function_tolerance", "step_tolerance", "initial_damping"):
+        for name in ("sigma_pixel", "loss_scale", "function_tolerance", "step_tolerance", "initial_damping"):
             value = getattr(self, name)
             if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
                 raise ValueError(f"SmootherConfig.{name} must be a positive number, got {value!r}")
+        for name in ("sigma_linear_velocity", "sigma_angular_velocity"):
+            setattr(self, name, _positive_per_axis(name, getattr(self, name)))
         for name, unit in (("min_depth", "m"), ("min_disparity", "px")):
             value = getattr(self, name)
             if not isinstance(value, (int, float, np.number)) or not 0 <= value < np.inf:
@@ -120,25 +116,40 @@ class SmootherConfig:
         for name, low in (("imu_lag", None), ("max_iterations", 1), ("rejection_rounds", 0),
                           ("min_observations", 2), ("window_size", 2), ("window_iterations", 1)):
             _check_int(name, getattr(self, name), low)
-        if self.blas_threads is not None:
-            _check_int("blas_threads", self.blas_threads, 1)
         if self.loss not in LOSSES:
             raise ValueError(f"SmootherConfig.loss must be one of {LOSSES}, got {self.loss!r}")
         if self.window_mode not in WINDOW_MODES:
             raise ValueError(f"SmootherConfig.window_mode must be one of {WINDOW_MODES}, got {self.window_mode!r}")
 
+    @property
+    def velocity_sigmas(self):
+        """``[sigma_v (3); sigma_w (3)]`` per body axis, shape (6,)."""
+        return np.concatenate([np.broadcast_to(self.sigma_linear_velocity, (3,)),
+                               np.broadcast_to(self.sigma_angular_velocity, (3,))]).astype(float)
+
+    @classmethod
+    def from_filter_config(cls, filter_config, **overrides):
+        """The smoother's model from a filter's resolved settings (noise, lag, far points).
+
+        Parameters
+        ----------
+        filter_config : visla_edu.filters.FilterConfig
+            Resolved (no ``"auto"`` noise or lag: :func:`visla_edu.run.resolve_config`).
+        **overrides
+            Further :class:`SmootherConfig` fields.
+        """
+        if not filter_config.resolved:
+            raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
+                             "(visla_edu.run.resolve_config(dataset, config))")
+        model = dict(sigma_pixel=filter_config.sigma_pixel, sigma_linear_velocity=filter_config.sigma_linear_velocity,
+                     sigma_angular_velocity=filter_config.sigma_angular_velocity, imu_lag=filter_config.imu_lag,
+                     min_disparity=filter_config.min_init_disparity,
+                     skip_repeated_frames=filter_config.skip_repeated_frames)
+        return cls(**{**model, **overrides})
+
     def to_dict(self):
         """Plain dict of the settings (for saving with results)."""
         return asdict(self)
-
-
-def blas_threads(n):
-    """Context manager limiting numpy's BLAS threads to ``n`` (None: leave as is)."""
-    if n is None:
-        return contextlib.nullcontext()
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=int(n), user_api="blas")
 
 
 def _check_int(name, value, low):
@@ -147,3 +158,11 @@ def _check_int(name, value, low):
         raise ValueError(f"SmootherConfig.{name} must be an integer, got {value!r}")
     if low is not None and value < low:
         raise ValueError(f"SmootherConfig.{name} must be >= {low}, got {value!r}")
+
+
+def _positive_per_axis(name, value):
+    """A velocity noise: a positive number or three (one per body axis), as a float or a tuple."""
+    sigma = np.asarray(value, dtype=float) if not isinstance(value, str) else np.full(2, np.nan)
+    if sigma.shape not in ((), (3,)) or not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
+        raise ValueError(f"SmootherConfig.{name} must be a positive number or three of them (x, y, z), got {value!r}")
+    return float(sigma) if sigma.ndim == 0 else tuple(float(x) for x in sigma)

@@ -44,7 +44,8 @@ from scipy import stats
 from visla_edu import lie
 from visla_edu.smoother import _envelope, _normal
 from visla_edu.smoother._batch import levenberg_marquardt, motion_information
-from visla_edu.smoother._config import SmootherConfig, blas_threads
+from visla_edu._blas import limit_blas_threads
+from visla_edu.smoother._config import SmootherConfig
 from visla_edu.smoother._factors import motion_steps, reprojection, robust_loss
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, PosePrior,
                                          build_problem, observation_status, rig_camera)
@@ -225,7 +226,7 @@ def _process_frame(state, k, history):
         state.hold(v0 - state.held_frames)
 
 
-def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None):
+def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_threads=1):
     """Fixed-lag sliding-window smoother over the whole drive, frame by frame.
 
     Parameters
@@ -236,6 +237,11 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None):
     imu_T_cam : array_like, shape (4, 4), optional
         Calibration to use (e.g. after the extrinsic correction); default the dataset's.
     config : SmootherConfig, optional
+    blas_threads : int or None
+        BLAS threads while it runs (:func:`visla_edu.run.limit_blas_threads`): its dense blocks
+        are small (6x6 to a few hundred rows), where a second thread costs far more in
+        synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
+        12 s with two on a busy 2-core machine); None leaves numpy's setting alone.
         ``window_size``, ``window_iterations``, ``window_mode`` and the noise model.
 
     Returns
@@ -252,7 +258,7 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None):
     config = config or SmootherConfig()
     first = np.eye(4) if world_T_imu0 is None else check_trajectory(np.asarray(world_T_imu0)[None], 1,
                                                                       dataset.name)[0]
-    with blas_threads(config.blas_threads):
+    with limit_blas_threads(blas_threads):
         return _run_window(dataset, first, rig_camera(dataset, imu_T_cam), config)
 
 
