@@ -5,8 +5,8 @@ Modules (import the one you need; nothing runs at import time):
 ``data`` loading the course files, ``simulate`` drives with ground truth, ``motion``
 IMU prediction, ``ekf`` the update steps, ``filters`` the filter modes and their settings,
 ``codes`` observation codes and mode names, ``run`` the driver, ``metrics``, ``diagnostics``,
-``plotting``, ``stepper`` the filter stepper (model, figure, widget, Voila page), ``checks``,
-``cli``.
+``plotting``, ``stepper`` the filter stepper (model, figure, widget, Voila page), ``checks``
+the exercise checks (``numdiff`` their central-difference reference), ``cli``.
 """
 
 __version__ = "0.1.0"
