@@ -4,7 +4,7 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import ekf, lie
-from visla_edu.checks._core import as_array, compare, fmt, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, project_with, random_pose, rig,
                                       rotation_transposed, stereo_camera, wrong_inverses)
 
@@ -22,6 +22,7 @@ def _calibrations(generator, hidden=False):
     return out
 
 
+@exercise_check
 def check_stereo_matrix(stereo_matrix, hidden=False):
     """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``."""
     name = "stereo_matrix"
@@ -58,6 +59,7 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
+@exercise_check
 def check_project(project, hidden=False):
     """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``."""
     name = "project"
@@ -76,6 +78,7 @@ def check_project(project, hidden=False):
     ok(f"{name}: pixels agree with StereoCamera.predict at 4 poses, points from 2 m to 300 m", hidden)
 
 
+@exercise_check
 def check_triangulate(triangulate, hidden=False):
     """Exercise 02: ``triangulate(z (M, 4), K, b) -> (M, 3)`` points in the left camera (disparity form)."""
     name = "triangulate"
@@ -115,6 +118,7 @@ def _init_variants(p_cam, imu_T_cam, T):
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
+@exercise_check
 def check_init_landmark(init_landmark, hidden=False):
     """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point."""
     name = "init_landmark"

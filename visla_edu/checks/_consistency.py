@@ -4,12 +4,13 @@ import numpy as np
 from scipy import stats
 
 from visla_edu import ekf, metrics, motion
-from visla_edu.checks._core import as_array, compare, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, ok, rng, student
 from visla_edu.checks._inputs import random_covariance
 
 __all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds"]
 
 
+@exercise_check
 def check_motion_noise(motion_noise, hidden=False):
     """Exercise 07: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``."""
     name = "motion_noise"
@@ -32,6 +33,7 @@ def check_motion_noise(motion_noise, hidden=False):
     ok(f"{name}: W = tau^2 diag(sigma_v^2 I, sigma_w^2 I)", hidden)
 
 
+@exercise_check
 def check_nees(nees, hidden=False):
     """Exercise 07: ``nees(error (n,), cov (n, n)) -> float`` = ``e^T cov^-1 e``."""
     name = "nees"
@@ -52,6 +54,7 @@ def check_nees(nees, hidden=False):
     ok(f"{name}: e^T Sigma^-1 e (chi-square with n dof when the filter is consistent)", hidden)
 
 
+@exercise_check
 def check_average_nees_bounds(average_nees_bounds, hidden=False):
     """Exercise 07: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES."""
     name = "average_nees_bounds"

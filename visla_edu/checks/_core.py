@@ -5,6 +5,7 @@ A failure is an ``AssertionError`` whose **first line** (at most 79 characters, 
 numbers follow on later lines.
 """
 
+import functools
 import os
 import textwrap
 
@@ -13,6 +14,7 @@ import numpy as np
 from visla_edu.checks import _hiding
 
 __all__ = [
+    "exercise_check",
     "SEED",
     "HIDDEN_SEED_VARIABLE",
     "rng",
@@ -31,6 +33,26 @@ SEED = 276
 #: Environment variable with the seed of the hidden cases (a teacher may set a private one).
 HIDDEN_SEED_VARIABLE = "VISLA_EDU_HIDDEN_SEED"
 _DEFAULT_HIDDEN_SEED = 1827
+
+
+def exercise_check(check):
+    """Decorator of the public checks: failures show the message, not the checks' own frames.
+
+    A failure found by a comparison is re-raised from the check itself, so a notebook (and
+    ``nbgrader validate``) shows the student's cell and the message, not the lines of the
+    checks. A crash of the student's code keeps its chained traceback (where it crashed).
+    """
+
+    @functools.wraps(check)
+    def run(fn, hidden=False):
+        try:
+            return check(fn, hidden=hidden)
+        except (AssertionError, NotImplementedError) as err:
+            if err.__cause__ is not None:
+                raise
+            raise type(err)(str(err)) from None
+
+    return run
 
 
 def _hidden_seed():

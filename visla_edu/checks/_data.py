@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from visla_edu.checks._core import as_array, compare, fail, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.dataset import Dataset
 
 __all__ = ["check_observations_at", "check_track_spans"]
@@ -58,6 +58,7 @@ def _check_frame(call, name, features, t):
     ])
 
 
+@exercise_check
 def check_observations_at(observations_at, hidden=False):
     """Exercise 00: ``observations_at(features, t) -> (ids (k,), z (k, 4))`` from dense features."""
     name = "observations_at"
@@ -97,6 +98,7 @@ def _check_spans(call, name, features):
     return int(seen.sum()), int(never.sum())
 
 
+@exercise_check
 def check_track_spans(track_spans, hidden=False):
     """Exercise 00: ``track_spans(features) -> (M, 2)`` first and last frame, -1 if never seen."""
     name = "track_spans"

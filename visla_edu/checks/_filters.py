@@ -4,7 +4,7 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import ekf, lie
-from visla_edu.checks._core import as_array, compare, fail, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, points_in_view, random_covariance, random_pose,
                                       rig, rotation_transposed, stereo_camera, wrong_inverses)
 
@@ -65,6 +65,7 @@ def _pair(out, name, what):
     return out
 
 
+@exercise_check
 def check_landmark_update(landmark_update, hidden=False):
     """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``."""
     name = "landmark_update"
@@ -116,6 +117,7 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
+@exercise_check
 def check_pose_update(pose_update, hidden=False):
     """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``."""
     name = "pose_update"
@@ -153,6 +155,7 @@ def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=
     return H
 
 
+@exercise_check
 def check_slam_jacobian(slam_jacobian, hidden=False):
     """Exercise 06: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``."""
     name = "slam_jacobian"
@@ -182,6 +185,7 @@ def _dense_bytes(num_landmarks, stride=1):
     return (_POSE_DIM + 3 * n) ** 2 * 8
 
 
+@exercise_check
 def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
     """Exercise 06: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64."""
     name = "dense_covariance_bytes"
@@ -210,6 +214,7 @@ def _marginal_cases(hidden):
     return [(12, np.array([0, 1, 2, 3, 4, 5, 9, 10, 11])), (15, np.arange(9)), (9, np.arange(9))]
 
 
+@exercise_check
 def check_marginalize(marginalize, hidden=False):
     """Exercise 06: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``."""
     name = "marginalize"

@@ -4,7 +4,7 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import lie, numdiff
-from visla_edu.checks._core import as_array, compare, fail, fmt, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, random_pose, rig, rotation_transposed,
                                       stereo_camera, wrong_inverses)
 
@@ -21,6 +21,7 @@ __all__ = [
 reference_numerical_jacobian = numdiff.central_jacobian
 
 
+@exercise_check
 def check_projection_jacobian(projection_jacobian, hidden=False):
     """Exercise 03: ``projection_jacobian(q (4,)) -> dpi/dq (4, 4)``."""
     name = "projection_jacobian"
@@ -43,6 +44,7 @@ def check_projection_jacobian(projection_jacobian, hidden=False):
     ok(f"{name}: agrees with the library (and so with finite differences)", hidden)
 
 
+@exercise_check
 def check_odot(odot, hidden=False):
     """Exercise 03: ``odot(s (4,)) -> (4, 6)`` with ``twist_hat(u) @ s == odot(s) @ u``."""
     name = "odot"
@@ -94,6 +96,7 @@ def _jacobian_cases(generator, hidden):
             (linear, generator.normal(size=3), A)]
 
 
+@exercise_check
 def check_numerical_jacobian(numerical_jacobian, hidden=False):
     """Exercise 03: ``numerical_jacobian(f, x, eps=1e-6) -> (m, n)`` by central differences."""
     name = "numerical_jacobian"
@@ -135,6 +138,7 @@ def _pose_jacobian_variants(camera, mu, m, ref):
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
+@exercise_check
 def check_pose_jacobian(pose_jacobian, hidden=False):
     """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``."""
     name = "pose_jacobian"
@@ -172,6 +176,7 @@ def _landmark_jacobian_variants(camera, T, m, ref):
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
+@exercise_check
 def check_landmark_jacobian(landmark_jacobian, hidden=False):
     """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``."""
     name = "landmark_jacobian"

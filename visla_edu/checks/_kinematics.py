@@ -3,7 +3,7 @@
 import numpy as np
 
 from visla_edu import lie, motion
-from visla_edu.checks._core import as_array, compare, fail, fmt, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
 from visla_edu.checks._inputs import (NEAR_ZERO_HINT, not_rotation, not_se3, rotation_vectors, swap_twist,
                                       twists, unit)
 
@@ -27,6 +27,7 @@ def _hat_inputs(generator, hidden):
     return fixed + [generator.normal(size=3) for _ in range(5)]
 
 
+@exercise_check
 def check_hat(hat, hidden=False):
     """Exercise 01: ``hat(w) -> (3, 3)`` with ``hat(w) @ x == cross(w, x)``."""
     name = "hat"
@@ -79,12 +80,12 @@ def _series_C(t):
     return (1 - t2 / 20 * (1 - t2 / 42)) / 6
 
 
-def _tiny_angle_failure(name, t, error, term):
+def _tiny_angle_failure(name, t, error):
     digits = max(0.0, -np.log10(_EPS / (t * t / 2)))
-    return fail(name, f"no small-angle series: {term} loses digits at {t:.0e} rad",
+    return fail(name, f"no small-angle series: digits lost at {t:.0e} rad",
                 f"at the angle t = {t:.0e} rad your result is off by {error:.1e} (relative) in the terms "
-                f"with hat(w); in float64 (1 - cos t)/t^2 keeps only about {digits:.0f} correct digit(s) there and "
-                "(t - sin t)/t^3 fewer.",
+                f"with hat(w); in float64 (1 - cos t)/t^2 keeps only about {digits:.0f} correct digit(s) there "
+                "and (t - sin t)/t^3 fewer.",
                 "Below a small angle (visla-edu switches at 0.1 rad) use the Taylor series "
                 "(1 - cos t)/t^2 ~ 1/2 - t^2/24 + t^4/720, (t - sin t)/t^3 ~ 1/6 - t^2/120 + t^4/5040; "
                 "a guard at exactly t == 0 is not enough.")
@@ -98,9 +99,10 @@ def _check_tiny_rotation(name, R, w):
     got = sym[[0, 0, 1], [1, 2, 2]]
     error = float(np.max(np.abs(got - ref) / np.abs(ref)))
     if not error <= 1e-6:
-        raise _tiny_angle_failure(name, t, error, "(1 - cos t)/t^2")
+        raise _tiny_angle_failure(name, t, error)
 
 
+@exercise_check
 def check_so3_exp(so3_exp, hidden=False):
     """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
 
@@ -139,10 +141,11 @@ def _check_tiny_twist(name, T, u):
     ref = v + _series_B(t) * wv + _series_C(t) * np.cross(w, wv)
     error = float(np.max(np.abs(T[:3, 3] - ref)) / np.linalg.norm(v))
     if not error <= 1e-12:
-        raise _tiny_angle_failure(name, t, error, "(1 - cos t)/t^2")
+        raise _tiny_angle_failure(name, t, error)
     _check_tiny_rotation(name, T[:3, :3], w)
 
 
+@exercise_check
 def check_se3_exp(se3_exp, hidden=False):
     """Exercise 01: ``se3_exp(u) -> (4, 4)`` for a twist ``u = [v; w]``, closed form.
 
@@ -193,6 +196,7 @@ def _drive(generator, T, hidden):
     return time_stamps, samples
 
 
+@exercise_check
 def check_dead_reckon(dead_reckon, hidden=False):
     """Exercise 01: ``dead_reckon(time_stamps (T,), twists (T, 6)) -> (T, 4, 4)`` from the identity."""
     name = "dead_reckon"
@@ -215,6 +219,7 @@ def check_dead_reckon(dead_reckon, hidden=False):
     ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon", hidden)
 
 
+@exercise_check
 def check_curly_hat(curly_hat, hidden=False):
     """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``."""
     name = "curly_hat"
@@ -237,6 +242,7 @@ def check_curly_hat(curly_hat, hidden=False):
     ok(f"{name}: expm(curly_hat(u)) == adjoint(se3_exp(u)) holds with your matrix", hidden)
 
 
+@exercise_check
 def check_pose_transition(pose_transition, hidden=False):
     """Exercise 05: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
 
