@@ -148,12 +148,17 @@ def _cmd_release(args):
     dst = Path(args.dst) if args.dst else root / "notebooks"
     if not src.is_dir():
         raise SystemExit(f"release: solutions folder {src} not found (run from a source checkout or pass --src)")
+    teaching = src.resolve().parent / "TEACHING.md"
     if args.check:
         drifted = release.check_in_sync(src, dst)
+        if teaching.is_file() and release.update_points_table(src, teaching, check=True):
+            drifted.append(teaching.name)
         print("\n".join(f"drifted: {name}" for name in drifted) or "notebooks/ is in sync with solutions/")
         raise SystemExit(1 if drifted else 0)
     release.make_student_notebooks(src, dst)
     print(f"wrote student notebooks to {dst}")
+    if teaching.is_file() and release.update_points_table(src, teaching):
+        print(f"updated the points table in {teaching}")
 
 
 def main(argv=None):
