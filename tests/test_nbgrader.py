@@ -124,10 +124,10 @@ def _build_course(course):
         "c.CourseDirectory.course_id = 'visla-edu'\n"
         "c.Execute.timeout = 300\n", encoding="utf-8")
     for name in NAMES:
-        _write(_exercises_only(_read(SOLUTIONS / f"{name}.ipynb")), course / "source" / ASSIGNMENT / f"{name}.ipynb")
-        submitted = course / "submitted"
-        _write(_exercises_only(_read(SOLUTIONS / f"{name}.ipynb")), submitted / "solutions" / ASSIGNMENT / f"{name}.ipynb")
-        _write(_exercises_only(_read(STUDENT / f"{name}.ipynb")), submitted / "blank" / ASSIGNMENT / f"{name}.ipynb")
+        solution = _exercises_only(_read(SOLUTIONS / f"{name}.ipynb"))
+        _write(solution, course / "source" / ASSIGNMENT / f"{name}.ipynb")
+        _write(solution, course / "submitted" / "solutions" / ASSIGNMENT / f"{name}.ipynb")
+        _write(_exercises_only(_read(STUDENT / f"{name}.ipynb")), course / "submitted" / "blank" / ASSIGNMENT / f"{name}.ipynb")
     for student, (name, answers) in GAMED.items():
         _write(_gamed_notebook(name, answers), course / "submitted" / student / ASSIGNMENT / f"{name}.ipynb")
 

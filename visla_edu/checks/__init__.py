@@ -7,11 +7,11 @@ library version and
 * prints one ``✓ ...`` line when everything agrees (``hidden=True`` runs other cases, drawn
   from ``VISLA_EDU_HIDDEN_SEED`` if set, and prints nothing);
 * raises ``AssertionError`` otherwise (nbgrader counts the cell as failed). The message's
-  first line (at most 79 characters, what ``nbgrader validate`` shows) names the likely
-  mistake; details follow. Mistakes are recognised by computing deliberately wrong variants
-  from the library (twist order ``[w; v]``, a transposed rotation, a missing minus sign,
-  a closed form without its small-angle series...) and seeing whether the student's output
-  equals one of them;
+  first line (at most 79 characters, as ``nbgrader validate`` cuts long lines) names the
+  likely mistake in its first words; details follow. Mistakes are recognised by computing
+  deliberately wrong variants from the library (twist order ``[w; v]``, a transposed
+  rotation, a missing minus sign, a closed form without its small-angle series...) and
+  seeing whether the student's output equals one of them;
 * raises ``NotImplementedError`` (with a pointer to the cell to fill in) while the exercise
   is still the stub of the student notebook.
 
@@ -64,8 +64,8 @@ from visla_edu.checks._hiding import LibraryFunctionHidden  # noqa: E402
 from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
                                          check_pose_jacobian, check_projection_jacobian,
                                          reference_numerical_jacobian)
-from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat, check_pose_transition,  # noqa: E402
-                                          check_se3_exp, check_so3_exp)
+from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat,  # noqa: E402
+                                          check_pose_transition, check_se3_exp, check_so3_exp)
 
 __all__ = [
     "student_or_reference",

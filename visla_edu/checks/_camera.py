@@ -63,7 +63,8 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
 def check_project(project, hidden=False):
     """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``."""
     name = "project"
-    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
     call = student(project, name, hide=[cam.StereoCamera.predict, cam.StereoCamera.predict_with_jacobians,
                                         cam.StereoCamera.points_in_camera])
     for trial in range(6 if hidden else 4):

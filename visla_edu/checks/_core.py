@@ -1,8 +1,10 @@
 """The machinery every check shares: calling the student's code, comparing, failure messages.
 
-A failure is an ``AssertionError`` whose **first line** (at most 79 characters, so that
-``nbgrader validate`` shows it whole) names the mistake; the input, the explanation and the
-numbers follow on later lines.
+A failure is an ``AssertionError`` whose **first line** (at most 79 characters) names the
+mistake in its first words; the input, the explanation and the numbers follow on later lines,
+wrapped at 79 characters. (``nbgrader validate`` indents each line of a traceback by 4 and cuts
+it at 87 characters, ``AssertionError: `` included, so the later lines show whole and the first
+one shows its first 67 characters.)
 """
 
 import functools

@@ -6,7 +6,7 @@ from visla_edu import camera as cam
 from visla_edu import ekf, lie
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, points_in_view, random_covariance, random_pose,
-                                      rig, rotation_transposed, stereo_camera, wrong_inverses)
+                                      rotation_transposed, stereo_camera, wrong_inverses)
 
 __all__ = [
     "check_landmark_update",
@@ -69,7 +69,8 @@ def _pair(out, name, what):
 def check_landmark_update(landmark_update, hidden=False):
     """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``."""
     name = "landmark_update"
-    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
     call = student(landmark_update, name, hide=[ekf.landmark_update, ekf.joint_update, ekf.cholesky_update])
     noise_var = 1.0 if hidden else 4.0
     for trial in range(6 if hidden else 4):
@@ -121,7 +122,8 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
 def check_pose_update(pose_update, hidden=False):
     """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``."""
     name = "pose_update"
-    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
     call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update])
     for trial in range(5 if hidden else 3):
         k = 1 if hidden and trial == 0 else 8

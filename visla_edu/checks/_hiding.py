@@ -26,7 +26,7 @@ __all__ = ["LibraryFunctionHidden", "label", "hidden_message", "hide", "guard", 
 #: The ``visla_edu`` package folder: library code must come from files under it.
 PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
 
-#: First lines must fit ``nbgrader validate``'s cut (about 90 characters with the error name).
+#: Longest line of a failure message (``nbgrader validate`` cuts lines at 87 characters).
 MAX_FIRST_LINE = 79
 
 

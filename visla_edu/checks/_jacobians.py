@@ -5,7 +5,7 @@ import numpy as np
 from visla_edu import camera as cam
 from visla_edu import lie, numdiff
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, random_pose, rig, rotation_transposed,
+from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, random_pose, rotation_transposed,
                                       stereo_camera, wrong_inverses)
 
 __all__ = [
@@ -142,7 +142,8 @@ def _pose_jacobian_variants(camera, mu, m, ref):
 def check_pose_jacobian(pose_jacobian, hidden=False):
     """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``."""
     name = "pose_jacobian"
-    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
     call = student(pose_jacobian, name, hide=[cam.StereoCamera.jacobian_pose,
                                               cam.StereoCamera.predict_with_jacobians])
     for trial in range(6 if hidden else 4):
@@ -180,7 +181,8 @@ def _landmark_jacobian_variants(camera, T, m, ref):
 def check_landmark_jacobian(landmark_jacobian, hidden=False):
     """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``."""
     name = "landmark_jacobian"
-    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
     call = student(landmark_jacobian, name, hide=[cam.StereoCamera.jacobian_landmark,
                                                   cam.StereoCamera.predict_with_jacobians])
     for trial in range(6 if hidden else 4):
