@@ -1,5 +1,6 @@
 """The command line as a user types it: info, run (with --out/--plot/--set), errors."""
 
+import re
 import subprocess
 import sys
 
@@ -67,3 +68,81 @@ def test_info_prints_summary_and_diagnostics(capsys):
 def test_python_dash_m_works():
     done = subprocess.run([sys.executable, "-m", "visla_edu", "--help"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and "info" in done.stdout and "run" in done.stdout
+
+
+# ----------------------------------------------------------------------------- ground truth, trajectories
+
+
+@pytest.fixture(scope="module")
+def real_like_drive(tmp_path_factory):
+    """A small simulated drive saved WITHOUT its truth, plus that truth as KITTI poses and times."""
+    import dataclasses
+
+    from visla_edu import data, simulate, trajectory
+
+    folder = tmp_path_factory.mktemp("drive")
+    ds = simulate.simulate_drive("tiny", seed=3)
+    path = data.save(dataclasses.replace(ds, name="drive", label="", ground_truth=None), folder / "drive.npz")
+    cam0_T_cam = data.kitti_poses_from_imu(ds.ground_truth.world_T_imu[:55], ds.imu_T_cam)
+    poses = trajectory.write_kitti(folder / "poses.txt", cam0_T_cam)
+    times = folder / "times.txt"
+    np.savetxt(times, ds.time_stamps[:55] - ds.time_stamps[0], fmt="%e")
+    return path, poses, times, ds
+
+
+def test_run_with_ground_truth_prints_saves_and_exports(real_like_drive, tmp_path, capsys):
+    from visla_edu import metrics, trajectory
+
+    path, poses, times, ds = real_like_drive
+    out, tum = tmp_path / "r.npz", tmp_path / "slam.tum"
+    argv = ["run", str(path), "--ground-truth", str(poses), "--ground-truth-times", str(times), "--out", str(out),
+            "--trajectory-out", str(tum), "--quiet"]
+    assert cli.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "ATE against ground truth (poses.txt, 55 frames)" in text
+    assert "slam estimate" in text and "dead reckoning" in text and text.count("drift unavailable") == 2
+    result = run.load_result(out)
+    truth = ds.ground_truth.world_T_imu[:55]
+    assert result.evaluation["estimate_ate_raw"] == pytest.approx(metrics.ate(result.world_T_imu[:55], truth, False))
+    assert result.evaluation["dead_reckoning_ate_aligned"] == pytest.approx(
+        metrics.ate(result.dead_reckoning[:55], truth, True))
+    assert result.evaluation["estimate_frames"] == 55 and result.evaluation["ground_truth_source"] == str(poses)
+    assert f"{result.evaluation['estimate_ate_raw']:.3f} m raw" in text
+    times_read, exported = trajectory.read_tum(tum)
+    np.testing.assert_array_equal(times_read, result.time_stamps)
+    np.testing.assert_allclose(exported, result.world_T_imu, atol=1e-12)
+
+
+def test_trajectory_out_in_kitti_format(real_like_drive, tmp_path):
+    from visla_edu import trajectory
+
+    path, _, _, _ = real_like_drive
+    assert cli.main(["run", str(path), "--mode", "deadreckon", "--trajectory-out", str(tmp_path / "dr.kitti"),
+                     "--out", str(tmp_path / "r.npz"), "--quiet"]) == 0
+    poses, _ = trajectory.read_kitti(tmp_path / "dr.kitti")
+    np.testing.assert_array_equal(poses, run.load_result(tmp_path / "r.npz").world_T_imu)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--trajectory-out", "est.csv"], "unknown trajectory format '.csv'"),
+    (["--ground-truth-times", "times.txt"], "--ground-truth-times times.txt needs --ground-truth"),
+    (["--ground-truth", "missing_poses.txt"], "missing_poses.txt: KITTI poses.* file not found"),
+])
+def test_ground_truth_and_trajectory_errors_come_before_the_run(real_like_drive, capsys, extra, message):
+    path, _, _, _ = real_like_drive
+    assert cli.main(["run", str(path), "--quiet", *extra]) == 2
+    captured = capsys.readouterr()
+    assert re.search(message, captured.err) and "mode slam" not in captured.out
+
+
+@pytest.mark.data
+def test_info_and_run_0020_with_its_ground_truth(require_data, capsys):
+    path = require_data("0020")
+    if not (path.parent / "kitti_odometry_06_poses.txt").is_file():
+        pytest.skip("kitti_odometry_06_poses.txt not found beside 0020.npz")
+    assert cli.main(["info", "0020", "--data-dir", str(path.parent), "--no-diagnostics"]) == 0
+    assert "ground truth  attached: KITTI poses of frames 0-1100, 1101 of 1104 frames" in capsys.readouterr().out
+    assert cli.main(["run", "0020", "--data-dir", str(path.parent), "--mode", "deadreckon", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "ATE against ground truth (kitti_odometry_06_poses.txt, 1101 frames)" in text
+    assert "first 1101 of 1104 frames" in text and "segments of 100-800 m" in text

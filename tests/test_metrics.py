@@ -189,3 +189,93 @@ def test_average_nees_bounds(dof, runs):
     rng = np.random.default_rng(dof * 100 + runs)
     averages = rng.chisquare(dof, size=(4000, runs)).mean(axis=1)
     assert np.mean((averages > lo) & (averages < hi)) == pytest.approx(0.95, abs=0.015)
+
+
+# ----------------------------------------------------------------------------- KITTI drift, evaluate
+
+
+def _straight(n, step=0.25):
+    """``n`` poses ``step`` m apart along x, identity rotations: path length ``step * (n - 1)``."""
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = step * np.arange(n)
+    return poses
+
+
+def test_drift_of_a_constant_scale_error_is_that_error():
+    gt = _straight(4001)  # 1000 m
+    est = gt.copy()
+    est[:, :3, 3] *= 1.01  # 1% too long everywhere
+    translation, rotation, segments = metrics.kitti_drift(est, gt)
+    # the error over a segment is 1% of its chord, which exceeds the nominal length by < one 0.25 m step
+    assert 1.0 <= translation <= 1.0 * (1 + 0.25 / 100) and rotation == 0.0
+    # starts every 10 frames (2.5 m) whose segment of L m ends before 1000 m: sum of (1000 - L) / 2.5
+    assert segments == sum(int((1000 - L) / 2.5) for L in range(100, 900, 100)) == 1760
+
+
+def test_drift_of_a_constant_heading_error_rate():
+    gt = _straight(4001)
+    k = 1e-3  # rad of extra yaw per metre
+    est = gt.copy()
+    est[:, :3, :3] = lie.so3_exp(np.outer(k * gt[:, 0, 3], [0, 0, 1.0]))
+    _, rotation, _ = metrics.kitti_drift(est, gt)
+    assert np.degrees(k) * 100 <= rotation <= np.degrees(k) * 100 * (1 + 0.25 / 100)
+
+
+def test_drift_matches_a_plain_loop_over_segments():
+    rng = np.random.default_rng(5)
+    gt = _trajectory(rng, T=400)
+    est = gt @ lie.se3_exp(0.02 * rng.standard_normal((400, 6)))
+    dist = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1))])
+    t_errs, r_errs = [], []
+    for first in range(0, 400, 10):
+        for length in (100.0, 200.0, 300.0):
+            later = [i for i in range(first, 400) if dist[i] > dist[first] + length]
+            if not later:
+                continue
+            last = later[0]
+            E = np.linalg.inv(np.linalg.inv(est[first]) @ est[last]) @ np.linalg.inv(gt[first]) @ gt[last]
+            t_errs.append(np.linalg.norm(E[:3, 3]) / length)
+            r_errs.append(np.arccos(np.clip((np.trace(E[:3, :3]) - 1) / 2, -1, 1)) / length)
+    translation, rotation, segments = metrics.kitti_drift(est, gt, lengths=(100.0, 200.0, 300.0))
+    assert segments == len(t_errs) > 50
+    assert translation == pytest.approx(100 * np.mean(t_errs), rel=1e-9)
+    assert rotation == pytest.approx(np.degrees(np.mean(r_errs)) * 100, rel=1e-6)
+
+
+def test_evaluate_gathers_ate_and_drift():
+    rng = np.random.default_rng(2)
+    gt = _straight(4001)
+    est = gt.copy()
+    est[:, :3, 3] *= 1.01
+    est = _random_transform(rng) @ est  # another world frame: raw ATE sees it, aligned ATE and drift do not
+    result = metrics.evaluate(est, gt)
+    assert result.ate_raw == metrics.ate(est, gt, align=False) and result.ate_raw > 1
+    assert result.ate_aligned == metrics.ate(est, gt, align=True)
+    assert result.ate_aligned == pytest.approx(0.01 * np.std(gt[:, 0, 3]), rel=1e-6)  # the scale is left
+    assert result.drift_translation == pytest.approx(1.0, rel=3e-3) and result.drift_note == ""
+    assert (result.frames, result.total_frames, result.path_length) == (4001, 4001, 1000.0)
+    line = result.summary()
+    assert "\n" not in line and "1.00 %" in line and "1760 segments" in line and "raw" in line
+    assert result.as_dict("estimate_")["estimate_drift_segments"] == 1760
+
+
+def test_evaluate_a_short_drive_says_why_there_is_no_drift():
+    gt = _straight(200)  # 49.75 m
+    result = metrics.evaluate(gt, gt)
+    assert result.drift_translation is None and result.drift_rotation is None and result.drift_segments == 0
+    assert "shorter than 100 m" in result.drift_note and "drift unavailable" in result.summary()
+    values = result.as_dict()
+    assert np.isnan(values["drift_translation"]) and values["drift_note"] == result.drift_note
+
+
+def test_evaluate_compares_the_frames_the_ground_truth_covers():
+    gt = _straight(300)
+    est = np.concatenate([gt, _straight(5) + 1.0])
+    result = metrics.evaluate(est, gt)
+    assert (result.frames, result.total_frames, result.ate_raw) == (300, 305, 0.0)
+    assert "first 300 of 305 frames" in result.summary()
+    with pytest.raises(ValueError, match="ground truth has 305 frames but the estimate only 300"):
+        metrics.evaluate(gt, est)
+    est[7, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="estimate's pose of frame 7 is not finite"):
+        metrics.evaluate(est, gt)

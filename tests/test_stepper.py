@@ -257,6 +257,19 @@ def test_ground_truth_and_dead_reckoning(tiny):
     assert "t = 7 / " in s.summary()
 
 
+def test_ground_truth_of_fewer_frames_than_the_drive(tiny):
+    import dataclasses
+
+    from visla_edu.dataset import GroundTruth
+
+    real_like = dataclasses.replace(tiny, ground_truth=GroundTruth(world_T_imu=tiny.ground_truth.world_T_imu[:40]))
+    s = Stepper(real_like)
+    s.goto(39)
+    np.testing.assert_array_equal(s.ground_truth_pose(), tiny.ground_truth.world_T_imu[39])
+    s.goto(40)
+    assert s.ground_truth_pose() is None  # past the frames the ground truth covers
+
+
 def test_divergence_stops_at_last_good_frame(tiny):
     s = Stepper(tiny)
     original = s.filter.step

@@ -180,6 +180,36 @@ def test_figure_shows_the_current_frame():
     assert "frame 25: " not in w.status.value and "25</b>" in w.status.value
 
 
+def test_figure_draws_a_poses_only_ground_truth_in_its_own_style():
+    import dataclasses
+
+    import matplotlib.colors
+
+    from visla_edu import data
+    from visla_edu.dataset import GroundTruth
+    from visla_edu.plotting import GROUND_TRUTH_STYLE
+    from visla_edu.stepper import Stepper
+
+    tiny = data.load("sim-tiny")
+    truth = GroundTruth(world_T_imu=tiny.ground_truth.world_T_imu[:40])  # a real drive's: poses only, 40 frames
+    s = Stepper(dataclasses.replace(tiny, ground_truth=truth), mode="slam")
+    fig = StepperFigure(dpi=40, annotate=True)
+    s.goto(45)
+    fig.update(s)
+    assert fig.render_png().startswith(b"\x89PNG")
+    assert len(fig.gt_line.get_xdata()) == 40 and len(fig.gt_points.get_offsets()) == 0
+    assert len(fig.gt_pose.get_xdata()) == 0 and "position error" not in fig.captions["map"]  # frame 45 > 39
+    labels = [t.get_text() for t in fig.ax_map.get_legend().get_texts()]
+    assert "ground truth" in labels and "true landmarks" not in labels
+    color = matplotlib.colors.to_hex(fig.gt_line.get_color())
+    assert color == matplotlib.colors.to_hex(GROUND_TRUTH_STYLE["color"]) and fig.gt_line.get_linestyle() == "-."
+    others = [fig.est_line, fig.dr_line]
+    assert all((matplotlib.colors.to_hex(a.get_color()), a.get_linestyle()) != (color, "-.") for a in others)
+    s.goto(20)
+    fig.update(s)
+    assert "position error" in fig.captions["map"]
+
+
 def test_redraw_is_fast_enough_headless():
     w = StepperWidget("sim-tiny")
     times = []

@@ -4,7 +4,8 @@ Modules (import the one you need; nothing runs at import time):
 ``lie`` SE(3) kinematics, ``camera`` stereo model, ``dataset`` the Dataset class,
 ``data`` loading the course files, ``simulate`` drives with ground truth, ``motion``
 IMU prediction, ``ekf`` the update steps, ``filters`` the filter modes and their settings,
-``codes`` observation codes and mode names, ``run`` the driver, ``metrics``, ``diagnostics``,
+``codes`` observation codes and mode names, ``run`` the driver, ``metrics`` (ATE, drift, NEES),
+``trajectory`` KITTI and TUM trajectory files, ``diagnostics``,
 ``plotting``, ``stepper`` the filter stepper (model, figure, widget, Voila page), ``checks``
 the exercise checks (``numdiff`` their central-difference reference), ``cli``.
 """

@@ -7,6 +7,8 @@ Examples::
     visla-edu run 03 --mode mapping --out map.npz
     visla-edu run 03 --dense --landmark-stride 20
     visla-edu run 03 --blas-threads none      # leave numpy's BLAS threads alone (default: 1)
+    visla-edu run 0020                      # ATE and drift against its KITTI ground truth (found beside it)
+    visla-edu run X --ground-truth poses.txt --ground-truth-times times.txt --trajectory-out slam.tum
     visla-edu stepper --port 8866           # the filter stepper page (Voila)
     visla-edu release                       # regenerate notebooks/ from solutions/
 """
@@ -47,6 +49,14 @@ def build_parser():
     run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
                      help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
                           "'none' leaves numpy's setting alone)")
+    run.add_argument("--ground-truth", default=None, metavar="FILE",
+                     help="KITTI odometry poses (poses/NN.txt: left-camera poses, row i = frame i) to report ATE and "
+                          "drift against (automatic for a registered drive such as 0020)")
+    run.add_argument("--ground-truth-times", default=None, metavar="FILE",
+                     help="KITTI times.txt of the ground truth, checked against the dataset's time stamps")
+    run.add_argument("--trajectory-out", default=None, metavar="FILE",
+                     help="write the estimated trajectory: .kitti or .txt (KITTI, 12 numbers per row) or .tum "
+                          "(TUM: t x y z qx qy qz qw)")
 
     stepper = sub.add_parser("stepper", parents=[common], help="serve the interactive filter stepper with Voila")
     stepper.add_argument("--port", type=int, default=8866)
@@ -109,21 +119,22 @@ def _cmd_run(args):
     if args.landmark_stride is not None:
         settings["landmark_stride"] = args.landmark_stride
     config = FilterConfig(**settings)
-    dataset = data.load(args.dataset, args.data_dir)
+    _check_run_outputs(args)
+    dataset = _load_with_ground_truth(args)
     if dataset.label:
         print(dataset.label)
     result = run.run_filter(dataset, args.mode, config, dense=args.dense,
                             progress=False if args.quiet else None, verbose=True, blas_threads=args.blas_threads)
     print(result.summary())
     if dataset.ground_truth is not None:
-        from visla_edu import metrics
-
-        gt = dataset.ground_truth.world_T_imu
-        print(f"ATE against ground truth: {metrics.ate(result.world_T_imu, gt, align=False):.3f} m "
-              f"(dead reckoning {metrics.ate(result.dead_reckoning, gt, align=False):.3f} m)")
+        _print_evaluation(run.evaluate_result(result, dataset.ground_truth), dataset.ground_truth, args.mode)
     if args.out:
         run.save_result(result, args.out)
         print(f"saved {Path(args.out).resolve()}")
+    if args.trajectory_out:
+        from visla_edu import trajectory
+
+        print(f"saved {trajectory.write_trajectory(args.trajectory_out, result.time_stamps, result.world_T_imu)}")
     if args.plot:
         import matplotlib
 
@@ -131,6 +142,36 @@ def _cmd_run(args):
         plotting.plot_result(result, args.plot, ground_truth=dataset.ground_truth,
                              title=f"{dataset.name}: {args.mode}{' (dense)' if args.dense else ''}")
         print(f"saved {Path(args.plot).resolve()}")
+
+
+def _check_run_outputs(args):
+    """Problems with the output and ground-truth options, found before the run starts."""
+    if args.trajectory_out:
+        from visla_edu import trajectory
+
+        trajectory.trajectory_format(args.trajectory_out)
+    if args.ground_truth_times and not args.ground_truth:
+        raise ValueError(f"--ground-truth-times {args.ground_truth_times} needs --ground-truth POSES_FILE too")
+
+
+def _load_with_ground_truth(args):
+    """The dataset of ``args``, with the ground truth of ``--ground-truth`` when given."""
+    from visla_edu import data
+
+    dataset = data.load(args.dataset, args.data_dir)
+    if args.ground_truth:
+        dataset = data.attach_ground_truth(dataset, args.ground_truth, args.ground_truth_times)
+    return dataset
+
+
+def _print_evaluation(evaluations, ground_truth, mode):
+    """The lines ``visla-edu run`` prints about the ground truth, estimate and dead reckoning."""
+    source = Path(ground_truth.source).name if ground_truth.source else "the simulation"
+    print(f"ATE against ground truth ({source}, {ground_truth.num_frames} frames), drift over 100-800 m segments:")
+    rows = {f"{mode} estimate": evaluations["estimate"], "dead reckoning": evaluations["dead_reckoning"]}
+    width = max(map(len, rows)) + 2
+    for label, evaluation in rows.items():
+        print(f"  {label:{width}s}{evaluation.summary()}")
 
 
 def _cmd_stepper(args):

@@ -19,25 +19,46 @@ __all__ = ["Dataset", "GroundTruth", "frame_major_order", "repeated_frames"]
 
 @dataclass
 class GroundTruth:
-    """True poses and landmarks of a simulated drive.
+    """True poses of a drive, and for simulated drives its true landmarks and velocities.
+
+    A simulated drive fills every field for all of its frames. A real drive's ground truth
+    (KITTI odometry poses, :func:`visla_edu.data.load_ground_truth`) has only the poses,
+    possibly for fewer frames than the dataset: it covers frames ``0 .. num_frames - 1``
+    (``0020.npz`` has 1104 frames, its KITTI poses 1101), so compare an estimate's first
+    :attr:`num_frames` poses, e.g. ``metrics.evaluate(est[:gt.num_frames], gt.world_T_imu)``
+    (:func:`visla_edu.metrics.evaluate` does this itself).
 
     Attributes
     ----------
-    world_T_imu : ndarray, shape (T, 4, 4)
-        True IMU poses, ``world`` = the IMU frame at the first time stamp.
-    landmarks : ndarray, shape (M, 3)
-        True landmark positions in the world frame.
-    linear_velocity, angular_velocity : ndarray, shape (T, 3)
-        Noise-free body-frame velocities used to generate the drive.
-    outlier : ndarray of bool, shape (M,)
-        Landmarks whose tracks were corrupted on purpose (gross outliers).
+    world_T_imu : ndarray, shape (n, 4, 4)
+        True IMU poses of frames ``0 .. n - 1``, ``world`` = the IMU frame at the first time
+        stamp; ``n`` is the dataset's ``T`` for simulated drives, ``n <= T`` for real ones.
+    landmarks : ndarray, shape (M, 3), or None
+        True landmark positions in the world frame (simulated drives only).
+    linear_velocity, angular_velocity : ndarray, shape (T, 3), or None
+        Noise-free body-frame velocities used to generate the drive (simulated drives only).
+    outlier : ndarray of bool, shape (M,), or None
+        Landmarks whose tracks were corrupted on purpose (simulated drives only).
+    source : str
+        Where the poses came from (a file path, or ``""`` for a simulation).
     """
 
     world_T_imu: np.ndarray
-    landmarks: np.ndarray
-    linear_velocity: np.ndarray
-    angular_velocity: np.ndarray
-    outlier: np.ndarray
+    landmarks: np.ndarray = None
+    linear_velocity: np.ndarray = None
+    angular_velocity: np.ndarray = None
+    outlier: np.ndarray = None
+    source: str = ""
+
+    @property
+    def num_frames(self):
+        """n, the number of frames the true poses cover (frames ``0 .. n - 1``)."""
+        return len(self.world_T_imu)
+
+    @property
+    def simulated(self):
+        """Whether the landmarks, velocities and outlier mask are known (a simulated drive)."""
+        return self.landmarks is not None
 
 
 @dataclass
@@ -67,7 +88,8 @@ class Dataset:
     obs_z : ndarray, shape (N, 4)
         Sparse observations, see the module docstring.
     ground_truth : GroundTruth or None
-        Present for simulated drives.
+        Present for simulated drives, and for real drives whose KITTI poses were found
+        (:func:`visla_edu.data.load`, :func:`visla_edu.data.attach_ground_truth`).
     label : str
         A human-readable description; stand-ins say so here.
     """

@@ -1,15 +1,20 @@
-"""Accuracy and consistency metrics: ATE, RPE, NEES, NIS and chi-square bounds.
+"""Accuracy and consistency metrics: ATE, RPE, KITTI drift, NEES, NIS and chi-square bounds.
 
 Errors of a pose estimate ``mu`` against the truth ``T`` use the filter's own perturbation
 convention: ``T = mu exp(hat(e))``, so ``e = se3_log(inv(mu) @ T)`` (twist ``[v; w]``).
+:func:`evaluate` gathers what a run is judged by against ground truth (ATE raw and aligned,
+KITTI drift) in a :class:`TrajectoryEvaluation`.
 """
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
 from visla_edu import lie
 
-__all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "nis_band", "average_nees_bounds"]
+__all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "nis_band", "average_nees_bounds",
+           "DRIFT_LENGTHS", "DRIFT_STEP", "path_distances", "kitti_drift", "TrajectoryEvaluation", "evaluate"]
 
 
 def _check_trajectories(est, gt):
@@ -176,3 +181,169 @@ def average_nees_bounds(dof, runs, probability=0.95):
     """
     lo, hi = chi2_bounds(dof * runs, probability)
     return lo / runs, hi / runs
+
+
+# ----------------------------------------------------------------------------- KITTI drift
+
+#: Segment lengths (m of ground-truth path) of the KITTI odometry benchmark's drift figures.
+DRIFT_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
+#: A segment starts every this many frames.
+DRIFT_STEP = 10
+
+
+def path_distances(world_T_imu):
+    """Distance travelled along a trajectory up to each frame (m): ``d_0 = 0``, ``d_i = d_{i-1} + |p_i - p_{i-1}|``.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (T, 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (T,)
+    """
+    p = np.asarray(world_T_imu, dtype=float)[:, :3, 3]
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+
+
+def kitti_drift(est_world_T_imu, gt_world_T_imu, lengths=DRIFT_LENGTHS, step=DRIFT_STEP):
+    """KITTI-style drift: relative pose error over segments of 100, 200, ..., 800 m of path.
+
+    For every start frame ``f = 0, step, 2 step, ...`` and segment length ``L``, the segment
+    ends at the first frame ``l`` whose ground-truth path distance exceeds ``d_f + L``
+    (:func:`path_distances`; no segment when the drive ends first). Its error is
+    ``E = inv(inv(est_f) est_l) (inv(gt_f) gt_l)``: the translation error ``|t(E)| / L`` and
+    the rotation error ``angle(E) / L``, averaged over all segments of all lengths (the
+    definition of the KITTI odometry devkit; the angle here is ``|so3_log|``, accurate for
+    small errors where ``acos`` of the trace is not).
+
+    Parameters
+    ----------
+    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
+    lengths : sequence of float
+        Segment lengths (m).
+    step : int
+        Frames between segment starts.
+
+    Returns
+    -------
+    translation_percent : float or None
+        Mean ``100 |t(E)| / L`` (%); None when no segment fits in the drive.
+    rotation_deg_per_100m : float or None
+        Mean ``angle(E) / L`` in degrees per 100 m.
+    segments : int
+        Number of segments averaged.
+    """
+    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu)
+    dist = path_distances(gt)
+    first = np.arange(0, len(gt), step)
+    t_err, r_err = [], []
+    for length in lengths:
+        last = np.searchsorted(dist, dist[first] + length, side="right")  # first frame with d > d_f + L
+        f, l = first[last < len(gt)], last[last < len(gt)]
+        if len(f) == 0:
+            continue
+        err = lie.se3_inv(lie.se3_inv(est[f]) @ est[l]) @ (lie.se3_inv(gt[f]) @ gt[l])
+        t_err.append(np.linalg.norm(err[:, :3, 3], axis=1) / length)
+        r_err.append(np.linalg.norm(lie.so3_log(err[:, :3, :3]), axis=1) / length)
+    if not t_err:
+        return None, None, 0
+    t_err, r_err = np.concatenate(t_err), np.concatenate(r_err)
+    return float(100 * t_err.mean()), float(np.degrees(r_err.mean()) * 100), len(t_err)
+
+
+@dataclass(frozen=True)
+class TrajectoryEvaluation:
+    """How close an estimated trajectory is to the ground truth (:func:`evaluate`).
+
+    Attributes
+    ----------
+    ate_raw : float
+        RMS position error (m), no alignment (``world`` = the first IMU frame for both).
+    ate_aligned : float
+        RMS position error (m) after the best rigid alignment (:func:`align_se3`).
+    drift_translation : float or None
+        KITTI translation drift (% of segment length, :func:`kitti_drift`); None when unavailable.
+    drift_rotation : float or None
+        KITTI rotation drift (degrees per 100 m); None when unavailable.
+    drift_segments : int
+        Segments averaged for the drift.
+    drift_note : str
+        Why the drift is unavailable (``""`` when it is available).
+    path_length : float
+        Ground-truth path length (m) over the compared frames.
+    frames : int
+        Frames compared: the first ``frames`` poses (those the ground truth covers).
+    total_frames : int
+        Frames of the estimate.
+    """
+
+    ate_raw: float
+    ate_aligned: float
+    drift_translation: float
+    drift_rotation: float
+    drift_segments: int
+    drift_note: str
+    path_length: float
+    frames: int
+    total_frames: int
+
+    def summary(self):
+        """One line: ATE raw and aligned, drift (or why not), frames compared."""
+        if self.drift_translation is None:
+            drift = f"drift unavailable ({self.drift_note})"
+        else:
+            drift = (f"drift {self.drift_translation:.2f} % and {self.drift_rotation:.3f} deg/100 m "
+                     f"({self.drift_segments} segments of {DRIFT_LENGTHS[0]:.0f}-{DRIFT_LENGTHS[-1]:.0f} m)")
+        frames = f"{self.frames} frames" if self.frames == self.total_frames else \
+            f"first {self.frames} of {self.total_frames} frames"
+        return (f"ATE {self.ate_raw:.3f} m raw, {self.ate_aligned:.3f} m SE(3)-aligned; {drift}; "
+                f"{frames}, {self.path_length:.0f} m of path")
+
+    def as_dict(self, prefix=""):
+        """``{prefix + name: value}`` of every field; an unavailable drift is NaN, ``drift_note`` says why."""
+        values = {k: (np.nan if v is None else v) for k, v in vars(self).items()}
+        return {prefix + k: v for k, v in values.items()}
+
+
+def evaluate(est_world_T_imu, gt_world_T_imu):
+    """ATE (raw and SE(3)-aligned) and KITTI drift of an estimate against the ground truth.
+
+    Parameters
+    ----------
+    est_world_T_imu : ndarray, shape (T, 4, 4)
+        The estimate, ``world`` = the first IMU frame.
+    gt_world_T_imu : ndarray, shape (n, 4, 4)
+        The ground truth of frames ``0 .. n - 1``, ``1 <= n <= T`` (a real drive's poses may
+        cover fewer frames than the dataset: the first ``n`` estimated poses are compared).
+
+    Returns
+    -------
+    TrajectoryEvaluation
+        Its :meth:`~TrajectoryEvaluation.summary` is one line for a report.
+
+    Raises
+    ------
+    ValueError
+        Shapes do not fit, the ground truth has more frames than the estimate, or a pose
+        is not finite (the message names the frame).
+    """
+    est = np.asarray(est_world_T_imu, dtype=float)
+    gt = np.asarray(gt_world_T_imu, dtype=float)
+    if est.ndim != 3 or gt.ndim != 3 or est.shape[1:] != (4, 4) or gt.shape[1:] != (4, 4) or not 1 <= len(gt):
+        raise ValueError(f"evaluate: trajectories must have shapes (T, 4, 4) and (n, 4, 4), got {est.shape} "
+                         f"and {gt.shape}")
+    if len(gt) > len(est):
+        raise ValueError(f"evaluate: the ground truth has {len(gt)} frames but the estimate only {len(est)}")
+    n = len(gt)
+    for name, poses in (("estimate", est[:n]), ("ground truth", gt)):
+        bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
+        if len(bad):
+            raise ValueError(f"evaluate: the {name}'s pose of frame {bad[0]} is not finite")
+    translation, rotation, segments = kitti_drift(est[:n], gt)
+    length = float(path_distances(gt)[-1])
+    note = "" if segments else f"ground-truth path {length:.0f} m is shorter than {DRIFT_LENGTHS[0]:.0f} m"
+    return TrajectoryEvaluation(
+        ate_raw=ate(est[:n], gt, align=False), ate_aligned=ate(est[:n], gt, align=True),
+        drift_translation=translation, drift_rotation=rotation, drift_segments=segments, drift_note=note,
+        path_length=length, frames=n, total_frames=len(est))

@@ -8,8 +8,12 @@ import numpy as np
 
 from visla_edu.codes import DEADRECKON, OBS_GATED
 
-__all__ = ["covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
+__all__ = ["GROUND_TRUTH_STYLE", "covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
            "covariance_ellipses", "plot_nis"]
+
+#: How the true trajectory is drawn in every view (these plots and the stepper's map): green
+#: dash-dot, unlike the estimate (blue, solid), dead reckoning (red, dashed) and landmarks (grey dots).
+GROUND_TRUTH_STYLE = {"color": "C2", "linestyle": "-.", "linewidth": 2.2, "alpha": 0.9}
 
 
 def _axes(ax, figsize=(8, 7)):
@@ -53,8 +57,9 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     ax : matplotlib Axes, optional
     reference : ndarray, shape (T, 4, 4), optional
         A second trajectory (e.g. dead reckoning), drawn dashed.
-    ground_truth : visla_edu.dataset.GroundTruth, optional
-        True trajectory (and landmarks) drawn in black.
+    ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
+        True trajectory, drawn in :data:`GROUND_TRUTH_STYLE` (green, dash-dot) with a legend
+        entry; it may cover fewer frames than the estimate.
 
     Returns
     -------
@@ -65,22 +70,34 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
         ok = np.isfinite(landmarks[:, 0])
         ax.scatter(landmarks[ok, 0], landmarks[ok, 1], s=2, c=landmark_color, label=f"landmarks ({ok.sum()})",
                    zorder=1)
+    paths = []
     if ground_truth is not None:
-        p = ground_truth.world_T_imu[:, :3, 3]
-        ax.plot(p[:, 0], p[:, 1], "-", color="0.1", lw=4, alpha=0.35, label="ground truth", zorder=2)
+        p = _truth_poses(ground_truth)[:, :3, 3]
+        ax.plot(p[:, 0], p[:, 1], label="ground truth", zorder=2, **GROUND_TRUTH_STYLE)
+        paths.append(p)
     if reference is not None:
         p = reference[:, :3, 3]
         ax.plot(p[:, 0], p[:, 1], "--", color="C3", lw=1.5, label=reference_label, zorder=3)
+        paths.append(p)
     p = world_T_imu[:, :3, 3]
     ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
     ax.plot(p[0, 0], p[0, 1], "o", color="k", ms=5, zorder=5)
     ax.set_xlabel("x (m, world = first IMU frame)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal", adjustable="box")
-    _limit_to_path(ax, [p] + ([reference[:, :3, 3]] if reference is not None else []))
+    _limit_to_path(ax, [p] + paths)
     ax.legend(loc="best", fontsize="small")
     ax.grid(True, alpha=0.3)
     return ax
+
+
+def _truth_poses(ground_truth):
+    """The ``(n, 4, 4)`` true poses of a :class:`~visla_edu.dataset.GroundTruth` or of an array."""
+    poses = getattr(ground_truth, "world_T_imu", ground_truth)
+    poses = np.asarray(poses, dtype=float)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise ValueError(f"ground_truth: expected a GroundTruth or poses of shape (n, 4, 4), got shape {poses.shape}")
+    return poses
 
 
 def _limit_to_path(ax, paths, margin=0.15):
@@ -100,7 +117,8 @@ def plot_result(result, path=None, ground_truth=None, title=None):
     result : visla_edu.run.RunResult
     path : str or Path, optional
         Save the figure there (PNG, 120 dpi).
-    ground_truth : visla_edu.dataset.GroundTruth, optional
+    ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
+        Drawn in :data:`GROUND_TRUTH_STYLE` with a legend entry.
     title : str, optional
 
     Returns

@@ -20,13 +20,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from visla_edu import diagnostics, filters, motion
+from visla_edu import diagnostics, filters, metrics, motion
 from visla_edu.camera import StereoCamera
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
 __all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "iterate_filter", "run_filter",
-           "save_result", "load_result"]
+           "evaluate_result", "save_result", "load_result"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
@@ -136,6 +136,10 @@ class RunResult:
     config : dict
     imu_T_cam : ndarray, shape (4, 4)
         The calibration used (after any correction).
+    evaluation : dict
+        Figures against ground truth, filled by :func:`evaluate_result` (empty without):
+        ``estimate_<name>`` and ``dead_reckoning_<name>`` for every field of
+        :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
     """
 
     name: str
@@ -153,6 +157,7 @@ class RunResult:
     step_seconds: np.ndarray
     config: dict = field(default_factory=dict)
     imu_T_cam: np.ndarray = None
+    evaluation: dict = field(default_factory=dict)
 
     def status_totals(self):
         """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``."""
@@ -215,6 +220,31 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
         dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=config.imu_lag),
         config=config.to_dict(), imu_T_cam=flt.camera.imu_T_cam.copy(), **arrays.as_dict(),
     )
+
+
+def evaluate_result(result, ground_truth):
+    """ATE and KITTI drift of a run's estimate and of its dead reckoning against the ground truth.
+
+    Stores the figures in ``result.evaluation`` (so :func:`save_result` writes them).
+
+    Parameters
+    ----------
+    result : RunResult
+    ground_truth : visla_edu.dataset.GroundTruth
+        Poses of the first ``n <= T`` frames; those frames are compared.
+
+    Returns
+    -------
+    dict of str to visla_edu.metrics.TrajectoryEvaluation
+        ``{"estimate": ..., "dead_reckoning": ...}``.
+    """
+    truth = ground_truth.world_T_imu
+    evaluations = {"estimate": metrics.evaluate(result.world_T_imu, truth),
+                   "dead_reckoning": metrics.evaluate(result.dead_reckoning, truth)}
+    result.evaluation = {"ground_truth_source": ground_truth.source or "simulation"}
+    for who, evaluation in evaluations.items():
+        result.evaluation.update(evaluation.as_dict(prefix=f"{who}_"))
+    return evaluations
 
 
 class RunArrays:
@@ -291,10 +321,12 @@ def save_result(result, path):
     initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
     ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
-    so the file loads without pickle; files of earlier versions hold ``blas_threads`` so).
+    so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
+    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`).
     """
-    arrays = {k: v for k, v in vars(result).items() if k != "config"}
+    arrays = {k: v for k, v in vars(result).items() if k not in ("config", "evaluation")}
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
+    arrays.update({f"eval_{k}": v for k, v in result.evaluation.items()})
     np.savez_compressed(path, **arrays)
 
 
@@ -303,8 +335,9 @@ def load_result(path):
     with np.load(path, allow_pickle=False) as f:
         config = {k[len("config_"):]: (None if f[k].size == 0 else f[k].item())
                   for k in f.files if k.startswith("config_")}
-        fields = {k: f[k] for k in f.files if not k.startswith("config_")}
+        evaluation = {k[len("eval_"):]: f[k].item() for k in f.files if k.startswith("eval_")}
+        fields = {k: f[k] for k in f.files if not k.startswith(("config_", "eval_"))}
     for key in ("name", "mode"):
         fields[key] = str(fields[key])
     fields["dense"] = bool(fields["dense"])
-    return RunResult(config=config, **fields)
+    return RunResult(config=config, evaluation=evaluation, **fields)

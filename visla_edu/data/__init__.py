@@ -10,6 +10,9 @@ Course files are never copied into the project: point ``VISLA_EDU_DATA`` at them
     >>> ds = data.load("03")                # <data dir>/03.npz
     >>> print(data.format_summary(ds))      # what ``visla-edu info 03`` prints
     >>> sim = data.load("sim")              # a simulated drive with ground truth
+    >>> ds = data.load("0020")              # KITTI odometry 06, its ground truth attached when
+    >>> ds.ground_truth.num_frames          # the KITTI pose files are in the data dir
+    1101
 
 The two course formats
 ----------------------
@@ -25,6 +28,13 @@ is 1.3 GB), never held in memory as a whole.
 When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
 dataset 10's real IMU drive with simulated stereo tracks.
 
+Ground truth of real drives
+---------------------------
+KITTI odometry poses (``poses/NN.txt``, left-camera poses, 12 or 13 columns) and their
+``times.txt`` are read, checked against the drive's time stamps and converted to
+``world_T_imu`` by :func:`load_ground_truth` / :func:`attach_ground_truth` (module
+``_groundtruth``); a registered drive (``"0020"``) gets its own automatically.
+
 Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError``
 whose message names the file, the key, and the expected and actual shape or value.
 
@@ -33,7 +43,7 @@ names, known files), ``_format`` (the keys of the course formats and the checks 
 arrays), ``_features`` (the dense features streamed into the sparse layout), ``_npz`` (the
 one ``.npz`` reader: course files to Datasets, named arrays of any archive), ``_standin``
 (the dataset-10 stand-in), ``_load`` (:func:`load`), ``_save`` (:func:`save`), ``_summary``
-(:func:`summarize`, :func:`format_summary`).
+(:func:`summarize`, :func:`format_summary`), ``_groundtruth`` (KITTI ground truth).
 """
 
 from visla_edu.data._format import (
@@ -44,8 +54,18 @@ from visla_edu.data._format import (
     RIGID_TOL,
     TEXT_KEYS,
 )
+from visla_edu.data._groundtruth import (
+    TIME_TOLERANCE,
+    attach_ground_truth,
+    attach_registered_ground_truth,
+    check_times,
+    imu_poses_from_kitti,
+    kitti_poses_from_imu,
+    load_ground_truth,
+    read_kitti_times,
+)
 from visla_edu.data._load import load
-from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir
+from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir, ground_truth_files
 from visla_edu.data._save import save
 from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, standin_dataset10
 from visla_edu.data._summary import format_summary, summarize
@@ -71,4 +91,13 @@ __all__ = [
     "standin_dataset10",
     "summarize",
     "format_summary",
+    "TIME_TOLERANCE",
+    "load_ground_truth",
+    "attach_ground_truth",
+    "attach_registered_ground_truth",
+    "read_kitti_times",
+    "check_times",
+    "imu_poses_from_kitti",
+    "kitti_poses_from_imu",
+    "ground_truth_files",
 ]

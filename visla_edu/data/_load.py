@@ -3,6 +3,7 @@
 import os
 from pathlib import Path
 
+from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
 from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, resolve_dir
 from visla_edu.data._standin import load_dataset10
@@ -16,7 +17,7 @@ def load(name_or_path, data_dir=None):
     Parameters
     ----------
     name_or_path : str or os.PathLike
-        A course name (``"03"``, ``"0022"``, ``"10"``: the file ``<data dir>/<name>.npz``),
+        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"10"``: the file ``<data dir>/<name>.npz``),
         ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated with seed 0), or a path to
         an ``.npz`` file in either course format or written by :func:`~visla_edu.data.save`.
         ``"10"`` falls back to a stand-in when ``10.npz`` is absent: simulated stereo
@@ -28,7 +29,9 @@ def load(name_or_path, data_dir=None):
     -------
     Dataset
         Time-major arrays, sparse observations; ``source`` is the absolute file path and
-        ``label`` describes known files (recognised by sha256).
+        ``label`` describes known files (recognised by sha256). A drive whose KITTI ground
+        truth the registry names (``"0020"``) gets it as ``ground_truth`` when its poses file
+        is beside the npz (:func:`~visla_edu.data.attach_registered_ground_truth`).
 
     Raises
     ------
@@ -38,7 +41,7 @@ def load(name_or_path, data_dir=None):
         The file is not a valid course file (the message names key, expected and actual).
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
-        return load_npz(_find_file(name_or_path, data_dir))
+        return attach_registered_ground_truth(load_npz(_find_file(name_or_path, data_dir)))
     name = _check_name(name_or_path)
     if name in SIMULATED:
         from visla_edu import simulate  # lazy: simulation is optional for loading files
@@ -50,7 +53,7 @@ def load(name_or_path, data_dir=None):
     path = directory / f"{name}.npz"
     if not path.is_file():
         raise FileNotFoundError(_not_found_message(f"{name}.npz", directory, how))
-    return load_npz(path)
+    return attach_registered_ground_truth(load_npz(path))
 
 
 def _looks_like_path(value):
@@ -61,7 +64,7 @@ def _check_name(value):
     if not isinstance(value, str):
         raise TypeError(f"load: expected a dataset name or a path, got {type(value).__name__} {value!r}")
     if not value.strip():
-        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '10' or 'sim'")
+        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '0020', '10' or 'sim'")
     return value.strip()
 
 

@@ -20,6 +20,7 @@ __all__ = [
     "available",
     "has_standin_inputs",
     "identify",
+    "ground_truth_files",
 ]
 
 #: Environment variable naming the folder with the course files.
@@ -28,7 +29,8 @@ ENV_VAR = "VISLA_EDU_DATA"
 #: Names that :func:`~visla_edu.data.load` answers with a simulated drive, and their preset.
 SIMULATED = {"sim": "course", "sim-small": "small", "sim-tiny": "tiny"}
 
-#: Known course files: name -> sha256, format and a description (used as ``Dataset.label``).
+#: Known course files: name -> sha256, format and a description (used as ``Dataset.label``);
+#: ``"ground_truth"`` names the drive's KITTI odometry pose and times files, when it has them.
 REGISTRY = {
     "03": {
         "sha256": "fdfd30237cb0a5697625af7392acc2a241c2be299a7d5cf2d0e189fa95a1f0c9",
@@ -48,6 +50,14 @@ REGISTRY = {
         "description": "KITTI raw 2011_09_26_drive_0022 (2019/2020 course format), "
         "10 Hz stereo feature tracks + IMU velocities",
     },
+    "0020": {
+        "sha256": "df224984db4668f1ca386f3e4025b9cd0a5d09a83c5837730d3f9107c15c76fc",
+        "format": FORMAT_2019,
+        "description": "KITTI raw 2011_09_30_drive_0020 = KITTI odometry sequence 06 (2019/2020 course format), "
+        "10 Hz stereo feature tracks + IMU velocities",
+        # KITTI odometry poses/06.txt and sequences/06/times.txt, renamed: looked for beside the npz
+        "ground_truth": {"poses": "kitti_odometry_06_poses.txt", "times": "kitti_odometry_06_times.txt"},
+    },
     "10_imu_only": {
         "sha256": "5543a9f404a80564b1ea382b7c2101652f3ef0829aa53fe16f0bbd93257018aa",
         "format": "2021+ (IMU only)",
@@ -56,7 +66,7 @@ REGISTRY = {
     },
 }
 #: Course names :func:`~visla_edu.data.load` finds as ``<data dir>/<name>.npz``.
-COURSE_NAMES = ("03", "10", "0022")
+COURSE_NAMES = ("03", "10", "0022", "0020")
 #: Files the dataset-10 stand-in is built from when ``10.npz`` is absent.
 STANDIN_INPUTS = ("10_imu_only.npz", "03.npz")
 
@@ -163,3 +173,26 @@ def identify(path, sha, stored_name=None, stored_label=None):
     if entry["sha256"] is None:
         return name, f"{entry['description']} (sha256 {sha} not on record)", None
     return name, f"{entry['description']} -- but this copy's sha256 differs from the known file (modified?)", None
+
+
+def ground_truth_files(name, directory):
+    """The KITTI ground-truth files the registry names for drive ``name``, if present in ``directory``.
+
+    Parameters
+    ----------
+    name : str
+        A :data:`REGISTRY` name (others have no ground truth: the answer is None).
+    directory : pathlib.Path
+        Where to look (the folder of the drive's ``.npz``).
+
+    Returns
+    -------
+    (pathlib.Path, pathlib.Path or None) or None
+        The poses file and the times file (None when absent: the times are then not checked),
+        or None when the drive has no registered ground truth or its poses file is absent.
+    """
+    files = REGISTRY.get(name, {}).get("ground_truth")
+    if files is None or not (directory / files["poses"]).is_file():
+        return None
+    times = directory / files["times"]
+    return directory / files["poses"], times if times.is_file() else None

@@ -13,6 +13,9 @@ __all__ = ["save"]
 def save(dataset, path):
     """Write a dataset as a 2021+ course file (plus ground truth and its name and label).
 
+    The ground truth of a simulated drive is written with it; a real drive's KITTI poses
+    (landmarks unknown, possibly fewer frames) are not: load them again from their files.
+
     Parameters
     ----------
     dataset : Dataset
@@ -29,7 +32,7 @@ def save(dataset, path):
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
     arrays = _course_arrays(dataset)
-    if dataset.ground_truth is not None:
+    if _saved_ground_truth(dataset) is not None:
         arrays.update(_ground_truth_arrays(dataset.ground_truth))
     arrays["name"] = np.array(str(dataset.name))
     arrays["label"] = np.array(str(dataset.label))
@@ -54,6 +57,14 @@ def _course_arrays(dataset):
         "b": np.array(float(dataset.b)),
         "imu_T_cam": np.asarray(dataset.imu_T_cam, dtype=float),
     }
+
+
+def _saved_ground_truth(dataset):
+    """The ground truth :func:`save` writes: a simulated drive's, complete for every frame; else None."""
+    gt = dataset.ground_truth
+    if gt is None or not gt.simulated or gt.num_frames != dataset.num_frames:
+        return None
+    return gt
 
 
 def _ground_truth_arrays(gt):

@@ -36,7 +36,9 @@ def summarize(dataset):
         (min/median/max over observed landmarks), ``landmarks_seen_once,
         nonpositive_disparity, nonpositive_disparity_share, tiny_disparity,
         tiny_disparity_depth_m, repeated_frames, tracks_contiguous,
-        noncontiguous_landmarks, speed_m_s`` (mean/min/max), ``distance_m, ground_truth``.
+        noncontiguous_landmarks, speed_m_s`` (mean/min/max), ``distance_m, ground_truth``
+        (bool), ``ground_truth_frames`` (frames its poses cover, or None),
+        ``ground_truth_simulated`` (bool), ``ground_truth_source`` (file, or ``""``).
     """
     ds = dataset
     steps = ds.time_steps
@@ -71,7 +73,16 @@ def summarize(dataset):
         "noncontiguous_landmarks": int(np.count_nonzero(gaps)),
         "speed_m_s": _mean_min_max(speed),
         "distance_m": float(np.sum(speed[:-1] * steps)),
-        "ground_truth": ds.ground_truth is not None,
+        **_ground_truth_facts(ds.ground_truth),
+    }
+
+
+def _ground_truth_facts(gt):
+    return {
+        "ground_truth": gt is not None,
+        "ground_truth_frames": None if gt is None else gt.num_frames,
+        "ground_truth_simulated": gt is not None and gt.simulated,
+        "ground_truth_source": "" if gt is None else gt.source,
     }
 
 
@@ -163,5 +174,14 @@ def _motion_lines(s):
         f"  speed         mean {speed['mean']:.2f} m/s (min {speed['min']:.2f}, max {speed['max']:.2f}); "
         f"about {s['distance_m']:.0f} m driven"
     ]
-    truth = "yes (poses, landmarks, velocities, outliers)" if s["ground_truth"] else "none (real data)"
-    return lines + [f"  ground truth  {truth}"]
+    return lines + [f"  ground truth  {_truth_text(s)}"]
+
+
+def _truth_text(s):
+    if not s["ground_truth"]:
+        return "none (real data)"
+    if s["ground_truth_simulated"]:
+        return "yes (poses, landmarks, velocities, outliers)"
+    n, T = s["ground_truth_frames"], s["frames"]
+    cover = "every frame" if n == T else f"frames 0-{n - 1}, {n} of {T} frames"
+    return f"attached: KITTI poses of {cover} ({_shorten(s['ground_truth_source'], 100)})"

@@ -19,6 +19,7 @@ from visla_edu.codes import (
     OBS_USED,
     STATUS_NAMES,
 )
+from visla_edu.plotting import GROUND_TRUTH_STYLE
 from visla_edu.stepper.model import MODE_LABELS, world_position_covariance
 
 __all__ = ["StepperFigure"]
@@ -121,9 +122,9 @@ class StepperFigure:
         from matplotlib.collections import LineCollection
 
         ax = self.ax_map
-        self.gt_line, = ax.plot([], [], "-", color="k", lw=1.2, alpha=0.6, label="ground truth", zorder=2)
+        self.gt_line, = ax.plot([], [], label="ground truth", zorder=2, **GROUND_TRUTH_STYLE)
         self.gt_points = ax.scatter(np.zeros(0), np.zeros(0), s=2, c="0.8", zorder=1, label="true landmarks")
-        self.gt_pose, = ax.plot([], [], "o", color="k", ms=7, mfc="none", zorder=7)
+        self.gt_pose, = ax.plot([], [], "o", color=GROUND_TRUTH_STYLE["color"], ms=7, mfc="none", mew=1.5, zorder=7)
         self.dr_line, = ax.plot([], [], "--", color="C3", lw=1.2, label="dead reckoning", zorder=3)
         self.map_points = ax.scatter(np.zeros(0), np.zeros(0), s=3, c="0.45", zorder=2, label="map so far")
         self.active_ellipses = LineCollection([], colors="C1", linewidths=0.7, alpha=0.7, zorder=4)
@@ -198,8 +199,8 @@ class StepperFigure:
         if gt is not None:
             p = gt.world_T_imu[:, :3, 3]
             self.gt_line.set_data(p[:, 0], p[:, 1])
-            ok = np.isfinite(gt.landmarks[:, 0])
-            self.gt_points.set_offsets(gt.landmarks[ok, :2])
+            known = gt.landmarks if gt.landmarks is not None else np.zeros((0, 3))  # a real drive: poses only
+            self.gt_points.set_offsets(known[np.isfinite(known[:, 0]), :2])
         else:
             self.gt_line.set_data([], [])
             self.gt_points.set_offsets(np.zeros((0, 2)))
@@ -210,7 +211,7 @@ class StepperFigure:
         if stepper.mode != DEADRECKON:
             handles += [self.dr_line, self.active_points, self.map_points]
         if gt is not None:
-            handles += [self.gt_line, self.gt_points]
+            handles += [self.gt_line] + ([self.gt_points] if gt.landmarks is not None else [])
         self.ax_map.legend(handles=handles, loc="upper right", fontsize="x-small", framealpha=1.0)
         width, height = self._image_size(ds)
         for ax in self._image:
@@ -274,6 +275,8 @@ class StepperFigure:
         gt_pose = stepper.ground_truth_pose()
         if gt_pose is not None:
             self.gt_pose.set_data([gt_pose[0, 3]], [gt_pose[1, 3]])
+        else:  # no ground truth, or past the frames it covers
+            self.gt_pose.set_data([], [])
         _, retired = stepper.retired_landmarks()
         self.map_points.set_offsets(retired[:, :2] if len(retired) else np.zeros((0, 2)))
         means = rec.active_means

@@ -86,6 +86,8 @@ def dataset_choices(data_dir=None):
     labels = {
         "03": "03 (KITTI-360 drive 0003)",
         "0022": "0022 (KITTI drive 0022, 2019 format)",
+        "0020": "0020 (KITTI drive 0020 = odometry 06, ground truth)"
+        if data.ground_truth_files("0020", directory) else "0020 (KITTI drive 0020 = odometry 06)",
         "10": "10 (KITTI-360 drive 0010)" if (directory / "10.npz").is_file()
         else "10 (STAND-IN: simulated tracks on its real IMU drive)",
         "sim": "sim (simulated, ground truth)",
@@ -358,7 +360,7 @@ class Stepper:
 
     @property
     def ground_truth(self):
-        """The dataset's :class:`~visla_edu.dataset.GroundTruth`, or None (course data)."""
+        """The dataset's :class:`~visla_edu.dataset.GroundTruth`, or None (course data without KITTI poses)."""
         return self._dataset.ground_truth
 
     @property
@@ -384,9 +386,10 @@ class Stepper:
         return ids, self._retired_means[ids]
 
     def ground_truth_pose(self):
-        """True pose of the current frame, (4, 4), or None."""
+        """True pose of the current frame, (4, 4), or None (no ground truth, or the frame is past
+        the ones a real drive's ground truth covers)."""
         gt = self.ground_truth
-        return None if gt is None else gt.world_T_imu[self._t]
+        return None if gt is None or self._t >= gt.num_frames else gt.world_T_imu[self._t]
 
     def summary(self):
         """One line about the current frame: time, observations by status, NIS, active set."""
