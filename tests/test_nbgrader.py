@@ -14,13 +14,16 @@ gradebook:
 
 To keep the runtime small the graded assignment holds each notebook's set-up cell and its
 exercise and graded cells only (the demonstrations are executed by nbval on ``solutions/``),
-and the gamed submissions cover one notebook per hiding mechanism.
+the gamed submissions cover one notebook per hiding mechanism, and two copies of the course
+(the solutions and the gamed answers; the blank release) are autograded side by side.
 """
 
 import os
+import shutil
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import nbformat
@@ -118,37 +121,64 @@ def _path_with_this_python():
     return os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")])
 
 
-def _build_course(course):
+def _build_course(course, students):
+    """A course directory with the assignment's source and the submissions of ``students``."""
     (course / "nbgrader_config.py").write_text(
         "c = get_config()  # noqa: F821\n"
         "c.CourseDirectory.course_id = 'visla-edu'\n"
         "c.Execute.timeout = 300\n", encoding="utf-8")
+    submitted = course / "submitted"
     for name in NAMES:
         solution = _exercises_only(_read(SOLUTIONS / f"{name}.ipynb"))
         _write(solution, course / "source" / ASSIGNMENT / f"{name}.ipynb")
-        _write(solution, course / "submitted" / "solutions" / ASSIGNMENT / f"{name}.ipynb")
-        _write(_exercises_only(_read(STUDENT / f"{name}.ipynb")), course / "submitted" / "blank" / ASSIGNMENT / f"{name}.ipynb")
-    for student, (name, answers) in GAMED.items():
-        _write(_gamed_notebook(name, answers), course / "submitted" / student / ASSIGNMENT / f"{name}.ipynb")
+        if "solutions" in students:
+            _write(solution, submitted / "solutions" / ASSIGNMENT / f"{name}.ipynb")
+        if "blank" in students:
+            blank = _exercises_only(_read(STUDENT / f"{name}.ipynb"))
+            _write(blank, submitted / "blank" / ASSIGNMENT / f"{name}.ipynb")
+    for student in set(students) & set(GAMED):
+        name, answers = GAMED[student]
+        _write(_gamed_notebook(name, answers), submitted / student / ASSIGNMENT / f"{name}.ipynb")
 
 
-@pytest.fixture(scope="module")
-def graded(tmp_path_factory):
-    """Build the course, generate the assignments, autograde every submission; scores and timings."""
-    course = tmp_path_factory.mktemp("course")
-    _build_course(course)
-    seconds = {"generate": _nbgrader(course, "generate_assignment", ASSIGNMENT, "--force")}
-    seconds["autograde"] = _nbgrader(course, "autograde", ASSIGNMENT, "--force")
+def _autograde(course):
+    """Seconds taken by ``nbgrader autograde`` of every submission in ``course``."""
+    return _nbgrader(course, "autograde", ASSIGNMENT, "--force")
+
+
+def _scores(course, students):
+    """Student -> notebook -> grade id -> score, and the assignment's maximum, from the gradebook."""
     scores = {}
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("PATH", _path_with_this_python())
         with Gradebook(f"sqlite:///{course / 'gradebook.db'}", "visla-edu") as gradebook:
-            for student in ["solutions", "blank", *GAMED]:
+            for student in students:
                 submission = gradebook.find_submission(ASSIGNMENT, student)
                 scores[student] = {nb.name: {g.name: g.score for g in nb.grades} for nb in submission.notebooks}
                 scores[student]["(max)"] = submission.max_score
+    return scores
+
+
+#: Two course directories, autograded side by side (nbgrader runs one notebook at a time).
+GROUPS = (("solutions", *GAMED), ("blank",))
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    """Build the courses, generate the assignment, autograde every submission: (course, scores)."""
+    courses = [tmp_path_factory.mktemp(f"course{i}") for i in range(len(GROUPS))]
+    for course, students in zip(courses, GROUPS):
+        _build_course(course, students)
+    seconds = {"generate_assignment": _nbgrader(courses[0], "generate_assignment", ASSIGNMENT, "--force")}
+    for other in courses[1:]:  # the same assignment: its gradebook records the graded cells
+        shutil.copy(courses[0] / "gradebook.db", other / "gradebook.db")
+    with ThreadPoolExecutor(len(courses)) as pool:
+        seconds["autograde"] = list(pool.map(_autograde, courses))
     print(f"nbgrader seconds: {seconds}")
-    return course, scores
+    scores = {}
+    for course, students in zip(courses, GROUPS):
+        scores.update(_scores(course, students))
+    return courses[0], scores
 
 
 def test_solutions_get_every_point(graded):
