@@ -1,11 +1,46 @@
-"""Shared fixtures. Course data is found through the environment variable VISLA_EDU_DATA."""
+"""Shared fixtures. Course data is found through the environment variable VISLA_EDU_DATA.
+
+The suite never writes to the user's cache folder: the calibration cache
+(``VISLA_EDU_CACHE``, see :mod:`visla_edu.cache`) points at a temporary folder for the whole
+session (which the notebook kernels and subprocesses inherit), and at each test's own
+``tmp_path`` while that test runs.
+"""
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 
 DATA_ENV = "VISLA_EDU_DATA"
+CACHE_ENV = "VISLA_EDU_CACHE"
+_session_cache = {}
+
+
+def pytest_configure(config):
+    """Point the calibration cache at a fresh temporary folder for the session."""
+    _session_cache["previous"] = os.environ.get(CACHE_ENV)
+    _session_cache["folder"] = tempfile.mkdtemp(prefix="visla-edu-test-cache-")
+    os.environ[CACHE_ENV] = _session_cache["folder"]
+
+
+def pytest_unconfigure(config):
+    """Remove the session's cache folder and restore the variable."""
+    folder = _session_cache.pop("folder", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+    previous = _session_cache.pop("previous", None)
+    if previous is None:
+        os.environ.pop(CACHE_ENV, None)
+    else:
+        os.environ[CACHE_ENV] = previous
+
+
+@pytest.fixture(autouse=True)
+def _private_calibration_cache(tmp_path, monkeypatch):
+    """Each test caches calibrations in its own temporary folder."""
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "visla-edu-cache"))
 
 
 def _course_dir():

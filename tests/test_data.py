@@ -595,3 +595,44 @@ def test_0022_loads_in_the_old_format(require_data):
 def test_imu_only_file_of_dataset10_is_recognised(require_data):
     with pytest.raises(ValueError, match=r"missing key\(s\).*load\('10'\)"):
         data.load(require_data("10_imu_only"))
+
+
+# --------------------------------------------------------------------------- plausibility (issue 10)
+
+
+def test_square_features_with_gappy_tracks_load():
+    """M = T is refused as transposed only on evidence (tests/fuzzgen.py has a transposed drive refused)."""
+    from visla_edu.data import _plausible
+
+    rng = np.random.default_rng(2)
+    observed = rng.random((20, 20)) < 0.3  # (landmark, frame): neither rows nor columns contiguous
+    ids, frames = np.nonzero(observed)
+    order, frame_ptr = frame_major_order(ids, frames, 20)
+    _plausible.check_track_layout(frame_ptr, ids[order], 20, "x")  # no error: the data do not say "swapped"
+
+
+@pytest.mark.parametrize("scale, unit", [(1 / 60, "minutes"), (1 / 3600, "hours")])
+def test_time_stamps_in_other_units_are_named(tmp_path, scale, unit):
+    arrays = course_dict()
+    stamps = arrays["time_stamps"]
+    arrays["time_stamps"] = (stamps - stamps[0, 0]) * scale
+    with pytest.raises(ValueError, match=rf"they look like {unit}"):
+        data.load(write(tmp_path, arrays))
+
+
+@pytest.mark.parametrize("key, value", [("b", 0.005), ("b", 5.0), ("K00", 4.0), ("t", 20.0)])
+def test_calibration_at_the_edges_of_the_plausible_ranges_loads(tmp_path, key, value):
+    from visla_edu.data import _plausible
+
+    arrays = course_dict()
+    if key == "b":
+        arrays["b"] = np.array(value)
+        data.load(write(tmp_path, arrays))
+        return
+    if key == "K00":
+        K = arrays["K"].copy()
+        K[0, 0] = K[1, 1] = value
+        _plausible.check_calibration(K, 0.6, "x")
+        return
+    arrays["imu_T_cam"][:3, 3] = [value, 0.0, 0.0]
+    data.load(write(tmp_path, arrays))

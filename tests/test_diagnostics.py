@@ -1,4 +1,7 @@
-"""Tests of visla_edu.diagnostics on simulated drives (known truth) and on the course files.
+"""Tests of visla_edu.diagnostics' single checks on simulated drives (known truth) and on the
+course files: the visual-odometry extrinsic check, time alignment, IMU noise and gyro bias,
+outlier indicators, the report. The calibration decision and its cache are tested in
+tests/test_calibration.py.
 
 Real-data tests need VISLA_EDU_DATA (they are skipped with the reason otherwise).
 """
@@ -57,7 +60,8 @@ def test_check_extrinsics_accepts_a_correct_calibration(seed):
     assert check.rotation_slope["none"] > 0.5 and check.translation_slope["none"] > 0.5
     # the flipped candidates disagree
     assert check.rotation_slope["flip_yz"] < -0.5 and check.translation_slope["flip_xy"] < -0.5
-    assert "none" in check.report() and "<- used" in check.report()
+    assert check.verdict == {"none": "agrees", "flip_yz": "disagrees", "flip_xy": "disagrees", "flip_xz": "disagrees"}
+    assert "none" in check.report() and "agrees" in check.report()
 
 
 def test_check_extrinsics_finds_the_flip(small_flipped):
@@ -103,7 +107,7 @@ def test_resolve_extrinsics(small):
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(ds, "auto")
     np.testing.assert_array_equal(imu_T_cam, ds.imu_T_cam)
     assert evidence == ""
-    assert ds.extra["extrinsic_check"].recommended == "none"  # cached
+    assert ds.extra["calibration"].extrinsic_correction == "none"  # cached
     with pytest.raises(ValueError, match="flip_yz"):
         diagnostics.resolve_extrinsics(ds, "flip_zz")
 
@@ -184,12 +188,13 @@ def test_diagnose_reports_every_section(small):
     for phrase in ("extrinsic check", "time alignment", "best lag", "IMU noise", "gyro bias",
                    "repeating the previous frame", "non-positive disparity", "epipolar", "visual odometry"):
         assert phrase in text, phrase
-    assert "disagrees" not in text
+    assert "the filter will use: extrinsic_correction 'none'" in text
 
 
 def test_diagnose_explains_a_correction(small_flipped):
     text = diagnostics.diagnose(_fresh(small_flipped))
     assert "flip_yz" in text and "disagrees" in text
+    assert "the filter will use: extrinsic_correction 'flip_yz'" in text
 
 
 # ----------------------------------------------------------------------------- course data

@@ -5,6 +5,7 @@ The stand-in tests on the real drive need the course data (``VISLA_EDU_DATA``, e
 ``/work/shared/data``) and are skipped with a reason otherwise.
 """
 
+import dataclasses
 import os
 from pathlib import Path
 
@@ -16,11 +17,12 @@ from hypothesis import strategies as st
 from visla_edu import lie
 from visla_edu.camera import StereoCamera
 from visla_edu.data import STANDIN_LABEL, standin_dataset10
-from visla_edu.motion import dead_reckon
+from visla_edu.motion import dead_reckon, select_twists
 from visla_edu.simulate import (
     PRESETS,
     SimulationConfig,
     default_rig,
+    lag_samples,
     make_config,
     place_landmarks,
     simulate_along_drive,
@@ -241,6 +243,50 @@ def test_outlier_tracks_are_far_off_and_inliers_are_not():
     assert np.all(error[out] > 10.0)
 
 
+def test_uniform_outlier_tracks_are_random_pixels_in_the_image():
+    d = simulate_drive("small", seed=2, outlier_share=0.05, outlier_kind="uniform")
+    out = d.ground_truth.outlier[d.obs_ids]
+    z = d.obs_z[out]
+    width, height = d.extra["config"].image_size
+    assert abs(d.ground_truth.outlier.mean() - 0.05) < 0.002
+    assert np.all((z[:, [0, 2]] >= 0) & (z[:, [0, 2]] < width)) and np.all((z[:, 1] >= 0) & (z[:, 1] < height))
+    assert np.all(z[:, 0] > z[:, 2])  # positive disparity
+    assert np.std(z[:, 1] - z[:, 3]) < 1.5  # on the epipolar line up to pixel noise
+    # random, not offset: consecutive observations of one outlier track jump across the image
+    ids, frames = d.obs_ids[out], d.observation_frames()[out]
+    order = np.lexsort((frames, ids))
+    same = ids[order][1:] == ids[order][:-1]
+    assert same.sum() > 100 and np.median(np.abs(np.diff(z[order, 0]))[same]) > 100
+    error = np.abs(d.obs_z - _predicted(d)).max(axis=1)
+    assert np.all(error[~out] < 8.0)
+
+
+def test_imu_lag_records_the_velocities_late():
+    for lag in (-1, 1, 2):
+        d = simulate_drive("tiny", seed=0, imu_lag=lag, linear_velocity_sigma=0.0, angular_velocity_sigma=0.0)
+        g = d.ground_truth
+        true = np.concatenate([g.linear_velocity, g.angular_velocity], axis=1)
+        used = select_twists(d.twists, lag)  # the sample that moves frame t to t+1
+        # the recording has no sample for the first -lag steps (lag < 0) or the last lag - 1 (lag > 1)
+        inside = slice(max(-lag, 0), len(used) - max(lag - 1, 0))
+        np.testing.assert_array_equal(used[inside], true[:-1][inside])
+        np.testing.assert_array_equal(lag_samples(true, lag)[max(lag, 0):], d.twists[max(lag, 0):])
+    plain = simulate_drive("tiny", seed=0)
+    np.testing.assert_array_equal(simulate_drive("tiny", seed=0, imu_lag=0).twists, plain.twists)
+
+
+def test_reported_extrinsic_differs_from_the_simulated_one():
+    K, b, rig = default_rig()
+    flipped = np.diag([1.0, -1.0, -1.0, 1.0]) @ rig
+    d = simulate_drive("tiny", seed=0, imu_T_cam=flipped, reported_imu_T_cam=rig, **NOISE_FREE)
+    np.testing.assert_array_equal(d.imu_T_cam, rig)
+    np.testing.assert_array_equal(d.extra["simulated_imu_T_cam"], flipped)
+    # the tracks were made with the simulated one
+    truth = dataclasses.replace(d, imu_T_cam=flipped)
+    np.testing.assert_allclose(d.obs_z, _predicted(truth), atol=1e-9)
+    assert "simulated_imu_T_cam" not in simulate_drive("tiny", seed=0).extra
+
+
 # ------------------------------------------------------------------------ noise stats
 
 
@@ -318,6 +364,12 @@ def test_config_errors_name_the_problem():
         simulate_drive("tiny", outlier_share=1.5)
     with pytest.raises(ValueError, match="num_frames"):
         make_config("tiny", num_frames=1)
+    with pytest.raises(ValueError, match="outlier_kind"):
+        make_config("tiny", outlier_kind="gaussian")
+    with pytest.raises(ValueError, match="imu_lag"):
+        make_config("tiny", imu_lag=0.5)
+    with pytest.raises(ValueError, match=r"reported_imu_T_cam.*\(3, 3\)"):
+        make_config("tiny", reported_imu_T_cam=np.eye(3))
 
 
 def test_default_rig_looks_forward():

@@ -1,26 +1,56 @@
-"""Writing files safely: a leaf module (imports only the standard library).
+"""Files visla-edu reads and writes: atomic writes, and checks of input and output paths.
 
-:func:`atomic_write` opens a temporary file in the target's folder and, when the ``with``
-block ends without an error, renames it over the target with :func:`os.replace` (atomic on
-POSIX and Windows within one file system). A reader therefore sees the old file or the whole
-new one, never a half-written file, and a failed write leaves the old file untouched.
+A leaf module (imports only the standard library).
+
+Every file the package writes (result ``.npz``, figures, saved datasets, exported
+trajectories, released notebooks) goes through :func:`atomic_write`: the bytes go to a
+temporary file in the target's folder, which then replaces the target with
+:func:`os.replace` (atomic on POSIX and Windows within one file system). A reader therefore
+sees the old file or the whole new one; a crash or a kill in the middle leaves the previous
+file as it was (and at most a hidden ``.<name>.*.tmp`` file next to it).
 
 >>> from visla_edu._files import atomic_write
 >>> with atomic_write("trajectory.txt") as f:    # doctest: +SKIP
 ...     f.write("1 0 0 0 0 1 0 0 0 0 1 0\\n")
+
+:func:`check_output_path` and :func:`check_input_file` turn the usual path mistakes (a
+folder, a FIFO, a missing or read-only folder, a wrong suffix, an output that is one of the
+inputs) into one-line errors that name the path and what to do, before any work starts.
+Both raise the built-in types (``FileNotFoundError``, ``IsADirectoryError``,
+``NotADirectoryError``, ``PermissionError``, ``ValueError``) with that message as their only
+argument, so ``str(err)`` is the whole message.
 """
 
 import contextlib
 import os
 import secrets
+import stat
 from pathlib import Path
 
-__all__ = ["atomic_write"]
+__all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind", "format_bytes"]
+
+#: Bytes the temporary file's name adds to the target's: ``.`` + ``.<pid>.<8 hex>.tmp``.
+_TMP_EXTRA = 1 + 1 + 10 + 1 + 8 + 4
+#: ``stat`` test -> what to call a path that is not a regular file.
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
 
 
 @contextlib.contextmanager
 def atomic_write(path, mode="w", encoding="utf-8"):
     """Context manager: a file object whose content replaces ``path`` only if the block succeeds.
+
+    The temporary file ``.<name>.<pid>.<random>.tmp`` is created in the same folder (so the
+    final ``os.replace`` is a rename within one file system), flushed and fsynced, then
+    renamed over ``path``. If the body raises (or the process is interrupted), the
+    temporary file is removed and ``path`` keeps its previous content. A replaced file keeps
+    its permission bits; a new one gets the permissions a plain ``open`` would give
+    (``0o666`` minus the umask).
 
     Parameters
     ----------
@@ -35,8 +65,7 @@ def atomic_write(path, mode="w", encoding="utf-8"):
     Yields
     ------
     file object
-        Open on a temporary file ``.<name>.<pid>.<random>.tmp`` in the target's folder, created
-        with the permissions a plain ``open`` would give.
+        Write to it; do not close it.
 
     Raises
     ------
@@ -44,6 +73,11 @@ def atomic_write(path, mode="w", encoding="utf-8"):
         The target's folder does not exist.
     ValueError
         ``mode`` is not ``"w"`` or ``"wb"``, or ``path`` is a folder.
+
+    Examples
+    --------
+    >>> with atomic_write(tmp_path / "result.npz", "wb") as f:    # doctest: +SKIP
+    ...     np.savez_compressed(f, x=x)
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write: mode must be 'w' or 'wb', got {mode!r}")
@@ -61,7 +95,160 @@ def atomic_write(path, mode="w", encoding="utf-8"):
             yield f
             f.flush()
             os.fsync(f.fileno())
+        with contextlib.suppress(FileNotFoundError):
+            os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+
+
+def format_bytes(n):
+    """``n`` bytes as a short text: ``"512 B"``, ``"3.2 MiB"``, ``"7.0 TiB"``."""
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n} B"
+
+
+def file_kind(path):
+    """What ``path`` is, for messages: ``"a regular file"``, ``"a directory"``, ``"a FIFO (named pipe)"``, ...
+
+    Returns ``"missing"`` when nothing is there and ``"a broken symbolic link"`` for a link
+    to nothing.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "a broken symbolic link" if os.path.islink(path) else "missing"
+    except NotADirectoryError:
+        return "missing"
+    return next((name for test, name in _KINDS if test(mode)), "a regular file")
+
+
+def check_input_file(path, what="data file"):
+    """``path`` as an absolute Path if it is a readable regular file, else a clear error.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    what : str
+        What the file is for, e.g. ``"course file"`` (starts the message).
+
+    Returns
+    -------
+    pathlib.Path
+        Absolute, symbolic links resolved.
+
+    Raises
+    ------
+    FileNotFoundError
+        Nothing there, or a broken symbolic link (says where it points).
+    IsADirectoryError
+        A folder.
+    PermissionError
+        Not readable by this user.
+    ValueError
+        A FIFO, socket or device: not a file on disk (visla-edu seeks in its inputs).
+    """
+    path = Path(path).expanduser()
+    kind = file_kind(path)
+    if kind == "missing":
+        raise FileNotFoundError(f"{what} {path}: not found")
+    if kind == "a broken symbolic link":
+        raise FileNotFoundError(f"{what} {path}: a broken symbolic link (it points to {os.readlink(path)!r}, "
+                                "which does not exist)")
+    if kind == "a directory":
+        raise IsADirectoryError(f"{what} {path}: is a directory, not a file; pass the .npz file inside it")
+    if kind != "a regular file":
+        raise ValueError(f"{what} {path}: is {kind}, not a regular file; save the data to a file on disk "
+                         "and pass that (visla-edu reads its inputs with random access)")
+    if not os.access(path, os.R_OK):
+        raise PermissionError(f"{what} {path}: permission denied (this user cannot read it); "
+                              "check its permissions (ls -l) or copy it somewhere readable")
+    return path.resolve()
+
+
+def same_file(a, b):
+    """Whether paths ``a`` and ``b`` name the same file (through links, ``..`` or hard links)."""
+    a, b = Path(a).expanduser(), Path(b).expanduser()
+    with contextlib.suppress(OSError):
+        return os.path.samefile(a, b)
+    return a.resolve() == b.resolve()
+
+
+def check_output_path(path, suffixes, option, inputs=(), others=()):
+    """Check an output path before any work: suffix, folder, kind, and that it is no input.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    suffixes : sequence of str
+        Allowed suffixes, lower case with the dot (``(".npz",)``); the first one is suggested.
+    option : str
+        How the user gave the path (``"--out"``), to start the message.
+    inputs : sequence of path-like
+        Files the command reads; the output may not be one of them (not even through a
+        symbolic link or a relative path).
+    others : sequence of (str, path-like)
+        Other outputs of the same command, ``(option, path)``; the output may not be one of them.
+
+    Returns
+    -------
+    pathlib.Path
+        The absolute path that will be written (the folder resolved, the name as given).
+
+    Raises
+    ------
+    ValueError
+        Wrong suffix, an existing FIFO or device, or the same file as an input or another output.
+    IsADirectoryError
+        ``path`` is a folder.
+    FileNotFoundError, NotADirectoryError
+        The folder does not exist or is not a folder.
+    PermissionError
+        The folder is not writable.
+    """
+    given = Path(path).expanduser()
+    kind = file_kind(given)
+    if kind == "a directory":
+        raise IsADirectoryError(f"{option} {path}: is a directory; give a file name, "
+                                f"e.g. {option} {given / ('result' + suffixes[0])}")
+    if given.suffix.lower() not in suffixes:
+        example = given.with_suffix(suffixes[0]) if given.suffix else given.with_name(given.name + suffixes[0])
+        raise ValueError(f"{option} {path}: the file name must end in {_choices(suffixes)}; e.g. {option} {example}")
+    if kind not in ("missing", "a regular file", "a broken symbolic link"):
+        raise ValueError(f"{option} {path}: is {kind}; visla-edu writes a regular file, give another name")
+    folder = _writable_folder(given, option, path)
+    target = folder / given.name
+    longest = os.pathconf(folder, "PC_NAME_MAX") - _TMP_EXTRA
+    if len(given.name.encode()) > longest:
+        raise ValueError(f"{option} {path}: the file name is {len(given.name.encode())} bytes long, more than the "
+                         f"{longest} this folder allows (with room for the temporary file); choose a shorter name")
+    for source in inputs:
+        if same_file(target, source):
+            raise ValueError(f"{option} {path}: is the input file {Path(source).resolve()}; writing there would "
+                             "destroy it: choose another name")
+    for other_option, other in others:
+        if other is not None and (same_file(target, other) or target == Path(other).expanduser().resolve()):
+            raise ValueError(f"{option} {path}: is also the {other_option} file; give them different names")
+    return target
+
+
+def _choices(suffixes):
+    return suffixes[0] if len(suffixes) == 1 else f"{', '.join(suffixes[:-1])} or {suffixes[-1]}"
+
+
+def _writable_folder(given, option, shown):
+    """The resolved folder of ``given``, checked to exist, be a folder and be writable."""
+    folder = given.parent.resolve()
+    kind = file_kind(folder)
+    if kind == "missing":
+        raise FileNotFoundError(f"{option} {shown}: the folder {folder} does not exist; create it first "
+                                f"(mkdir -p {folder})")
+    if kind != "a directory":
+        raise NotADirectoryError(f"{option} {shown}: {folder} is {kind}, not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(f"{option} {shown}: the folder {folder} is not writable by this user; "
+                              "choose another folder")
+    return folder

@@ -32,10 +32,21 @@ __all__ = [
 
 
 def _check_calibration(K, b, name):
-    """Return ``K`` as a (3, 3) float array and ``b`` as a positive float, or raise ValueError."""
+    """Return ``K`` as a (3, 3) float array and ``b`` as a positive float, or raise ValueError.
+
+    ``K`` must be ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with finite entries and positive
+    focal lengths: the stereo model has no skew, so a skew ``K[0, 1]`` is refused, not ignored.
+    """
     K = np.asarray(K, dtype=float)
     if K.shape != (3, 3):
         raise ValueError(f"{name}: K must have shape (3, 3), got {K.shape}")
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(f"{name}: K needs finite entries and positive focal lengths, got {K.tolist()}")
+    if K[0, 1] != 0:
+        raise ValueError(f"{name}: K[0, 1] = {float(K[0, 1])!r} is a skew, but the stereo model has none "
+                         "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]], rectified images); rectify or set it to 0")
+    if K[1, 0] != 0 or np.any(K[2] != [0.0, 0.0, 1.0]):
+        raise ValueError(f"{name}: K must be [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]], got {K.tolist()}")
     b = float(b)
     if not np.isfinite(b) or b <= 0:
         raise ValueError(f"{name}: baseline b must be a positive number, got {b}")

@@ -11,23 +11,73 @@ Examples::
     visla-edu run X --ground-truth poses.txt --ground-truth-times times.txt --trajectory-out slam.tum
     visla-edu stepper --port 8866           # the filter stepper page (Voila)
     visla-edu release                       # regenerate notebooks/ from solutions/
+
+Errors: :func:`main` is the one error boundary. Whatever a user can get wrong is reported
+as ONE line on stderr that names the file, key, value, setting or frame and what to try,
+never a traceback. Exit status:
+
+* 0 - done;
+* 1 - the filter (or the diagnostics) failed on valid input: divergence, a singular matrix,
+  numerical overflow, out of memory (the line names the frame and the likely cause);
+* 2 - bad input: a command-line error, a bad ``--set`` value, a missing, unreadable or
+  invalid file, an output path that cannot or must not be written (checked before any work);
+* 3 - an internal error (a bug): one line asking to report it;
+* 130 - interrupted (Ctrl-C).
+
+``--debug`` (or the environment variable ``VISLA_EDU_DEBUG=1``) adds the traceback.
+Every file is written atomically, so an error or Ctrl-C never leaves a half-written file
+where a good one was.
 """
 
 import argparse
-import dataclasses
+import errno
+import os
 import sys
+import traceback
+import warnings
 from pathlib import Path
 
 from visla_edu.codes import MODES, SLAM
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
+
+EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 1, 2, 3, 130
+#: Environment variable that makes every error print its traceback too (like ``--debug``).
+DEBUG_ENV = "VISLA_EDU_DEBUG"
+#: errno values of an OSError that mean a bad path given by the user (exit 2); others are system failures (exit 1).
+_PATH_ERRNOS = {errno.ENOENT, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EEXIST, errno.ENAMETOOLONG,
+                errno.EROFS, errno.ELOOP, errno.ENXIO}
+
+
+class _UsageExit(SystemExit):
+    """A command-line error: exit status 2 (as argparse), the message as its text for in-process callers."""
+
+    def __init__(self, message):
+        super().__init__(EXIT_BAD_INPUT)
+        self.message = message
+
+    def __str__(self):
+        return self.message
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (no usage block) that points to ``--help``."""
+
+    def error(self, message):
+        line = _one_line(f"{self.prog}: error: {message} (see {self.prog} --help)")
+        print(line, file=sys.stderr)
+        raise _UsageExit(line)
 
 
 def build_parser():
     """The argument parser of ``visla-edu``."""
-    parser = argparse.ArgumentParser(
-        prog="visla-edu", description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
-    common = argparse.ArgumentParser(add_help=False)
+    parser = _Parser(prog="visla-edu",
+                     description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
+    parser.add_argument("--debug", action="store_true", help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
+    debug = _Parser(add_help=False)
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
+    common = _Parser(add_help=False, parents=[debug])
     common.add_argument("--data-dir", default=None,
                         help="folder with the course files (default: $VISLA_EDU_DATA, else ./data)")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -36,15 +86,32 @@ def build_parser():
     info.add_argument("dataset", help="03, 0022, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     info.add_argument("--no-diagnostics", action="store_true", help="skip the visual-odometry diagnostics")
 
+    _add_run_parser(sub, common)
+
+    stepper = sub.add_parser("stepper", parents=[common], help="serve the interactive filter stepper with Voila")
+    stepper.add_argument("--port", type=_port, default=8866)
+    stepper.add_argument("--open", action="store_true", help="open a browser")
+
+    release = sub.add_parser("release", parents=[debug], help="generate the student notebooks from the solutions")
+    release.add_argument("--src", default=None, help="solutions folder (default: the project's solutions/)")
+    release.add_argument("--dst", default=None, help="student folder (default: the project's notebooks/)")
+    release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
+    return parser
+
+
+def _add_run_parser(sub, common):
     run = sub.add_parser("run", parents=[common], help="run a filter over a dataset")
     run.add_argument("dataset", help="03, 0022, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     run.add_argument("--mode", default=SLAM, choices=MODES)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
-    run.add_argument("--landmark-stride", type=int, default=None, help="use every N-th landmark only")
-    run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                     help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable)")
+    run.add_argument("--force", action="store_true",
+                     help="run even when the estimated memory or time exceeds the limits (2 GiB, 15 min)")
+    run.add_argument("--landmark-stride", type=_stride, default=None, metavar="N", help="use every N-th landmark only")
+    run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
+                     help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
+                          "booleans are true/false, ranges are enforced")
     run.add_argument("--out", default=None, help="save the result (.npz)")
-    run.add_argument("--plot", default=None, help="save a top-down figure of trajectory and map (.png)")
+    run.add_argument("--plot", default=None, help="save a top-down figure of trajectory and map (.png, .pdf, .svg)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
                      help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
@@ -58,16 +125,6 @@ def build_parser():
                      help="write the estimated trajectory: .kitti or .txt (KITTI, 12 numbers per row) or .tum "
                           "(TUM: t x y z qx qy qz qw)")
 
-    stepper = sub.add_parser("stepper", parents=[common], help="serve the interactive filter stepper with Voila")
-    stepper.add_argument("--port", type=int, default=8866)
-    stepper.add_argument("--open", action="store_true", help="open a browser")
-
-    release = sub.add_parser("release", help="generate the student notebooks from the solutions")
-    release.add_argument("--src", default=None, help="solutions folder (default: the project's solutions/)")
-    release.add_argument("--dst", default=None, help="student folder (default: the project's notebooks/)")
-    release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
-    return parser
-
 
 def _blas_threads(text):
     """``--blas-threads`` value: a positive integer or ``none``."""
@@ -77,28 +134,45 @@ def _blas_threads(text):
         n = int(text)
     except ValueError:
         n = 0
-    if n < 1:
+    if not 1 <= n <= 4096:
         raise argparse.ArgumentTypeError(f"expected a positive integer or 'none', got {text!r}")
     return n
 
 
-def _parse_settings(pairs):
-    """``["sigma_pixel=2", ...]`` -> FilterConfig keyword arguments, typed like the defaults."""
-    from visla_edu.filters import FilterConfig
+def _port(text):
+    """``--port`` value: a TCP port, 1 to 65535."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = 0
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a TCP port number from 1 to 65535, got {text!r}")
+    return port
 
-    fields = {f.name: f for f in dataclasses.fields(FilterConfig)}
-    defaults = FilterConfig()
-    out = {}
-    for pair in pairs:
-        name, sep, value = pair.partition("=")
-        if not sep or name not in fields:
-            raise SystemExit(f"--set {pair!r}: expected NAME=VALUE with NAME one of {', '.join(fields)}")
-        kind = type(getattr(defaults, name))
-        try:
-            out[name] = (value.lower() in ("1", "true", "yes")) if kind is bool else kind(value)
-        except ValueError:
-            raise SystemExit(f"--set {pair!r}: {name} needs a {kind.__name__}, got {value!r}") from None
-    return out
+
+def _setting(text):
+    """``--set NAME=VALUE``: ``(name, value)`` parsed strictly by the setting's declaration."""
+    from visla_edu.filters import FilterConfig, _settings
+
+    if text.strip().lower().startswith("blas_threads"):
+        raise argparse.ArgumentTypeError(f"{text!r}: blas_threads is not a filter setting; use --blas-threads N "
+                                         "(or --blas-threads none)")
+    try:
+        name, value = _settings.parse_setting(FilterConfig, text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    if name == "extrinsic_correction":
+        from visla_edu.diagnostics import CORRECTIONS
+
+        if value not in ("auto", *CORRECTIONS):
+            raise argparse.ArgumentTypeError(f"extrinsic_correction must be 'auto' or one of {list(CORRECTIONS)}, "
+                                             f"got {value!r}")
+    return name, value
+
+
+def _stride(text):
+    """``--landmark-stride N``: as ``--set landmark_stride=N``."""
+    return _setting(f"landmark_stride={text}")[1]
 
 
 def _cmd_info(args):
@@ -108,50 +182,138 @@ def _cmd_info(args):
     print(data.format_summary(dataset))
     if not args.no_diagnostics and dataset.num_observations:
         print()
-        print(diagnostics.diagnose(dataset))
+        try:
+            print(diagnostics.calibrate(dataset).report(dataset.name))
+        except (ArithmeticError, ValueError, MemoryError) as err:
+            err.hint = "the file loaded fine; rerun with --no-diagnostics to skip the diagnostics"
+            err.failed = True  # a failure of the diagnostics on a valid file: exit 1, not 2
+            raise
 
 
 def _cmd_run(args):
-    from visla_edu import data, plotting, run
-    from visla_edu.filters import FilterConfig
+    import numpy as np
 
-    settings = _parse_settings(args.set)
-    if args.landmark_stride is not None:
-        settings["landmark_stride"] = args.landmark_stride
-    config = FilterConfig(**settings)
-    _check_run_outputs(args)
+    from visla_edu import run
+    from visla_edu.filters import FilterDivergedError
+
+    config = _run_config(args)
+    outputs = _check_outputs(args, _run_inputs(args))
     dataset = _load_with_ground_truth(args)
     if dataset.label:
         print(dataset.label)
-    result = run.run_filter(dataset, args.mode, config, dense=args.dense,
-                            progress=False if args.quiet else None, verbose=True, blas_threads=args.blas_threads)
+    _check_work(dataset, args, config)
+    try:
+        result = run.run_filter(dataset, args.mode, config, dense=args.dense, progress=False if args.quiet else None,
+                                verbose=True, blas_threads=args.blas_threads)
+    except (FilterDivergedError, np.linalg.LinAlgError, ArithmeticError, MemoryError) as err:
+        err.hint = run.divergence_hint(dataset, config, getattr(err, "frame", None))
+        raise
     print(result.summary())
     if dataset.ground_truth is not None:
         _print_evaluation(run.evaluate_result(result, dataset.ground_truth), dataset.ground_truth, args.mode)
     if args.out:
-        run.save_result(result, args.out)
-        print(f"saved {Path(args.out).resolve()}")
+        print(f"saved {run.save_result(result, outputs['--out'])}")
     if args.trajectory_out:
         from visla_edu import trajectory
 
-        print(f"saved {trajectory.write_trajectory(args.trajectory_out, result.time_stamps, result.world_T_imu)}")
+        written = trajectory.write_trajectory(outputs["--trajectory-out"], result.time_stamps, result.world_T_imu)
+        print(f"saved {written}")
     if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        plotting.plot_result(result, args.plot, ground_truth=dataset.ground_truth,
-                             title=f"{dataset.name}: {args.mode}{' (dense)' if args.dense else ''}")
-        print(f"saved {Path(args.plot).resolve()}")
+        _save_plot(result, dataset, args, outputs["--plot"])
 
 
-def _check_run_outputs(args):
-    """Problems with the output and ground-truth options, found before the run starts."""
-    if args.trajectory_out:
-        from visla_edu import trajectory
+def _run_config(args):
+    """The FilterConfig of ``--set`` and ``--landmark-stride`` (each setting given once), checked."""
+    from visla_edu.filters import FilterConfig
 
-        trajectory.trajectory_format(args.trajectory_out)
+    if args.dense and args.mode != SLAM:
+        raise ValueError(f"--dense is the textbook joint filter and needs --mode slam, got --mode {args.mode}")
+    settings = {}
+    pairs = list(args.set) + ([("landmark_stride", args.landmark_stride)] if args.landmark_stride else [])
+    for name, value in pairs:
+        if name in settings:
+            raise ValueError(f"--set: {name} is given twice (or both --set landmark_stride and --landmark-stride); "
+                             "give each setting once")
+        settings[name] = value
+    return FilterConfig(**settings)
+
+
+def _run_inputs(args):
+    """Every file ``run`` reads: the dataset, its registered ground truth, ``--ground-truth`` files."""
+    from visla_edu import data
+
     if args.ground_truth_times and not args.ground_truth:
         raise ValueError(f"--ground-truth-times {args.ground_truth_times} needs --ground-truth POSES_FILE too")
+    given = [args.ground_truth, args.ground_truth_times]
+    return data.input_files(args.dataset, args.data_dir) + [Path(p) for p in given if p and Path(p).exists()]
+
+
+def _check_outputs(args, inputs):
+    """``{"--out": path, "--plot": path, "--trajectory-out": path}`` checked before any work.
+
+    Suffix, folder, kind, and that no output is an input or another output.
+    """
+    from visla_edu._files import check_output_path
+
+    given = {"--out": args.out, "--plot": args.plot, "--trajectory-out": args.trajectory_out}
+    outputs = {}
+    for option, path in given.items():
+        if not path:
+            continue
+        others = [(o, p) for o, p in given.items() if o != option and p]
+        outputs[option] = check_output_path(path, _suffixes(option, path), option, inputs, others)
+    return outputs
+
+
+def _suffixes(option, path):
+    """The suffixes allowed for an output option (the trajectory's format is checked by its own rule)."""
+    if option == "--out":
+        return (".npz",)
+    if option == "--plot":
+        from visla_edu.plotting import figure_suffixes
+
+        return figure_suffixes()
+    from visla_edu import trajectory
+
+    trajectory.trajectory_format(path)
+    return tuple(trajectory.FORMATS)
+
+
+def _check_work(dataset, args, config):
+    """Print the estimated cost of a dense (or a heavy) run; refuse one past the limits unless ``--force``."""
+    import dataclasses
+
+    from visla_edu import run
+
+    estimate = run.estimate_work(dataset, args.mode, config, args.dense)
+    over = estimate.over_limits()
+    if args.dense or over:
+        print(estimate.summary())
+    if not over:
+        return
+    if args.force:
+        print(f"--force: running anyway ({' and '.join(over)})")
+        return
+    stride = config.landmark_stride
+    while stride < dataset.num_landmarks and run.estimate_work(
+            dataset, args.mode, dataclasses.replace(config, landmark_stride=stride), args.dense).over_limits():
+        stride *= 2
+    dense = " --dense" if args.dense else ""
+    alternative = "the active set (drop --dense, same trajectory), " if args.dense else ""
+    raise ValueError(f"--mode {args.mode}{dense} on {dataset.name} with landmark stride {config.landmark_stride} would "
+                     f"need {' and '.join(over)}; use --landmark-stride {stride} (or more), or {alternative}or --force "
+                     "to run it anyway")
+
+
+def _save_plot(result, dataset, args, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from visla_edu import plotting
+
+    figure = plotting.plot_result(result, ground_truth=dataset.ground_truth,
+                                  title=f"{dataset.name}: {args.mode}{' (dense)' if args.dense else ''}")
+    print(f"saved {plotting.save_figure(figure, path)}")
 
 
 def _load_with_ground_truth(args):
@@ -188,7 +350,10 @@ def _cmd_release(args):
     src = Path(args.src) if args.src else root / "solutions"
     dst = Path(args.dst) if args.dst else root / "notebooks"
     if not src.is_dir():
-        raise SystemExit(f"release: solutions folder {src} not found (run from a source checkout or pass --src)")
+        raise FileNotFoundError(f"solutions folder {src} not found (run from a source checkout or pass --src)")
+    if dst.exists() and not dst.is_dir():
+        raise NotADirectoryError(f"release: --dst {dst} is a file, not a folder; give the folder of the student "
+                                 "notebooks")
     teaching = src.resolve().parent / "TEACHING.md"
     if args.check:
         drifted = release.check_in_sync(src, dst)
@@ -202,13 +367,96 @@ def _cmd_release(args):
         print(f"updated the points table in {teaching}")
 
 
+_HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release}
+
+
 def main(argv=None):
-    """Entry point of the ``visla-edu`` console script."""
+    """Entry point of the ``visla-edu`` console script: the one error boundary; returns the exit status.
+
+    Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected,
+    not printed: a failure is reported by its one line (the filter detects a non-finite state
+    itself), a success by one line counting them. ``--debug`` prints them as they happen.
+    """
     args = build_parser().parse_args(argv)
-    handlers = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release}
-    try:
-        handlers[args.command](args)
-    except (FileNotFoundError, ValueError) as err:
-        print(f"visla-edu {args.command}: {err}", file=sys.stderr)
-        return 2
+    debug = getattr(args, "debug", False) or os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
+    with warnings.catch_warnings(record=not debug) as caught:
+        if not debug:
+            warnings.simplefilter("default", RuntimeWarning)  # once per place: bounded
+        try:
+            _HANDLERS[args.command](args)
+        except KeyboardInterrupt:
+            _report(args.command, "interrupted (Ctrl-C); files being written were left as they were", debug)
+            return EXIT_INTERRUPTED
+        except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): stop quietly
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return EXIT_FAILED
+        except Exception as err:  # noqa: BLE001 - the boundary: every error becomes one line and a status
+            code, message = _describe(err, args)
+            _report(args.command, message, debug)
+            return code
+    _note_warnings(args.command, caught or [])
     return 0
+
+
+def _note_warnings(command, caught):
+    """One line on stderr for the numerical warnings of a successful run, the rest re-issued."""
+    numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+    for w in caught:
+        if not issubclass(w.category, RuntimeWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if numeric:
+        first = str(numeric[0].message)
+        print(f"visla-edu {command}: note: numerical warnings at {len(numeric)} place(s), e.g. {first!r} "
+              "(rerun with --debug to see them)", file=sys.stderr)
+
+
+def _report(command, message, debug):
+    print(_one_line(f"visla-edu {command}: {message}"), file=sys.stderr)
+    if debug:
+        traceback.print_exc()
+
+
+def _one_line(text):
+    return " ".join(str(text).split())
+
+
+def _describe(err, args):
+    """``(exit status, message)`` of an exception that reached the boundary."""
+    import numpy as np
+
+    from visla_edu.filters import FilterDivergedError
+
+    hint = getattr(err, "hint", "")
+    hint = f"; {hint}" if hint else ""
+    if getattr(err, "failed", False):
+        return EXIT_FAILED, f"{type(err).__name__}: {err}{hint}"
+    if isinstance(err, FilterDivergedError):
+        return EXIT_FAILED, f"the filter diverged: {err}{hint}"
+    if isinstance(err, np.linalg.LinAlgError):
+        return EXIT_FAILED, f"the filter failed: singular or not positive definite matrix ({err}){hint}"
+    if isinstance(err, ArithmeticError):
+        return EXIT_FAILED, f"numerical failure ({type(err).__name__}: {err}){hint}"
+    if isinstance(err, MemoryError):
+        return EXIT_FAILED, f"out of memory ({err or 'MemoryError'}); {_memory_hint(args)}"
+    if isinstance(err, OSError) and (err.errno in _PATH_ERRNOS or err.errno is None):
+        return EXIT_BAD_INPUT, _os_message(err)
+    if isinstance(err, OSError):
+        return EXIT_FAILED, f"{_os_message(err)} (a system error: check the disk and the paths)"
+    if isinstance(err, ValueError):
+        return EXIT_BAD_INPUT, f"{err}{hint}"
+    return EXIT_INTERNAL, (f"internal error ({type(err).__name__}: {err}); this is a bug in visla-edu, please report "
+                           "it with the command line and the traceback of --debug")
+
+
+def _os_message(err):
+    """An OSError as text: our own messages as they are, the system's as 'file: reason'."""
+    if err.filename is None:
+        return str(err)
+    return f"{err.filename}: {(err.strerror or str(err)).lower()}"
+
+
+def _memory_hint(args):
+    if getattr(args, "dense", False):
+        return ("the dense filter keeps a covariance over every landmark: use a larger --landmark-stride, "
+                "or the active set (drop --dense)")
+    return "close other programs or use a smaller dataset"

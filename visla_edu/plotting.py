@@ -4,12 +4,39 @@ All functions draw into a given ``Axes`` (or a new figure) and return it; nothin
 or saved unless asked, so notebooks, the CLI and the widgets share them.
 """
 
+from pathlib import Path
+
 import numpy as np
 
+from visla_edu._files import atomic_write
 from visla_edu.codes import DEADRECKON, OBS_GATED
 
 __all__ = ["GROUND_TRUTH_STYLE", "covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
-           "covariance_ellipses", "plot_nis"]
+           "covariance_ellipses", "plot_nis", "figure_suffixes", "save_figure"]
+
+
+def figure_suffixes():
+    """File suffixes matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
+
+    ``.pgf`` is left out: it needs a LaTeX installation.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    first = ("png", "pdf", "svg")
+    others = sorted(set(FigureCanvasBase.get_supported_filetypes()) - set(first) - {"pgf"})
+    return tuple(f".{ext}" for ext in (*first, *others))
+
+
+def save_figure(fig, path, dpi=120):
+    """Save ``fig`` to ``path`` atomically (format from the suffix); return the absolute path.
+
+    The image is written to a temporary file and renamed over ``path``
+    (:func:`visla_edu._files.atomic_write`), so a failed save never leaves a broken image.
+    """
+    path = Path(path).expanduser()
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, dpi=dpi, format=path.suffix.lstrip(".").lower() or "png")
+    return path.resolve()
 
 #: How the true trajectory is drawn in every view (these plots and the stepper's map): green
 #: dash-dot, unlike the estimate (blue, solid), dead reckoning (red, dashed) and landmarks (grey dots).
@@ -116,7 +143,8 @@ def plot_result(result, path=None, ground_truth=None, title=None):
     ----------
     result : visla_edu.run.RunResult
     path : str or Path, optional
-        Save the figure there (PNG, 120 dpi).
+        Save the figure there (format from the suffix, see :func:`figure_suffixes`; 120 dpi),
+        atomically (:func:`save_figure`).
     ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
         Drawn in :data:`GROUND_TRUTH_STYLE` with a legend entry.
     title : str, optional
@@ -134,7 +162,7 @@ def plot_result(result, path=None, ground_truth=None, title=None):
     ax.set_title(title or f"{result.name}: {result.mode}{' (dense)' if result.dense else ''}")
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=120)
+        save_figure(fig, path)
     return fig
 
 

@@ -32,6 +32,8 @@ import re
 import sys
 from pathlib import Path
 
+from visla_edu._files import atomic_write
+
 __all__ = [
     "BEGIN_SOLUTION",
     "END_SOLUTION",
@@ -219,8 +221,9 @@ def _expected(src_dir):
 def make_student_notebooks(src_dir=_DEFAULT_SRC, dst_dir=_DEFAULT_DST):
     """Write the student version of every ``src_dir/*.ipynb`` to ``dst_dir``.
 
-    Files are rewritten only when their content changes. Student notebooks without a
-    solution notebook are left alone (:func:`check_in_sync` reports them).
+    Files are rewritten only when their content changes, each atomically (an interrupted
+    release leaves every notebook whole, old or new). Student notebooks without a solution
+    notebook are left alone (:func:`check_in_sync` reports them).
 
     Parameters
     ----------
@@ -238,9 +241,15 @@ def make_student_notebooks(src_dir=_DEFAULT_SRC, dst_dir=_DEFAULT_DST):
         target = dst_dir / name
         if target.is_file() and target.read_text(encoding="utf-8") == text:
             continue
-        target.write_text(text, encoding="utf-8")
+        _write_text(target, text)
         written.append(target)
     return written
+
+
+def _write_text(path, text):
+    """Write a notebook atomically (:func:`visla_edu._files.atomic_write`): never half a notebook."""
+    with atomic_write(path, "w", encoding="utf-8") as f:
+        f.write(text)
 
 
 def check_in_sync(src_dir=_DEFAULT_SRC, dst_dir=_DEFAULT_DST):
@@ -280,7 +289,7 @@ def clean_sources(src_dir=_DEFAULT_SRC):
     for path in _sources(src_dir):
         text = notebook_text(clean_notebook(_read(path)))
         if path.read_text(encoding="utf-8") != text:
-            path.write_text(text, encoding="utf-8")
+            _write_text(path, text)
             written.append(path)
     return written
 
@@ -352,7 +361,7 @@ def update_points_table(src_dir=_DEFAULT_SRC, teaching="TEACHING.md", check=Fals
     if new == text:
         return False
     if not check:
-        teaching.write_text(new, encoding="utf-8")
+        _write_text(teaching, new)
     return True
 
 

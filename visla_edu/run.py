@@ -3,8 +3,10 @@
 :func:`make_filter` builds a mode by name (:data:`MODES`, from :mod:`visla_edu.codes`),
 :func:`iterate_filter` steps it, :func:`run_filter` runs it to the end into a
 :class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
-:func:`load_result` write and read it. How the driver runs is in its arguments, not in the
-filter's settings: the BLAS thread limit (:func:`limit_blas_threads`) and the progress bar.
+:func:`load_result` write and read it (atomically, :func:`visla_edu._files.atomic_write`). How
+the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
+(:func:`limit_blas_threads`) and the progress bar. :func:`estimate_work` says what a run will cost
+before it starts; :func:`divergence_hint` names the likely cause when a run fails.
 
 >>> from visla_edu import data, run
 >>> ds = data.load("sim-tiny")
@@ -17,16 +19,18 @@ import contextlib
 import functools
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from visla_edu import diagnostics, filters, metrics, motion
+from visla_edu import data, diagnostics, filters, metrics, motion
+from visla_edu._files import atomic_write, format_bytes
 from visla_edu.camera import StereoCamera
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
-__all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "iterate_filter", "run_filter",
-           "evaluate_result", "save_result", "load_result"]
+__all__ = ["MODES", "RunArrays", "RunResult", "WorkEstimate", "limit_blas_threads", "make_filter", "iterate_filter",
+           "run_filter", "evaluate_result", "save_result", "load_result", "estimate_work", "divergence_hint"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
@@ -85,12 +89,23 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     Returns
     -------
     filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
+
+    Raises
+    ------
+    ValueError
+        A bad mode, or a dataset with an implausible calibration
+        (:func:`visla_edu.data.calibration_problems`: in-memory datasets are held to the
+        ranges the loader enforces on files, since the filter would silently turn an absurd
+        focal length, baseline or extrinsic into inf/NaN covariances or a garbage map).
     """
     config = config or FilterConfig()
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if dense and mode != SLAM:
         raise ValueError(f"dense=True is the textbook joint filter and needs mode='slam', got mode={mode!r}")
+    problems = data.calibration_problems(dataset)
+    if problems:
+        raise ValueError(f"cannot run the filter: {problems[0]}")
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
         print(evidence)
@@ -200,6 +215,12 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     Returns
     -------
     RunResult
+
+    Raises
+    ------
+    visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError
+        The filter failed; the exception's ``frame`` attribute is the frame it failed at
+        (see :func:`divergence_hint`).
     """
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
@@ -208,11 +229,15 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     arrays = RunArrays(T)
     show = T > 500 if progress is None else progress
     with limit_blas_threads(blas_threads), _progress_bar(T, show, f"{dataset.name} {mode}") as bar:
-        for _ in range(T):
-            start = time.perf_counter()
-            rec = flt.step()
-            arrays.store(rec, seconds=time.perf_counter() - start)
-            bar.update(1)
+        try:
+            for _ in range(T):
+                start = time.perf_counter()
+                rec = flt.step()
+                arrays.store(rec, seconds=time.perf_counter() - start)
+                bar.update(1)
+        except (filters.FilterDivergedError, np.linalg.LinAlgError, ArithmeticError, MemoryError) as err:
+            err.frame = flt.t  # the frame it failed at, for divergence_hint (the message is unchanged)
+            raise
     landmarks, landmark_cov = flt.landmark_estimates()
     return RunResult(
         name=dataset.name, mode=mode, dense=dense, time_stamps=dataset.time_stamps.copy(),
@@ -315,7 +340,7 @@ def _progress_bar(total, show, desc):
 
 
 def save_result(result, path):
-    """Save a :class:`RunResult` to ``path`` (npz).
+    """Save a :class:`RunResult` to ``path`` (npz), atomically; return the path written.
 
     Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
     initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
@@ -323,11 +348,29 @@ def save_result(result, path):
     ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
     so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
     ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`).
+
+    Parameters
+    ----------
+    result : RunResult
+    path : str or os.PathLike
+        ``.npz`` is appended if missing (as ``numpy.savez`` does). The file is written to a
+        temporary file first and then renamed (:func:`visla_edu._files.atomic_write`), so an
+        interrupted save leaves a previous result there intact.
+
+    Returns
+    -------
+    pathlib.Path
+        The absolute path written.
     """
+    path = Path(path).expanduser()
+    if path.suffix.lower() != ".npz":
+        path = path.with_name(path.name + ".npz")
     arrays = {k: v for k, v in vars(result).items() if k not in ("config", "evaluation")}
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
     arrays.update({f"eval_{k}": v for k, v in result.evaluation.items()})
-    np.savez_compressed(path, **arrays)
+    with atomic_write(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
+    return path.resolve()
 
 
 def load_result(path):
@@ -341,3 +384,163 @@ def load_result(path):
         fields[key] = str(fields[key])
     fields["dense"] = bool(fields["dense"])
     return RunResult(config=config, evaluation=evaluation, **fields)
+
+
+#: Cost model of the filter's updates, fitted on the 2-core development machine with one BLAS
+#: thread (``benchmarks/bench_work_estimate.py`` prints estimates against measurements). A joint
+#: update with a D-dimensional state and m observation rows costs ``D^2 (a + b m)`` seconds (the
+#: covariance update ``Sigma -= A^T A`` streams the D x D covariance and multiplies (D, m) by
+#: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``; every
+#: frame some milliseconds more. Estimated/measured time on 40-frame runs (a loaded 2-core
+#: machine): 0.7 to 2.5 for dense SLAM (strides 2 to 8, simulated and dataset 03), 0.8 for
+#: active-set SLAM and 2.8 for VIO with about 700 landmarks in view; dense SLAM on every
+#: landmark of dataset 03 (D = 15321) measured 2.2 s a frame against 3.3 s estimated.
+SECONDS_PER_ENTRY = 1e-8  # a
+SECONDS_PER_ENTRY_ROW = 2e-11  # b
+SECONDS_PER_ROW_CUBED = 4e-11  # c
+SECONDS_PER_ROW_SQUARED = 2e-8  # d
+SECONDS_PER_FRAME = 5e-3  # the rest of a step (prediction, gating, bookkeeping)
+#: ``visla-edu run`` refuses a run estimated past these limits unless given ``--force``.
+WORK_LIMIT_BYTES = 2 * 2**30
+WORK_LIMIT_SECONDS = 15 * 60
+
+
+@dataclass
+class WorkEstimate:
+    """What a run will cost, estimated from the observations before it starts (:func:`estimate_work`).
+
+    Attributes
+    ----------
+    mode : str
+    dense : bool
+    state_dim : int
+        Largest state: ``6 + 3 n`` with n the landmarks in the joint state (SLAM), else 6.
+    frames : int
+    max_rows : int
+        Most observation rows of one update (3 per observation in SLAM, 4 in VIO).
+    peak_bytes : int
+        The largest matrices at once: in SLAM the covariance and the same-size product of its
+        update (``2 D^2 8`` bytes) and the (D, m) and (m, m) blocks of the update, in VIO the
+        innovation covariance and its factor.
+    seconds : float
+        See :data:`SECONDS_PER_ENTRY`.
+    """
+
+    mode: str
+    dense: bool
+    state_dim: int
+    frames: int
+    max_rows: int
+    peak_bytes: int
+    seconds: float
+
+    def over_limits(self, max_bytes=None, max_seconds=None):
+        """What exceeds the limits (default :data:`WORK_LIMIT_BYTES`, :data:`WORK_LIMIT_SECONDS`), as phrases.
+
+        Empty when the run is within them.
+        """
+        max_bytes = WORK_LIMIT_BYTES if max_bytes is None else max_bytes
+        max_seconds = WORK_LIMIT_SECONDS if max_seconds is None else max_seconds
+        over = []
+        if self.peak_bytes > max_bytes:
+            over.append(f"{format_bytes(self.peak_bytes)} of memory (limit {format_bytes(max_bytes)})")
+        if self.seconds > max_seconds:
+            over.append(f"about {_duration(self.seconds)} (limit {_duration(max_seconds)})")
+        return over
+
+    def summary(self):
+        """One line: the largest state and update, memory and time."""
+        what = f"{self.mode}{' (dense)' if self.dense else ''}"
+        return (f"{what}: states up to {self.state_dim} dimensions, updates up to {self.max_rows} rows: about "
+                f"{format_bytes(self.peak_bytes)} of memory and {_duration(self.seconds)} for {self.frames} frames "
+                "(estimate)")
+
+
+def estimate_work(dataset, mode=SLAM, config=None, dense=False):
+    """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
+
+    The dense filter carries every (strided) landmark; the active set those whose track
+    spans the frame; both update with 3 rows per observation. VIO solves one 4-row block
+    per observation; mapping and dead reckoning work in 3x3 and 6x6 blocks (cheap).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    mode : str
+    config : visla_edu.filters.FilterConfig, optional
+        Its ``landmark_stride`` decides the landmarks used.
+    dense : bool
+
+    Returns
+    -------
+    WorkEstimate
+    """
+    config = config or FilterConfig()
+    T = max(1, dataset.num_frames)
+    in_stride = dataset.obs_ids % config.landmark_stride == 0
+    per_frame = np.bincount(dataset.observation_frames()[in_stride], minlength=T).astype(float)
+    if mode == SLAM:
+        landmarks = _landmarks_in_state(dataset, config.landmark_stride, dense)
+        D, m = 6 + 3 * landmarks, 3 * per_frame
+        seconds = np.sum(D * D * (SECONDS_PER_ENTRY + SECONDS_PER_ENTRY_ROW * m) + SECONDS_PER_ROW_CUBED * m**3)
+        peak = 16 * float(D.max()) ** 2 + 24 * float(np.max(D * m)) + 24 * float(m.max()) ** 2
+    elif mode == VIO:
+        D, m = np.full(T, 6.0), 4 * per_frame
+        seconds = np.sum(SECONDS_PER_ROW_CUBED * m**3 + SECONDS_PER_ROW_SQUARED * m**2)
+        peak = 24 * float(m.max()) ** 2
+    else:
+        D, m = np.full(T, 6.0), 3 * per_frame
+        seconds, peak = float(np.sum(SECONDS_PER_ROW_SQUARED * m)), 8 * 64 * float(m.max())
+    return WorkEstimate(mode=mode, dense=dense, state_dim=int(D.max()), frames=T, max_rows=int(m.max()),
+                        peak_bytes=int(peak), seconds=float(seconds) + SECONDS_PER_FRAME * T)
+
+
+def _landmarks_in_state(dataset, stride, dense):
+    """Landmarks in the joint state at each frame (T,): every strided one (dense), else those being tracked."""
+    T = max(1, dataset.num_frames)
+    if dense:
+        return np.full(T, float(len(range(0, dataset.num_landmarks, stride))))
+    spans = dataset.track_spans()[::stride]
+    spans = spans[spans[:, 0] >= 0]
+    change = np.zeros(T + 1)
+    np.add.at(change, spans[:, 0], 1)
+    np.add.at(change, spans[:, 1] + 1, -1)
+    return np.cumsum(change[:T])
+
+
+def divergence_hint(dataset, config, frame=None):
+    """The likely cause of a filter failure at ``frame``, as one sentence.
+
+    Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`:
+    calibration, time stamps, velocities), else the step into ``frame`` and the settings.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig
+    frame : int, optional
+
+    Returns
+    -------
+    str
+    """
+    problems = data.dataset_problems(dataset)
+    if problems:
+        return "likely cause: " + problems[0]
+    where = ""
+    if frame is not None and 0 < frame < dataset.num_frames:
+        twist = motion.select_twists(dataset.twists, config.imu_lag)[frame - 1]
+        speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
+        where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
+                 f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
+    return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
+            f"velocity noise {config.sigma_linear_velocity:g} m/s and {config.sigma_angular_velocity:g} rad/s) "
+            "and the calibration (visla-edu info shows the diagnostics)")
+
+
+def _duration(seconds):
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"

@@ -21,17 +21,20 @@ Every problem with a file is a one-line ``FileNotFoundError`` or ``ValueError`` 
 file, the line and the value.
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
 
-from visla_edu._files import atomic_write
+from visla_edu._files import atomic_write, file_kind, format_bytes
 
 __all__ = ["FORMATS", "ORTHONORMAL_TOL", "trajectory_format", "read_table", "read_kitti", "write_kitti", "read_tum",
            "write_tum", "read_trajectory", "write_trajectory"]
 
 #: File suffix -> format name.
 FORMATS = {".kitti": "kitti", ".txt": "kitti", ".tum": "tum"}
+#: Largest trajectory or times file read (a million frames of TUM rows take about 200 MB).
+MAX_TEXT_BYTES = 512 * 2**20
 #: Largest ``|R^T R - I|`` entry (and ``| |q| - 1 |`` of a TUM quaternion) a read pose may have.
 ORTHONORMAL_TOL = 1e-3
 
@@ -84,14 +87,15 @@ def read_table(path, allowed_columns, what):
     Raises
     ------
     FileNotFoundError
-        No such file.
+        No such file (or a folder).
+    PermissionError
+        Not readable.
     ValueError
-        Empty, not text, a row with another column count, a value that is not a finite number.
+        A FIFO or device, larger than :data:`MAX_TEXT_BYTES`, empty, not text, a row with
+        another column count, a value that is not a finite number.
     """
     path = Path(path).expanduser()
-    if not path.is_file():
-        where = "is a folder, not a file" if path.is_dir() else "not found"
-        raise FileNotFoundError(f"{path}: {what} file {where}")
+    _check_text_file(path, what)
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
     except UnicodeDecodeError:
@@ -109,6 +113,21 @@ def read_table(path, allowed_columns, what):
                 expected = " or ".join(map(str, allowed_columns))
             raise ValueError(f"{path}: line {line_no} has {len(tokens)} numbers, expected {expected} ({what})")
     return _parse_numbers(path, numbered), np.array([n for n, _ in numbered])
+
+
+def _check_text_file(path, what):
+    """A readable regular file of bounded size, else a one-line error (a FIFO would block a reader)."""
+    kind = file_kind(path)
+    if kind in ("missing", "a broken symbolic link", "a directory"):
+        where = {"missing": "not found", "a directory": "is a folder, not a file"}.get(kind, "is a broken symbolic link")
+        raise FileNotFoundError(f"{path}: {what} file {where}")
+    if kind != "a regular file":
+        raise ValueError(f"{path}: {what} file is {kind}, not a regular file; save it to a file on disk")
+    if not os.access(path, os.R_OK):
+        raise PermissionError(f"{path}: {what} file is not readable by this user (permission denied)")
+    if path.stat().st_size > MAX_TEXT_BYTES:
+        raise ValueError(f"{path}: {format_bytes(path.stat().st_size)}, more than the {format_bytes(MAX_TEXT_BYTES)} "
+                         f"of a trajectory of a million frames (expected {what}); nothing was read")
 
 
 def _parse_numbers(path, numbered):

@@ -35,15 +35,21 @@ KITTI odometry poses (``poses/NN.txt``, left-camera poses, 12 or 13 columns) and
 ``world_T_imu`` by :func:`load_ground_truth` / :func:`attach_ground_truth` (module
 ``_groundtruth``); a registered drive (``"0020"``) gets its own automatically.
 
-Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError``
-whose message names the file, the key, and the expected and actual shape or value.
+Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError`` (or,
+for a folder or an unreadable file, ``IsADirectoryError`` or ``PermissionError``) whose
+message names the file, the key, and the expected and actual shape or value. Besides the
+format, a file must be plausible: calibration, time stamps and velocities within the ranges
+of :mod:`~visla_edu.data._plausible` (each with its reason), and the declared array sizes
+bounded, checked from the headers before any data is read.
 
 Modules (private; everything public is re-exported here): ``_registry`` (data directory,
 names, known files), ``_format`` (the keys of the course formats and the checks of the small
 arrays), ``_features`` (the dense features streamed into the sparse layout), ``_npz`` (the
 one ``.npz`` reader: course files to Datasets, named arrays of any archive), ``_standin``
 (the dataset-10 stand-in), ``_load`` (:func:`load`), ``_save`` (:func:`save`), ``_summary``
-(:func:`summarize`, :func:`format_summary`), ``_groundtruth`` (KITTI ground truth).
+(:func:`summarize`, :func:`format_summary`), ``_groundtruth`` (KITTI ground truth), ``_zip`` (zip
+members and ``.npy`` headers, read before any data), ``_plausible`` (plausible ranges,
+:func:`dataset_problems`).
 """
 
 from visla_edu.data._format import (
@@ -64,7 +70,8 @@ from visla_edu.data._groundtruth import (
     load_ground_truth,
     read_kitti_times,
 )
-from visla_edu.data._load import load
+from visla_edu.data._load import input_files, load
+from visla_edu.data._plausible import calibration_problems, dataset_problems, magnitude
 from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir, ground_truth_files
 from visla_edu.data._save import save
 from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, standin_dataset10
@@ -85,6 +92,10 @@ __all__ = [
     "STANDIN_NUM_LANDMARKS",
     "data_dir",
     "load",
+    "input_files",
+    "dataset_problems",
+    "calibration_problems",
+    "magnitude",
     "save",
     "available",
     "repeated_frames",

@@ -2,57 +2,61 @@
 
 ``features`` is a dense ``(4, M, T)`` array of pixels ``[uL, vL, uR, vR]``, all four -1 where
 landmark m is not seen at frame t. Dataset 10's is 1.3 GB, of which about 1% is observations,
-so it is decoded in chunks of landmark rows straight from the zip member (never held whole),
-checked (finite, each observation complete) and collected into frame-major sparse arrays
-(:func:`visla_edu.dataset.frame_major_order`).
+so it is decoded in chunks straight from the zip member (never held whole), checked (finite,
+each observation complete) and collected into frame-major sparse arrays
+(:func:`visla_edu.dataset.frame_major_order`). An array stored in C order is decoded in
+chunks of landmark rows of one plane at a time; one stored in Fortran order (its bytes are
+those of a C-order ``(T, M, 4)`` array) in chunks of whole frames. Either way the memory is
+one chunk plus the observations.
 """
 
 import numpy as np
 
-from visla_edu.data._format import check_extras
 from visla_edu.dataset import frame_major_order
 
-__all__ = ["features_streamed", "features_in_memory"]
+__all__ = ["features_streamed", "features_in_memory", "MAX_OBSERVATIONS"]
 
 #: Bytes of the dense features decoded at a time (tests shrink it to exercise chunking).
 _CHUNK_BYTES = 8 * 2**20
+#: Most observations a file may hold: 50 times dataset 10's (about 400,000); the sparse
+#: arrays of this many take about 1.3 GB.
+MAX_OBSERVATIONS = 20_000_000
 _PLANES = ("uL", "vL", "uR", "vR")
 
 
-def features_streamed(fp, arrays, T, path):
+def features_streamed(fp, header, path):
     """Sparse features decoded chunk by chunk from an open ``.npy`` stream.
 
     Parameters
     ----------
     fp : file-like
-        The ``features`` member of the archive, opened for reading at its start.
-    arrays : dict
-        The file's other (already checked) arrays; their ground-truth keys are checked
-        against M here.
-    T : int
-        Number of frames (from ``time_stamps``).
+        The ``features`` member of the archive, positioned at the start of its array data
+        (after the ``.npy`` header).
+    header : visla_edu.data._zip.NpyHeader
+        Its header, already checked: shape ``(4, M, T)``, a float or signed integer dtype.
     path : pathlib.Path
         The file, for messages.
 
     Returns
     -------
-    tuple or None
-        ``(frame_ptr (T+1,), obs_ids (N,), obs_z (N, 4), M)``, or None when the array is in
-        Fortran order or an unusual ``.npy`` version (then use :func:`features_in_memory`).
+    tuple
+        ``(frame_ptr (T+1,), obs_ids (N,), obs_z (N, 4))``.
     """
-    header = _read_npy_header(fp, path)
-    if header is None or header[1]:
-        return None
-    M = _check_features_header(header[0], header[2], T, path)
-    check_extras(arrays, T, M, path)
+    _, M, T = header.shape
+    if header.fortran_order:
+        chunks = _stream_frame_chunks(fp, header.dtype, M, T, path)
+        collect = _collect_frame_blocks
+    else:
+        chunks = _stream_chunks(fp, header.dtype, M, T, path)
+        collect = _collect_observations
     try:
-        sparse = _collect_observations(_stream_chunks(fp, header[2], M, T, path), T, path)
+        sparse = collect(chunks, T, path)
     except ValueError:
         _drain(fp)  # a damaged archive shows only at the end (CRC): report that instead
         raise
     if fp.read(1):
-        raise ValueError(f"{path}: key 'features' has extra bytes after its {header[0]} array data")
-    return sparse + (M,)
+        raise ValueError(f"{path}: key 'features' has extra bytes after its {header.shape} array data")
+    return sparse
 
 
 def _drain(fp, block=2**22):
@@ -61,38 +65,14 @@ def _drain(fp, block=2**22):
         pass
 
 
-
-def features_in_memory(dense, arrays, T, path):
+def features_in_memory(dense, path):
     """Like :func:`features_streamed` for the whole dense array ``(4, M, T)`` already read."""
-    M = _check_features_header(dense.shape, dense.dtype, T, path)
-    check_extras(arrays, T, M, path)
-    return _collect_observations(_array_chunks(dense, M, T), T, path) + (M,)
+    _, M, T = dense.shape
+    return _collect_observations(_array_chunks(dense, M, T), T, path)
 
 
-def _read_npy_header(fp, path):
-    """``(shape, fortran_order, dtype)`` of an ``.npy`` stream, or None for versions 3+."""
-    try:
-        version = np.lib.format.read_magic(fp)
-        if version == (1, 0):
-            return np.lib.format.read_array_header_1_0(fp)
-        if version == (2, 0):
-            return np.lib.format.read_array_header_2_0(fp)
-        return None
-    except (ValueError, TypeError, EOFError, OSError, UnicodeError) as exc:
-        raise ValueError(f"{path}: key 'features' is not a readable numpy array ({exc})") from None
-
-
-def _check_features_header(shape, dtype, T, path):
-    """Check the shape and dtype of ``features``; return M."""
-    if len(shape) != 3 or shape[0] != 4 or shape[2] != T:
-        raise ValueError(f"{path}: key 'features' expected shape (4, M, T) with T = {T} from time_stamps, got {shape}")
-    if dtype.kind not in "fiu":
-        raise ValueError(f"{path}: key 'features' must hold real numbers, got dtype {dtype}")
-    return shape[1]
-
-
-def _rows_per_chunk(T, itemsize):
-    return max(1, _CHUNK_BYTES // max(1, T * itemsize))
+def _rows_per_chunk(row_items, itemsize):
+    return max(1, _CHUNK_BYTES // max(1, row_items * itemsize))
 
 
 def _stream_chunks(fp, dtype, M, T, path):
@@ -103,6 +83,15 @@ def _stream_chunks(fp, dtype, M, T, path):
             rows = min(step, M - first)
             raw = _read_exact(fp, rows * T * dtype.itemsize, path)
             yield plane, first, np.frombuffer(raw, dtype=dtype).reshape(rows, T)
+
+
+def _stream_frame_chunks(fp, dtype, M, T, path):
+    """Fortran order: yield ``(first_frame, block)`` with block (frames, M, 4) = ``features[:, :, frames]`` moved."""
+    step = _rows_per_chunk(4 * M, dtype.itemsize)
+    for first in range(0, T, step):
+        frames = min(step, T - first)
+        raw = _read_exact(fp, frames * M * 4 * dtype.itemsize, path)
+        yield first, np.frombuffer(raw, dtype=dtype).reshape(frames, M, 4)
 
 
 def _array_chunks(features, M, T):
@@ -136,6 +125,7 @@ def _collect_observations(chunks, T, path):
         if plane == 0:
             rows, frames = np.nonzero(block != -1)
             found.append((rows + first, frames, block[rows, frames]))
+            _check_count(sum(len(f[0]) for f in found), path)
             continue
         if z is None:
             ids, frames, z = _start_observations(found)
@@ -149,6 +139,36 @@ def _collect_observations(chunks, T, path):
     return frame_ptr, ids[order], z[order]
 
 
+def _collect_frame_blocks(chunks, T, path):
+    """Like :func:`_collect_observations` for Fortran-order blocks ``(first_frame, (frames, M, 4))``."""
+    ids, frames, values = [], [], []
+    for first, block in chunks:
+        for plane in range(4):
+            _check_finite_block(block[:, :, plane].T, plane, 0, path, first_frame=first)
+        observed = block[:, :, 0] != -1
+        for plane in range(1, 4):
+            unobserved = block[:, :, plane] == -1
+            if np.any(unobserved == observed):
+                t, m = (int(i) for i in np.argwhere(unobserved == observed)[0])
+                raise ValueError(_partial_message(path, plane, m, first + t, block[t, m, plane], observed[t, m]))
+        t, m = np.nonzero(observed)
+        _check_count(sum(len(i) for i in ids) + len(m), path)
+        ids.append(m)
+        frames.append(t + first)
+        values.append(block[t, m].astype(float))
+    ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, dtype=np.int64)
+    frames = np.concatenate(frames).astype(np.int64) if frames else np.zeros(0, dtype=np.int64)
+    z = np.concatenate(values) if values else np.zeros((0, 4))
+    order, frame_ptr = frame_major_order(ids, frames, T)
+    return frame_ptr, ids[order], z[order]
+
+
+def _check_count(count, path):
+    if count > MAX_OBSERVATIONS:
+        raise ValueError(f"{path}: key 'features' holds more than {MAX_OBSERVATIONS} observations (entries other than "
+                         "-1), fifty times the largest course file; is 'not observed' marked with -1?")
+
+
 def _start_observations(found):
     """Concatenate plane-0 findings: landmark ids (sorted), frames, and z with uL filled."""
     ids = np.concatenate([f[0] for f in found]) if found else np.zeros(0, dtype=np.int64)
@@ -158,13 +178,15 @@ def _start_observations(found):
     return ids.astype(np.int64), frames.astype(np.int64), z
 
 
-def _check_finite_block(block, plane, first, path):
+def _check_finite_block(block, plane, first, path, first_frame=0):
+    """No NaN or inf in ``block`` = ``features[plane, first:first + rows, first_frame:...]``."""
     bad = ~np.isfinite(block)
     if bad.any():
         row, frame = (int(i) for i in np.argwhere(bad)[0])
+        landmark, frame_index = first + row, first_frame + frame
         raise ValueError(
             f"{path}: key 'features' has a non-finite value {block[row, frame]} at index "
-            f"({plane}, {first + row}, {frame}) ({_PLANES[plane]} of landmark {first + row} at frame {frame})"
+            f"({plane}, {landmark}, {frame_index}) ({_PLANES[plane]} of landmark {landmark} at frame {frame_index})"
         )
 
 
@@ -175,10 +197,13 @@ def _check_complete(block, plane, first, ids, frames, values, path):
     observed = np.zeros(block.shape, dtype=bool)
     observed[ids - first, frames] = True
     row, frame = (int(i) for i in np.argwhere((block == -1) == observed)[0])
-    landmark = first + row
-    state = "observed (uL != -1)" if observed[row, frame] else "not observed (uL = -1)"
-    raise ValueError(
+    raise ValueError(_partial_message(path, plane, first + row, frame, block[row, frame], observed[row, frame]))
+
+
+def _partial_message(path, plane, landmark, frame, value, observed):
+    state = "observed (uL != -1)" if observed else "not observed (uL = -1)"
+    return (
         f"{path}: key 'features': landmark {landmark} at frame {frame} is partly observed: it is {state} "
-        f"but {_PLANES[plane]} = features[{plane}, {landmark}, {frame}] = {block[row, frame]}; "
+        f"but {_PLANES[plane]} = features[{plane}, {landmark}, {frame}] = {value}; "
         f"all four of [uL, vL, uR, vR] must be -1 (not observed) or none of them"
     )

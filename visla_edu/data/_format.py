@@ -5,9 +5,22 @@ Both course formats store ``time_stamps`` (1, T), ``features`` (4, M, T), ``line
 ``imu_T_cam`` (4, 4), the 2019/2020 format ``rotational_velocity`` (3, T) and ``cam_T_imu``
 (4, 4). Files written by :func:`~visla_edu.data.save` may add ground truth and a name and label.
 Every check raises ``ValueError`` naming the file, the key, and the expected and actual value.
+
+The checks come in two passes. :func:`check_course_headers` runs on the ``.npy`` headers
+alone (:class:`~visla_edu.data._zip.NpyHeader`: dtype and shape, before any data is read) and
+bounds what reading the file will cost: at most :data:`MAX_FRAMES` frames and
+:data:`MAX_FEATURES_BYTES` of dense features. :func:`check_course_arrays` then checks the values
+of the small arrays, including their plausibility (:mod:`visla_edu.data._plausible`).
 """
 
 import numpy as np
+
+from visla_edu.data._plausible import (
+    check_calibration,
+    check_time_stamps,
+    check_velocities,
+)
+from visla_edu._files import format_bytes
 
 __all__ = [
     "FORMAT_2021",
@@ -17,7 +30,11 @@ __all__ = [
     "GROUND_TRUTH_KEYS",
     "TEXT_KEYS",
     "RIGID_TOL",
+    "MAX_FRAMES",
+    "MAX_FEATURES_BYTES",
+    "check_course_headers",
     "check_course_arrays",
+    "check_features_header",
     "check_numeric",
     "check_shape",
     "check_finite",
@@ -53,10 +70,47 @@ GROUND_TRUTH_KEYS = (
 TEXT_KEYS = ("name", "label")
 #: Tolerance on ``R^T R = I`` for the camera extrinsics.
 RIGID_TOL = 1e-6
+#: Most frames a course file may have: 28 hours at 10 Hz. Every per-frame array (and the
+#: filter's per-frame results, about 400 bytes a frame) is bounded by it before it is read.
+MAX_FRAMES = 1_000_000
+#: Largest dense ``features`` array read (4 GiB, three times dataset 10's 1.3 GB). It is
+#: streamed in chunks, so this bounds the time of a load (about 25 s), not its memory.
+MAX_FEATURES_BYTES = 4 * 2**30
+#: Longest ``name``/``label`` string (characters).
+_MAX_TEXT = 10_000
+
+
+def check_course_headers(headers, fmt, path):
+    """Check the dtype and shape of every key from its ``.npy`` header, before reading any data.
+
+    Parameters
+    ----------
+    headers : dict of str to NpyHeader
+        Every key of the file (anything with ``shape``, ``ndim`` and ``dtype`` works).
+    fmt : str
+        :data:`FORMAT_2021` or :data:`FORMAT_2019`.
+    path : pathlib.Path
+
+    Returns
+    -------
+    T, M : int
+        Frames and landmarks.
+    """
+    velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
+    for key in ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key):
+        check_numeric(headers[key], key, path)
+    T = _frame_count(headers["time_stamps"], path)
+    for key in ("linear_velocity", velocity_key):
+        check_shape(headers[key], (3, T), key, path, T)
+    for key, shape in (("K", (3, 3)), ("b", ()), (pose_key, (4, 4))):
+        check_shape(headers[key], shape, key, path)
+    M = check_features_header(headers["features"], T, path)
+    _check_extras_layout(headers, T, M, path)
+    return T, M
 
 
 def check_course_arrays(arrays, fmt, path):
-    """Check dtypes, shapes, finiteness and meaning of the non-feature keys; return T."""
+    """Check dtypes, shapes, finiteness, meaning and plausibility of the non-feature keys; return T."""
     velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
     keys = ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key)
     for key in keys:
@@ -69,10 +123,36 @@ def check_course_arrays(arrays, fmt, path):
     for key in keys:
         check_finite(arrays[key], key, path)
     check_increasing(arrays["time_stamps"][0], path)
+    check_time_stamps(arrays["time_stamps"][0], path)
+    check_velocities(arrays["linear_velocity"], arrays[velocity_key], ("linear_velocity", velocity_key), path)
     check_intrinsics(arrays["K"], path)
     check_baseline(arrays["b"], path)
     check_rigid(arrays[pose_key], pose_key, path)
+    check_calibration(arrays["K"], float(arrays["b"]), path, arrays[pose_key], pose_key)
     return T
+
+
+def check_features_header(header, T, path):
+    """Shape ``(4, M, T)``, a dtype that can hold -1 and pixels, and a bounded size; return M."""
+    shape, dtype = header.shape, header.dtype
+    if len(shape) != 3 or shape[0] != 4 or shape[2] != T:
+        swapped = len(shape) == 3 and shape[0] == 4 and shape[1] == T
+        hint = (f"; its landmark and frame axes look swapped ((4, T, M) = {shape}): store it as (4, M, T), "
+                "e.g. features.transpose(0, 2, 1)") if swapped else ""
+        raise ValueError(f"{path}: key 'features' expected shape (4, M, T) with T = {T} from time_stamps, "
+                         f"got {shape}{hint}")
+    if dtype.kind in "ub":
+        raise ValueError(f"{path}: key 'features' has dtype {dtype}, which cannot hold -1, the course's marker "
+                         "for 'not observed' (every entry would count as an observation); store the features "
+                         "as float (or signed integer) pixels")
+    if dtype.kind not in "fi":
+        raise ValueError(f"{path}: key 'features' must hold real numbers, got dtype {dtype}")
+    if header.nbytes > MAX_FEATURES_BYTES:
+        raise ValueError(f"{path}: key 'features' declares a {shape} {dtype} array of "
+                         f"{format_bytes(header.nbytes)}, more than the {format_bytes(MAX_FEATURES_BYTES)} "
+                         "visla-edu reads (three times the largest course file); nothing was read. "
+                         "Is the header damaged, or M or T wrong?")
+    return shape[1]
 
 
 def check_numeric(arr, key, path, kinds="fiu"):
@@ -83,9 +163,13 @@ def check_numeric(arr, key, path, kinds="fiu"):
 
 
 def _frame_count(time_stamps, path):
-    """T of ``time_stamps``, which must have shape (1, T) with T >= 1."""
+    """T of ``time_stamps``, which must have shape (1, T) with 1 <= T <= MAX_FRAMES."""
     if time_stamps.ndim != 2 or time_stamps.shape[0] != 1 or time_stamps.shape[1] < 1:
         raise ValueError(f"{path}: key 'time_stamps' expected shape (1, T) with T >= 1, got {time_stamps.shape}")
+    if time_stamps.shape[1] > MAX_FRAMES:
+        raise ValueError(f"{path}: key 'time_stamps' declares T = {time_stamps.shape[1]} frames, more than the "
+                         f"{MAX_FRAMES} visla-edu reads (28 hours at 10 Hz); nothing was read. "
+                         "Is the header damaged? Split a longer drive into parts.")
     return time_stamps.shape[1]
 
 
@@ -111,12 +195,16 @@ def check_increasing(stamps, path):
         i = int(bad[0])
         raise ValueError(
             f"{path}: key 'time_stamps' must be strictly increasing, but time_stamps[0, {i + 1}] = "
-            f"{stamps[i + 1]!r} is not after time_stamps[0, {i}] = {stamps[i]!r}"
+            f"{float(stamps[i + 1])!r} is not after time_stamps[0, {i}] = {float(stamps[i])!r}"
         )
 
 
 def check_intrinsics(K, path):
-    """``K`` (3, 3) is ``[[fsu, s, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths."""
+    """``K`` (3, 3) is ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths.
+
+    A skew ``K[0, 1] != 0`` is refused: the stereo model (:func:`visla_edu.camera.stereo_matrix`)
+    has none (rectified images have none), so it would be silently ignored.
+    """
     lower = K[np.tril_indices(3, -1)]
     if np.any(lower != 0) or K[2, 2] != 1:
         raise ValueError(
@@ -125,6 +213,11 @@ def check_intrinsics(K, path):
         )
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise ValueError(f"{path}: key 'K' needs positive focal lengths, got fsu = {K[0, 0]}, fsv = {K[1, 1]}")
+    if K[0, 1] != 0:
+        raise ValueError(
+            f"{path}: key 'K' has a skew K[0, 1] = {float(K[0, 1])!r}, but the stereo camera model has none "
+            "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]; rectified stereo images have zero skew), so it would "
+            "be ignored. Rectify the images, or set K[0, 1] = 0 if the skew is a rounding artefact")
 
 
 def check_baseline(b, path):
@@ -153,24 +246,32 @@ def check_rigid(T, key, path):
 
 
 def check_extras(arrays, T, M, path):
-    """Check the ground-truth keys (all or none; shapes from T and M) and the text keys.
+    """Check the ground-truth keys (all or none; shapes from T and M, finite) and the text keys.
 
     Both are written by :func:`~visla_edu.data.save`.
     """
-    present = [k for k in GROUND_TRUTH_KEYS if k in arrays]
+    _check_extras_layout(arrays, T, M, path)
+    for key in GROUND_TRUTH_KEYS:
+        if key in arrays:
+            check_finite(arrays[key], key, path)
+
+
+def _check_extras_layout(items, T, M, path):
+    """Dtypes and shapes of the ground-truth and text keys in ``items`` (arrays or headers)."""
+    present = [k for k in GROUND_TRUTH_KEYS if k in items]
     if present and len(present) < len(GROUND_TRUTH_KEYS):
-        missing = [k for k in GROUND_TRUTH_KEYS if k not in arrays]
+        missing = [k for k in GROUND_TRUTH_KEYS if k not in items]
         raise ValueError(f"{path}: has ground-truth key(s) {present} but is missing {missing}")
     if present:
         shapes = dict(zip(GROUND_TRUTH_KEYS, [(T, 4, 4), (M, 3), (T, 3), (T, 3), (M,)]))
         for key, shape in shapes.items():
-            check_numeric(arrays[key], key, path, kinds="b" if key.endswith("outlier") else "fiu")
-            check_shape(arrays[key], shape, key, path)
-            check_finite(arrays[key], key, path)
+            check_numeric(items[key], key, path, kinds="b" if key.endswith("outlier") else "fiu")
+            check_shape(items[key], shape, key, path)
     for key in TEXT_KEYS:
-        if key in arrays and (arrays[key].dtype.kind != "U" or arrays[key].shape != ()):
+        item = items.get(key)
+        if item is not None and (item.dtype.kind != "U" or item.shape != () or item.dtype.itemsize > 4 * _MAX_TEXT):
             raise ValueError(
-                f"{path}: key '{key}' must be a single string, got dtype {arrays[key].dtype} "
-                f"shape {arrays[key].shape}"
+                f"{path}: key '{key}' must be a single string of at most {_MAX_TEXT} characters, got dtype "
+                f"{item.dtype} shape {item.shape}"
             )
 

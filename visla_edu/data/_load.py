@@ -3,12 +3,13 @@
 import os
 from pathlib import Path
 
+from visla_edu._files import file_kind
 from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
-from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, resolve_dir
+from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, STANDIN_INPUTS, ground_truth_files, resolve_dir
 from visla_edu.data._standin import load_dataset10
 
-__all__ = ["load"]
+__all__ = ["load", "input_files"]
 
 
 def load(name_or_path, data_dir=None):
@@ -37,8 +38,11 @@ def load(name_or_path, data_dir=None):
     ------
     FileNotFoundError
         The file is not there (the message says where it looked).
+    IsADirectoryError, NotADirectoryError, PermissionError
+        The path is a folder, the data directory is not one, or the file is not readable.
     ValueError
-        The file is not a valid course file (the message names key, expected and actual).
+        The file is not a valid course file (the message names key, expected and actual), or
+        not a regular file (a FIFO, a device).
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
         return attach_registered_ground_truth(load_npz(_find_file(name_or_path, data_dir)))
@@ -48,12 +52,38 @@ def load(name_or_path, data_dir=None):
 
         return simulate.simulate_drive(preset=SIMULATED[name], seed=0)
     directory, how = resolve_dir(data_dir)
+    _check_data_dir(directory, how)
     if name == "10":
         return load_dataset10(directory, how)
     path = directory / f"{name}.npz"
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise FileNotFoundError(_not_found_message(f"{name}.npz", directory, how))
     return attach_registered_ground_truth(load_npz(path))
+
+
+def input_files(name_or_path, data_dir=None):
+    """The existing files :func:`load` would read for ``name_or_path`` (none for simulated drives).
+
+    Lets a caller refuse to write over an input before loading anything.
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
+    if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
+        given = Path(name_or_path).expanduser()
+        directory = resolve_dir(data_dir)[0]
+        candidates = [given] if given.is_absolute() else [given, directory / given]
+    elif isinstance(name_or_path, str) and name_or_path.strip() in COURSE_NAMES:
+        directory = resolve_dir(data_dir)[0]
+        name = name_or_path.strip()
+        candidates = [directory / f"{name}.npz"] + ([directory / f for f in STANDIN_INPUTS] if name == "10" else [])
+    else:
+        candidates = []
+    files = [c for c in candidates if c.exists()]
+    for npz in list(files):  # a registered drive's ground truth is read too
+        files.extend(f for f in ground_truth_files(npz.stem, npz.parent) or () if f is not None)
+    return files
 
 
 def _looks_like_path(value):
@@ -77,14 +107,22 @@ def _not_found_message(filename, directory, how):
     )
 
 
+def _check_data_dir(directory, how):
+    """The data directory, if it exists, must be a folder."""
+    kind = file_kind(directory)
+    if kind not in ("missing", "a directory"):
+        raise NotADirectoryError(f"the data directory {directory} (from {how}) is {kind}, not a folder; "
+                                 f"set {ENV_VAR} or --data-dir to the folder with the course files")
+
+
 def _find_file(path, data_dir):
-    """An existing file given as a path: as given, else relative to the data directory."""
+    """A path as given if anything is there, else relative to the data directory (load_npz checks its kind)."""
     given = Path(path).expanduser()
-    if given.is_file():
-        return given.resolve()
+    if os.path.lexists(given):
+        return given
     directory, how = resolve_dir(data_dir)
-    if not given.is_absolute() and (directory / given).is_file():
-        return (directory / given).resolve()
+    if not given.is_absolute() and os.path.lexists(directory / given):
+        return directory / given
     where = f"{given.resolve()}" if given.is_absolute() else f"{given.resolve()} nor in {directory} ({how})"
     raise FileNotFoundError(
         f"no data file {str(path)!r}: not found at {where}. "

@@ -6,18 +6,25 @@
 archive (the dataset-10 stand-in reads its IMU drive and calibration with it). Both read the
 zip members themselves (``allow_pickle=False``) so a damaged, truncated or foreign file is
 reported as a ``ValueError`` naming the file, never as a zipfile or numpy traceback.
+
+Reading goes in passes, each bounded before the next starts: the zip directory and every
+member's ``.npy`` header (:mod:`visla_edu.data._zip`: duplicates, declared sizes), the dtypes
+and shapes (:func:`~visla_edu.data._format.check_course_headers`: at most
+:data:`~visla_edu.data._format.MAX_FRAMES` frames and
+:data:`~visla_edu.data._format.MAX_FEATURES_BYTES` of features), the small arrays and their
+values and plausibility, then the features, streamed, and the checks that need the
+observations (:func:`~visla_edu.data._plausible.check_observations`,
+:func:`~visla_edu.data._plausible.check_track_layout`).
 """
 
 import hashlib
-import io
 import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 from visla_edu import lie
-from visla_edu.data._features import features_in_memory, features_streamed
+from visla_edu.data._features import features_streamed
 from visla_edu.data._format import (
     FORMAT_2019,
     FORMAT_2021,
@@ -25,14 +32,19 @@ from visla_edu.data._format import (
     GROUND_TRUTH_KEYS,
     TEXT_KEYS,
     check_course_arrays,
+    check_course_headers,
+    check_extras,
 )
+from visla_edu.data._plausible import check_observations, check_track_layout
 from visla_edu.data._registry import identify
+from visla_edu._files import check_input_file, format_bytes
+from visla_edu.data._zip import ZIP_ERRORS, member_infos, read_header, read_member
 from visla_edu.dataset import Dataset, GroundTruth
 
-__all__ = ["load_npz", "read_arrays", "file_sha256", "time_major"]
+__all__ = ["load_npz", "read_arrays", "file_sha256", "time_major", "MAX_ARRAY_BYTES"]
 
-#: Errors of ``zipfile`` and ``zlib`` that mean the archive is damaged.
-_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError)
+#: Largest member :func:`read_arrays` reads whole (it does not know the shapes to expect).
+MAX_ARRAY_BYTES = 2**30
 
 
 def load_npz(path):
@@ -51,15 +63,18 @@ def load_npz(path):
 
     Raises
     ------
+    FileNotFoundError, IsADirectoryError, PermissionError
+        No such file, a folder, or not readable (:func:`visla_edu._files.check_input_file`).
     ValueError
-        The file is not a valid course file (the message names key, expected and actual).
+        The file is not a valid course file (the message names key, expected and actual), or
+        it is a FIFO or device.
     """
-    path = Path(path).resolve()
+    path = check_input_file(path, "course file")
     sha = file_sha256(path)
     try:
         with zipfile.ZipFile(path) as zf:
             fmt, arrays, sparse = _read_course_members(zf, path)
-    except _ZIP_ERRORS as exc:
+    except ZIP_ERRORS as exc:
         raise ValueError(_corrupt_message(path, exc)) from None
     stored_name = str(arrays["name"]) if "name" in arrays else None
     stored_label = str(arrays["label"]) if "label" in arrays else None
@@ -84,22 +99,27 @@ def read_arrays(path, keys):
 
     Raises
     ------
-    FileNotFoundError
-        No such file.
+    FileNotFoundError, IsADirectoryError, PermissionError
+        No such file, a folder, or not readable (:func:`visla_edu._files.check_input_file`).
     ValueError
-        Not an ``.npz`` archive, damaged, a key missing, or a member not a plain numpy array.
+        Not an ``.npz`` archive, damaged, a key missing or twice, a member not a plain numpy
+        array, or one larger than :data:`MAX_ARRAY_BYTES`.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: file not found")
+    path = check_input_file(path)
     try:
         with zipfile.ZipFile(path) as zf:
-            members = _member_keys(zf)
+            members = member_infos(zf, path)
             missing = [k for k in keys if k not in members]
             if missing:
                 raise ValueError(f"{path}: missing key(s) {missing}; keys present: {sorted(members)}")
-            return {key: _read_member(zf, members[key], key, path) for key in keys}
-    except _ZIP_ERRORS as exc:
+            headers = {key: read_header(zf, members[key], key, path) for key in keys}
+            for key, header in headers.items():
+                if header.nbytes > MAX_ARRAY_BYTES:
+                    raise ValueError(f"{path}: key '{key}' declares a {header.shape} {header.dtype} array of "
+                                     f"{format_bytes(header.nbytes)}, more than the {format_bytes(MAX_ARRAY_BYTES)} "
+                                     "read whole; nothing was read")
+            return {key: read_member(zf, members[key], key, path) for key in keys}
+    except ZIP_ERRORS as exc:
         raise ValueError(_corrupt_message(path, exc)) from None
 
 
@@ -123,32 +143,24 @@ def _corrupt_message(path, exc):
 
 
 def _read_course_members(zf, path):
-    """Format, checked small arrays, and sparse features ``(frame_ptr, ids, z, M)``."""
-    members = _member_keys(zf)
+    """Format, checked small arrays, and sparse features ``(frame_ptr, ids, z, M)``.
+
+    Nothing is read before every header is checked; the features are read last, streamed.
+    """
+    members = member_infos(zf, path)
     fmt = _detect_format(members, path)
     _reject_unexpected(members, fmt, path)
-    arrays = {key: _read_member(zf, member, key, path) for key, member in members.items() if key != "features"}
-    T = check_course_arrays(arrays, fmt, path)
+    headers = {key: read_header(zf, info, key, path) for key, info in members.items()}
+    T, M = check_course_headers(headers, fmt, path)
+    arrays = {key: read_member(zf, info, key, path) for key, info in members.items() if key != "features"}
+    check_course_arrays(arrays, fmt, path)
+    check_extras(arrays, T, M, path)
     with zf.open(members["features"]) as fp:
-        sparse = features_streamed(fp, arrays, T, path)
-    if sparse is None:  # fortran order or an unusual .npy version: read it whole
-        dense = _read_member(zf, members["features"], "features", path)
-        sparse = features_in_memory(dense, arrays, T, path)
-    return fmt, arrays, sparse
-
-
-def _member_keys(zf):
-    """Key -> zip member name (``np.savez`` stores key ``k`` as ``k.npy``)."""
-    return {(n[:-4] if n.endswith(".npy") else n): n for n in zf.namelist() if not n.endswith("/")}
-
-
-def _read_member(zf, member, key, path):
-    """One whole member as an array (CRC-checked by ``zf.read``)."""
-    raw = zf.read(member)
-    try:
-        return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
-    except (ValueError, TypeError, EOFError, OSError, UnicodeError) as exc:
-        raise ValueError(f"{path}: key '{key}' is not a readable numpy array ({exc})") from None
+        fp.read(headers["features"].data_offset)
+        frame_ptr, obs_ids, obs_z = features_streamed(fp, headers["features"], path)
+    check_observations(arrays["K"], obs_z, path)
+    check_track_layout(frame_ptr, obs_ids, M, path)
+    return fmt, arrays, (frame_ptr, obs_ids, obs_z, M)
 
 
 def _detect_format(members, path):

@@ -1,10 +1,10 @@
 """Write a Dataset as a course file that :func:`~visla_edu.data.load` reads back exactly."""
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from visla_edu._files import atomic_write
 from visla_edu.data._format import GROUND_TRUTH_KEYS
 
 __all__ = ["save"]
@@ -20,8 +20,9 @@ def save(dataset, path):
     ----------
     dataset : Dataset
     path : str or os.PathLike
-        Target file; ``.npz`` is appended if missing. Written atomically (temporary
-        file, then rename). The dense features ``(4, M, T)`` are built in memory.
+        Target file; ``.npz`` is appended if missing. Written atomically
+        (:func:`visla_edu._files.atomic_write`: a kill mid-write leaves any previous file as it
+        was). The dense features ``(4, M, T)`` are built in memory.
 
     Returns
     -------
@@ -36,13 +37,8 @@ def save(dataset, path):
         arrays.update(_ground_truth_arrays(dataset.ground_truth))
     arrays["name"] = np.array(str(dataset.name))
     arrays["label"] = np.array(str(dataset.label))
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, **arrays)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    with atomic_write(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
     return path.resolve()
 
 

@@ -8,6 +8,8 @@ the same vehicle. Both input files are read with the package's one ``.npz`` read
 like course files. :func:`load_dataset10` is what ``load("10")`` does.
 """
 
+import os
+
 import numpy as np
 
 from visla_edu.data._format import (
@@ -20,6 +22,7 @@ from visla_edu.data._format import (
     check_shape,
 )
 from visla_edu.data._npz import load_npz, read_arrays, time_major
+from visla_edu.data._plausible import check_calibration, check_time_stamps, check_velocities
 from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, has_standin_inputs
 
 __all__ = ["STANDIN_LABEL", "STANDIN_NUM_LANDMARKS", "standin_dataset10", "load_dataset10"]
@@ -55,7 +58,7 @@ def load_dataset10(directory, how):
         Neither ``10.npz`` nor both stand-in inputs are in ``directory``.
     """
     full = directory / "10.npz"
-    if full.is_file():
+    if os.path.lexists(full):
         return load_npz(full)
     if has_standin_inputs(directory):
         return _standin_as_course_file(directory)
@@ -170,6 +173,8 @@ def _read_imu_drive(path):
         check_finite(arrays[key], key, path)
     stamps = np.array(stamps.reshape(T), dtype=float)
     check_increasing(stamps, path)
+    check_time_stamps(stamps, path)
+    check_velocities(arrays["linear_velocity"], arrays["angular_velocity"], _IMU_KEYS[1:], path)
     return stamps, time_major(arrays["linear_velocity"]), time_major(arrays["angular_velocity"])
 
 
@@ -186,6 +191,8 @@ def _read_calibration(path, need_extrinsic):
     check_intrinsics(arrays["K"], path)
     check_baseline(arrays["b"], path)
     if not need_extrinsic:
+        check_calibration(arrays["K"], float(arrays["b"]), path)
         return np.array(arrays["K"], dtype=float), float(arrays["b"]), None
     check_rigid(arrays["imu_T_cam"], "imu_T_cam", path)
+    check_calibration(arrays["K"], float(arrays["b"]), path, arrays["imu_T_cam"])
     return np.array(arrays["K"], dtype=float), float(arrays["b"]), np.array(arrays["imu_T_cam"], dtype=float)

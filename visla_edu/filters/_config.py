@@ -4,6 +4,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from visla_edu.filters._settings import check_settings, setting
+
 __all__ = ["FilterConfig"]
 
 
@@ -40,6 +42,12 @@ class FilterConfig:
       +0.83 after the ``flip_yz`` correction), hence ``extrinsic_correction="auto"``.
     * The time-alignment check prefers ``imu_lag=+1`` by only 0.2% (03) and 1% (0022) of
       the rotation residual: too weak to leave the course's convention ``u[t]`` for ``t->t+1``.
+
+    Each field declares what it accepts next to its default (:func:`visla_edu.filters._settings.setting`:
+    kind, plausible range and why, words such as ``"auto"``, None or not); the same
+    declaration checks values given in Python and parses ``visla-edu run --set NAME=VALUE``
+    strictly (:func:`visla_edu.filters._settings.parse_setting`). An out-of-range value is
+    refused with its range, never clipped.
 
     The three switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
     ``vio_refine_landmarks`` are the teaching comparisons of the modes that read them: the
@@ -79,7 +87,7 @@ class FilterConfig:
         Observations with non-positive disparity are never used.
     imu_lag : int
         Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
-        the step ``t -> t+1``: ``u[t + imu_lag]``.
+        the step ``t -> t+1``: ``u[t + imu_lag]``, -2 to 2.
     extrinsic_correction : str
         Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
@@ -106,38 +114,34 @@ class FilterConfig:
         textbook workaround for the dense filter's memory; 1 = every landmark).
     """
 
-    sigma_pixel: float = 1.5
-    sigma_linear_velocity: float = 0.5
-    sigma_angular_velocity: float = 0.05
-    landmark_prior_inflation: float = 1.0
-    landmark_prior_sigma: float = 0.1
-    initial_pose_sigma: float = 0.0
-    gate_probability: float = 0.999
-    min_init_disparity: float = 3.0
-    imu_lag: int = 0
-    extrinsic_correction: str = "auto"
-    landmark_cross_covariance: bool = True
-    mapping_motion_noise: bool = True
-    vio_refine_landmarks: bool = False
-    skip_repeated_frames: bool = True
-    landmark_stride: int = 1
+    sigma_pixel: float = setting(1.5, float, 1e-3, 100.0, unit="px",
+                                 why="no tracker locates a feature to a thousandth of a pixel; 100 px is no location")
+    sigma_linear_velocity: float = setting(0.5, float, 0.0, 50.0, unit="m/s",
+                                           why="0 trusts the velocities; 50 m/s (180 km/h) of noise is no measurement")
+    sigma_angular_velocity: float = setting(0.05, float, 0.0, 5.0, unit="rad/s",
+                                            why="5 rad/s of noise is almost a turn per second")
+    landmark_prior_inflation: float = setting(1.0, float, 0.0, 1000.0,
+                                              why="a factor on the triangulation's standard deviation")
+    landmark_prior_sigma: float = setting(0.1, float, 0.0, 1e4, low_open=True, unit="m",
+                                          why="a prior wider than 10 km says nothing")
+    initial_pose_sigma: float = setting(0.0, float, 0.0, 1e3, unit="m",
+                                        why="world is the first IMU frame, so 0 is exact")
+    gate_probability: float = setting(0.999, float, 0.0, 1.0, low_open=True,
+                                      why="a probability; 1 disables gating")
+    min_init_disparity: float = setting(3.0, float, 0.0, 1000.0, unit="px",
+                                        why="no image is wider than the range")
+    imu_lag: int = setting(0, int, -2, 2,
+                           why="which velocity sample near the step drives it; a larger shift is a broken file")
+    extrinsic_correction: str = setting("auto", str,
+                                        why="'auto', 'none' or a correction of visla_edu.diagnostics.CORRECTIONS")
+    landmark_cross_covariance: bool = setting(True, bool)
+    mapping_motion_noise: bool = setting(True, bool)
+    vio_refine_landmarks: bool = setting(False, bool)
+    skip_repeated_frames: bool = setting(True, bool)
+    landmark_stride: int = setting(1, int, 1, 1_000_000, why="1 uses every landmark")
 
     def __post_init__(self):
-        positive = ["sigma_pixel", "landmark_prior_sigma"]
-        non_negative = ["landmark_prior_inflation", "sigma_linear_velocity", "sigma_angular_velocity",
-                        "initial_pose_sigma", "min_init_disparity"]
-        for name in positive:
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
-                raise ValueError(f"FilterConfig.{name} must be a positive number, got {getattr(self, name)!r}")
-        for name in non_negative:
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise ValueError(f"FilterConfig.{name} must be >= 0, got {getattr(self, name)!r}")
-        if not 0 < self.gate_probability <= 1:
-            raise ValueError(f"FilterConfig.gate_probability must be in (0, 1], got {self.gate_probability!r}")
-        if int(self.landmark_stride) != self.landmark_stride or self.landmark_stride < 1:
-            raise ValueError(f"FilterConfig.landmark_stride must be a positive integer, got {self.landmark_stride!r}")
-        if int(self.imu_lag) != self.imu_lag:
-            raise ValueError(f"FilterConfig.imu_lag must be an integer, got {self.imu_lag!r}")
+        check_settings(self)
 
     @property
     def pixel_variance(self):

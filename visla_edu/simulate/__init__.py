@@ -38,8 +38,13 @@ How the tracks are made (all of it vectorised; a loop runs over track *age*, not
    observations lose their farthest ones (a track keeps its longest remaining run).
 4. Ids are assigned by first observation frame. Pixels are ``Ks pi(q)`` plus white
    noise on each of ``[uL, vL, uR, vR]`` (so ``vR`` equals ``vL`` plus noise: the pair is
-   rectified); a share of tracks are gross outliers, and a share of observations get a
-   non-positive disparity (noise on far points, topped up by forced ones).
+   rectified); a share of tracks are gross outliers (a constant offset, or uniformly random
+   pixels: ``outlier_kind``), and a share of observations get a non-positive disparity (noise
+   on far points, topped up by forced ones).
+
+Quirks of real files can be simulated too: velocities recorded one or more samples late
+(``imu_lag``, as on the KITTI raw drives), and a reported extrinsic that differs from the rig's
+(``reported_imu_T_cam``, e.g. dataset 3's flipped axes).
 
 Modules: ``_config`` (:class:`SimulationConfig`, presets, :func:`default_rig`), ``_motion``
 (the car's motion, IMU noise), ``_landmarks``, ``_tracks`` (the track model above),
@@ -49,7 +54,7 @@ Modules: ``_config`` (:class:`SimulationConfig`, presets, :func:`default_rig`), 
 from visla_edu.simulate._config import PRESETS, SimulationConfig, default_rig, make_config
 from visla_edu.simulate._drive import simulate_along_drive, simulate_drive
 from visla_edu.simulate._landmarks import place_landmarks
-from visla_edu.simulate._motion import add_imu_noise, simulate_motion
+from visla_edu.simulate._motion import add_imu_noise, lag_samples, simulate_motion
 from visla_edu.simulate._tracks import SimulatedTracks, simulate_tracks
 
 __all__ = [
@@ -60,6 +65,7 @@ __all__ = [
     "default_rig",
     "simulate_motion",
     "add_imu_noise",
+    "lag_samples",
     "place_landmarks",
     "simulate_tracks",
     "simulate_drive",

@@ -7,7 +7,10 @@ import numpy as np
 
 from visla_edu import lie
 
-__all__ = ["SimulationConfig", "PRESETS", "PRESET_NAMES", "make_config", "default_rig"]
+__all__ = ["SimulationConfig", "PRESETS", "PRESET_NAMES", "OUTLIER_KINDS", "make_config", "default_rig"]
+
+#: How an outlier track is made, see :attr:`SimulationConfig.outlier_kind`.
+OUTLIER_KINDS = ("offset", "uniform")
 
 
 @dataclass
@@ -43,8 +46,17 @@ class SimulationConfig:
         White noise added to the true velocities to give the measured IMU velocities.
     gyro_bias : (float, float, float)
         Constant bias added to the measured angular velocity.
+    imu_lag : int
+        The recorded velocity sample ``t + imu_lag`` is the one that moves frame ``t`` to
+        ``t + 1`` (as on the KITTI raw drives, where it is 1): the measured velocities are the
+        true ones shifted, ``measured[k] = true[k - imu_lag]`` (edge samples repeated), plus
+        noise. 0 is the course's convention.
     K, b, imu_T_cam : ndarray (3, 3), float, ndarray (4, 4), or None
         Calibration; None means :func:`default_rig` (stand-in: the calibration file).
+    reported_imu_T_cam : ndarray (4, 4) or None
+        The extrinsic the dataset *reports*, when it differs from the one the tracks were
+        simulated with (``imu_T_cam``), e.g. with flipped axes like course dataset 3's file;
+        the true one is kept in ``extra["simulated_imu_T_cam"]``. None: the true one.
     image_size : (int, int)
         Image width and height in pixels.
     num_landmarks : int
@@ -84,6 +96,12 @@ class SimulationConfig:
         Standard deviation of the pixel noise on each of ``[uL, vL, uR, vR]``.
     outlier_share : float
         Share of landmark tracks that are gross outliers.
+    outlier_kind : {"offset", "uniform"}
+        ``"offset"``: an outlier track is the true track shifted by a constant offset (see
+        ``outlier_offset_range``). ``"uniform"``: every observation of an outlier track is
+        random pixels, ``uL``, ``uR`` uniform in the image width with ``uL > uR``, ``vL``
+        uniform in its height, ``vR = vL`` plus pixel noise (a match that still passes the
+        rectified-stereo check).
     outlier_offset_range : (float, float)
         Size of an outlier's constant offset: both images (wrong feature), or the right
         image's u only (wrong stereo match), half of the outliers each.
@@ -109,9 +127,11 @@ class SimulationConfig:
     linear_velocity_sigma: float = 0.2
     angular_velocity_sigma: float = 0.02
     gyro_bias: tuple = (0.0, 0.0, 0.0)
+    imu_lag: int = 0
     K: object = None
     b: object = None
     imu_T_cam: object = None
+    reported_imu_T_cam: object = None
     image_size: tuple = (1400, 500)
     num_landmarks: int = 5000
     candidate_factor: float = 1.6
@@ -131,6 +151,7 @@ class SimulationConfig:
     max_observations_per_frame: int = 130
     pixel_sigma: float = 1.0
     outlier_share: float = 0.01
+    outlier_kind: str = "offset"
     outlier_offset_range: tuple = (20.0, 60.0)
     nonpositive_disparity_share: float = 0.01
 
@@ -151,6 +172,12 @@ class SimulationConfig:
         _require(self.max_observations_per_frame >= 1, "max_observations_per_frame",
                  self.max_observations_per_frame, ">= 1")
         _require(self.candidate_factor >= 1, "candidate_factor", self.candidate_factor, ">= 1")
+        _require(isinstance(self.imu_lag, (int, np.integer)) and abs(self.imu_lag) < self.num_frames,
+                 "imu_lag", self.imu_lag, "an integer smaller in size than num_frames")
+        _require(self.outlier_kind in OUTLIER_KINDS, "outlier_kind", self.outlier_kind, f"one of {OUTLIER_KINDS}")
+        _require(self.reported_imu_T_cam is None or np.shape(self.reported_imu_T_cam) == (4, 4),
+                 "reported_imu_T_cam", None if self.reported_imu_T_cam is None else np.shape(self.reported_imu_T_cam),
+                 "None or a (4, 4) pose (shape shown)")
         _require(0 < self.depth_range[0] < self.depth_range[1], "depth_range",
                  self.depth_range, "0 < near < far")
         for name in ("speed_range", "turn_angle_range", "turn_duration_range", "ahead_range",

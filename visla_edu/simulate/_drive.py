@@ -45,8 +45,12 @@ def _build(time_stamps, true_v, true_w, rig, config, rngs, **fields):
     meas_v, meas_w = add_imu_noise(true_v, true_w, config, rng_imu)
     truth = GroundTruth(world_T_imu=poses, landmarks=tracks.landmarks, linear_velocity=true_v,
                         angular_velocity=true_w, outlier=tracks.outlier)
+    reported = imu_T_cam
+    if config.reported_imu_T_cam is not None:  # the file's calibration differs from the rig's
+        reported = np.array(config.reported_imu_T_cam, dtype=float)
+        fields["extra"] = {**fields.get("extra", {}), "simulated_imu_T_cam": imu_T_cam}
     return Dataset(time_stamps=time_stamps, linear_velocity=meas_v, angular_velocity=meas_w,
-                   K=K, b=b, imu_T_cam=imu_T_cam, num_landmarks=len(tracks.landmarks),
+                   K=K, b=b, imu_T_cam=reported, num_landmarks=len(tracks.landmarks),
                    frame_ptr=tracks.frame_ptr, obs_ids=tracks.obs_ids, obs_z=tracks.obs_z,
                    ground_truth=truth, **fields)
 

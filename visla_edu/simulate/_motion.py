@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-__all__ = ["simulate_motion", "add_imu_noise"]
+__all__ = ["simulate_motion", "add_imu_noise", "lag_samples"]
 
 
 def _smooth_noise(rng, n, step, timescale):
@@ -79,13 +79,17 @@ def simulate_motion(config, rng):
     return t, linear, angular
 
 def add_imu_noise(linear_velocity, angular_velocity, config, rng):
-    """Measured IMU velocities: true + white noise (+ constant gyro bias).
+    """Measured IMU velocities: true, recorded with a lag, + white noise (+ constant gyro bias).
+
+    ``measured[k] = true[k - imu_lag] + noise`` (:func:`lag_samples`), so the sample
+    ``t + imu_lag`` is the one that moves frame ``t`` to ``t + 1``.
 
     Parameters
     ----------
     linear_velocity, angular_velocity : ndarray, shape (T, 3)
+        True velocities; the step ``t -> t+1`` uses sample ``t``.
     config : SimulationConfig
-        ``linear_velocity_sigma``, ``angular_velocity_sigma``, ``gyro_bias``.
+        ``linear_velocity_sigma``, ``angular_velocity_sigma``, ``gyro_bias``, ``imu_lag``.
     rng : numpy.random.Generator
 
     Returns
@@ -95,4 +99,15 @@ def add_imu_noise(linear_velocity, angular_velocity, config, rng):
     noise_v = config.linear_velocity_sigma * rng.standard_normal(np.shape(linear_velocity))
     noise_w = config.angular_velocity_sigma * rng.standard_normal(np.shape(angular_velocity))
     bias = np.asarray(config.gyro_bias, dtype=float).reshape(1, 3)
-    return linear_velocity + noise_v, angular_velocity + noise_w + bias
+    lag = config.imu_lag
+    return lag_samples(linear_velocity, lag) + noise_v, lag_samples(angular_velocity, lag) + noise_w + bias
+
+
+def lag_samples(samples, lag):
+    """Samples recorded ``lag`` steps late: ``out[k] = samples[clip(k - lag, 0, T - 1)]``, shape (T, ...).
+
+    The inverse of :func:`visla_edu.motion.select_twists` with the same ``lag`` (away from the ends).
+    """
+    samples = np.asarray(samples)
+    index = np.clip(np.arange(len(samples)) - int(lag), 0, len(samples) - 1)
+    return samples[index]

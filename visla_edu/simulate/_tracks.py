@@ -168,6 +168,14 @@ def _force_nonpositive_disparity(z, true_disparity, inlier, config, rng):
     z[chosen, 2] = z[chosen, 0] + rng.uniform(0.0, 1.0, len(chosen))
 
 
+def _uniform_pixels(count, config, rng):
+    """Random stereo pixels ``[uL, vL, uR, vR]`` in the image, ``uL > uR``, ``vR = vL`` + noise, (count, 4)."""
+    width, height = config.image_size
+    u = np.sort(rng.uniform(0.0, width, (count, 2)), axis=1)
+    v = rng.uniform(0.0, height, count)
+    return np.stack([u[:, 1], v, u[:, 0], v + config.pixel_sigma * rng.standard_normal(count)], axis=1)
+
+
 def _measure(q, ids, num_landmarks, Ks, config, rng):
     """Noisy pixels with outliers and non-positive disparities, shapes (N, 4), (M,)."""
     q_h = np.concatenate([q, np.ones((len(q), 1))], axis=1)
@@ -175,6 +183,9 @@ def _measure(q, ids, num_landmarks, Ks, config, rng):
     z = z_true + config.pixel_sigma * rng.standard_normal(z_true.shape)
     offsets, outlier = _outlier_offsets(num_landmarks, config, rng)
     z += offsets[ids]
+    if config.outlier_kind == "uniform":
+        hit = outlier[ids]
+        z[hit] = _uniform_pixels(int(hit.sum()), config, rng)
     _force_nonpositive_disparity(z, z_true[:, 0] - z_true[:, 2], ~outlier[ids], config, rng)
     return z, outlier
 

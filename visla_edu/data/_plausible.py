@@ -1,0 +1,319 @@
+"""Plausible ranges of a drive's calibration, time stamps and velocities, and why.
+
+A course file can be well formed (right keys, shapes, finite numbers) and still wrong: a
+focal length of 1e300 px, a baseline of 600 m (millimetres stored as metres), time stamps in
+nanoseconds, a gap of 1e6 s. The filter would run on it and produce inf/NaN covariances or a
+garbage map. These checks refuse such files at load time; each range is wide enough for any
+real rig and its message says what is plausible and what was probably meant.
+
+========================  ====================  ============================================
+quantity                  plausible             why
+========================  ====================  ============================================
+focal lengths fsu, fsv    4 .. 250,000 px       ``f = (W/2) / tan(FOV/2)`` for images 100 to
+                                                20,000 px wide and fields of view 5 to 170 deg
+fsv / fsu                 0.2 .. 5              pixels are close to square (1 on course rigs)
+principal point cu, cv    0 .. 20,000 px        inside an image at most 20,000 px wide, and
+                                                inside the region where features are seen
+off-axis angle of pixels  < 85 deg              a pinhole camera sees less than 170 deg
+observed pixels           >= -10 px             inside the image, give or take a tracker's
+                                                sub-pixel slack; not a 'missing' marker
+baseline b                0.005 .. 5 m          a phone's stereo pair to a rig across a truck
+extrinsic translation     <= 20 m               camera and IMU ride the same vehicle
+median frame step         2 ms .. 10 s          cameras run at 0.1 to 500 frames per second
+largest frame step        <= max(10 s, 100      dead reckoning carries one velocity sample
+                          median steps)         across a gap: 1e6 s at 10 m/s is 10,000 km
+speed                     <= 343 m/s            no vehicle carrying a stereo rig is supersonic
+angular rate              <= 35 rad/s           2000 deg/s, a MEMS gyro's full-scale range
+========================  ====================  ============================================
+
+Every check raises ``ValueError`` naming the file, the key, the value and the plausible range;
+:func:`dataset_problems` runs them on an in-memory Dataset and returns the messages (the
+filter driver refuses a dataset with :func:`calibration_problems`, which the filter would
+silently turn into a garbage map, and names the others when a run diverges).
+"""
+
+import numpy as np
+
+__all__ = [
+    "FOCAL_RANGE",
+    "ASPECT_RANGE",
+    "PRINCIPAL_POINT_RANGE",
+    "MAX_OFF_AXIS_DEG",
+    "BASELINE_RANGE",
+    "MAX_EXTRINSIC_TRANSLATION",
+    "FRAME_STEP_RANGE",
+    "MAX_GAP_SECONDS",
+    "MAX_GAP_STEPS",
+    "MAX_SPEED",
+    "MAX_ANGULAR_RATE",
+    "magnitude",
+    "check_time_stamps",
+    "check_velocities",
+    "check_calibration",
+    "check_observations",
+    "check_track_layout",
+    "calibration_problems",
+    "dataset_problems",
+]
+
+FOCAL_RANGE = (4.0, 2.5e5)  # px
+ASPECT_RANGE = (0.2, 5.0)  # fsv / fsu
+PRINCIPAL_POINT_RANGE = (0.0, 2e4)  # px
+MAX_OFF_AXIS_DEG = 85.0
+BASELINE_RANGE = (0.005, 5.0)  # m
+MAX_EXTRINSIC_TRANSLATION = 20.0  # m
+FRAME_STEP_RANGE = (2e-3, 10.0)  # s, the median step
+MAX_GAP_SECONDS = 10.0
+MAX_GAP_STEPS = 100
+MAX_SPEED = 343.0  # m/s
+MAX_ANGULAR_RATE = 35.0  # rad/s
+
+#: Pixels below this are outside any image (a tracker reports at most a pixel or so beyond the border).
+MIN_PIXEL = -10.0
+#: More identical ``[x, x, x, x]`` observations than this count and share are a 'missing' marker.
+_MARKER_MIN_COUNT, _MARKER_SHARE = 10, 0.01
+#: The principal point must lie in the box of the observed left pixels, widened by this
+#: share of its size on every side, once a file has at least this many observations.
+_BOX_MARGIN, _BOX_MIN_OBSERVATIONS = 0.25, 50
+#: A typical frame step (10 Hz), to choose between units that all give a plausible step.
+_TYPICAL_STEP = 0.1
+#: Units time stamps are sometimes stored in: factor to seconds, name, the fix.
+_TIME_UNITS = ((1e-3, "milliseconds", "/ 1e3"), (1e-6, "microseconds", "/ 1e6"), (1e-9, "nanoseconds", "/ 1e9"),
+               (60.0, "minutes", "* 60"), (3600.0, "hours", "* 3600"))
+
+
+def check_time_stamps(stamps, path):
+    """Seconds, at a camera's frame rate, without long gaps (``stamps`` (T,), increasing).
+
+    The median step must lie in :data:`FRAME_STEP_RANGE` (else the stamps are probably in
+    other units, and the message says which); no step may exceed ``max(MAX_GAP_SECONDS,
+    MAX_GAP_STEPS * median)``.
+    """
+    if len(stamps) < 2:
+        return
+    steps = np.diff(stamps)
+    median = float(np.median(steps))
+    low, high = FRAME_STEP_RANGE
+    if not low <= median <= high:
+        fits = [(unit, name, fix) for unit, name, fix in _TIME_UNITS if low <= median * unit <= high]
+        guess = min(fits, key=lambda f: abs(np.log10(median * f[0] / _TYPICAL_STEP)), default=None)
+        hint = (f"; they look like {guess[1]} ({median * guess[0]:.4g} s per frame): store seconds, "
+                f"time_stamps {guess[2]}") if guess else "; store the time stamps in seconds"
+        raise ValueError(f"{path}: key 'time_stamps': the median step between frames is {median:.6g}, but a camera "
+                         f"frame comes every {low:g} to {high:g} s{hint}")
+    limit = max(MAX_GAP_SECONDS, MAX_GAP_STEPS * median)
+    gaps = np.flatnonzero(steps > limit)
+    if gaps.size:
+        i = int(gaps[0])
+        raise ValueError(
+            f"{path}: key 'time_stamps' has a gap of {steps[i]:.6g} s between frames {i} and {i + 1} "
+            f"(time_stamps[0, {i}] = {float(stamps[i])!r}, time_stamps[0, {i + 1}] = {float(stamps[i + 1])!r}; "
+            f"the median step "
+            f"is {median:.4g} s, the most allowed {limit:.4g} s): dead reckoning would carry one velocity sample "
+            f"across it. Split the drive at frame {i + 1}, or fix the stamp")
+
+
+def check_velocities(linear, angular, keys, path):
+    """Speeds at most :data:`MAX_SPEED` and angular rates at most :data:`MAX_ANGULAR_RATE` (``(3, T)`` each)."""
+    for values, key, limit, unit, hint in (
+        (linear, keys[0], MAX_SPEED, "m/s", "the speed of sound; are they in km/h, mm/s or another unit?"),
+        (angular, keys[1], MAX_ANGULAR_RATE, "rad/s", "2000 deg/s, a gyro's full range; are they in deg/s?"),
+    ):
+        norms = magnitude(np.asarray(values, dtype=float).T)
+        bad = np.flatnonzero(norms > limit)
+        if bad.size:
+            t = int(bad[0])
+            raise ValueError(f"{path}: key '{key}' at frame {t} has magnitude {norms[t]:.6g} {unit}, more than "
+                             f"the plausible {limit:g} {unit} ({hint})")
+
+
+def magnitude(vectors):
+    """Euclidean norms of ``vectors`` (..., 3) without overflow (1e200 stays 1e200, not inf)."""
+    v = np.asarray(vectors, dtype=float)
+    return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
+
+
+def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
+    """Focal lengths, aspect, principal point, baseline and extrinsic translation in their plausible ranges.
+
+    ``K`` (3, 3) must already be ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal
+    lengths, ``b`` positive and ``pose`` (4, 4) rigid (see :mod:`visla_edu.data._format`);
+    without ``pose`` its translation is not checked. ``pose_key`` names it in messages.
+    """
+    fsu, fsv, cu, cv = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    for name, value in (("fsu = K[0, 0]", fsu), ("fsv = K[1, 1]", fsv)):
+        if not FOCAL_RANGE[0] <= value <= FOCAL_RANGE[1]:
+            raise ValueError(f"{path}: key 'K': focal length {name} = {value:.6g} px is implausible; a camera's "
+                             f"focal length is {FOCAL_RANGE[0]:g} to {FOCAL_RANGE[1]:g} px ((W/2) / tan(FOV/2) for "
+                             "images 100 to 20,000 px wide and fields of view 5 to 170 deg). Is it in mm or "
+                             "metres instead of pixels?")
+    if not ASPECT_RANGE[0] <= fsv / fsu <= ASPECT_RANGE[1]:
+        raise ValueError(f"{path}: key 'K': fsv / fsu = {fsv / fsu:.4g} is implausible (pixels are close to square: "
+                         f"{ASPECT_RANGE[0]:g} to {ASPECT_RANGE[1]:g}); are two entries of K swapped?")
+    for name, value in (("cu = K[0, 2]", cu), ("cv = K[1, 2]", cv)):
+        if not PRINCIPAL_POINT_RANGE[0] < value <= PRINCIPAL_POINT_RANGE[1]:
+            raise ValueError(f"{path}: key 'K': principal point {name} = {value:.6g} px is outside any image (it "
+                             f"lies near the image centre, between 0 and {PRINCIPAL_POINT_RANGE[1]:g} px)")
+    _check_length(b, BASELINE_RANGE, "b", "the stereo baseline", "(from a phone's stereo pair to a rig across a "
+                  "truck)", path)
+    if pose is None:
+        return
+    translation = float(magnitude(pose[:3, 3]))
+    _check_length(translation, (0.0, MAX_EXTRINSIC_TRANSLATION), pose_key, "the camera-IMU translation |t|",
+                  "(the camera and the IMU ride the same vehicle)", path)
+
+
+def _check_length(value, plausible, key, what, why, path):
+    low, high = plausible
+    if low <= value <= high:
+        return
+    mm = " It looks like millimetres: divide by 1000." if low <= value / 1000 <= high else ""
+    raise ValueError(f"{path}: key '{key}': {what} is {value:.6g} m, outside the plausible {low:g} to {high:g} m "
+                     f"{why}.{mm}")
+
+
+def check_observations(K, obs_z, path):
+    """The observed pixels fit the intrinsics: principal point among them, angles below :data:`MAX_OFF_AXIS_DEG`.
+
+    Parameters
+    ----------
+    K : ndarray, shape (3, 3)
+    obs_z : ndarray, shape (N, 4)
+        ``[uL, vL, uR, vR]`` of every observation.
+    path : pathlib.Path or str
+    """
+    if len(obs_z) == 0:
+        return
+    _check_marker(obs_z, path)
+    f = np.array([K[0, 0], K[1, 1]])
+    c = np.array([K[0, 2], K[1, 2]])
+    pixels = np.concatenate([obs_z[:, 0:2], obs_z[:, 2:4]])
+    low, high = pixels.min(axis=0), pixels.max(axis=0)
+    angle = np.degrees(np.arctan(np.max(np.abs(pixels - c), axis=0) / f))
+    for axis, name in enumerate(("u (cu, fsu)", "v (cv, fsv)")):
+        if angle[axis] > MAX_OFF_AXIS_DEG:
+            raise ValueError(
+                f"{path}: key 'K': observed pixels lie up to {np.max(np.abs(pixels[:, axis] - c[axis])):.6g} px "
+                f"from the principal point along {name}, {angle[axis]:.2f} deg off the optical axis with focal "
+                f"length {f[axis]:.6g} px; a camera sees less than {2 * MAX_OFF_AXIS_DEG:g} deg, so the focal "
+                "length is too small (another unit?) or the principal point is wrong")
+    if len(obs_z) < _BOX_MIN_OBSERVATIONS:
+        return
+    margin = _BOX_MARGIN * (high - low)
+    for axis, name in enumerate(("cu", "cv")):
+        if not low[axis] - margin[axis] <= c[axis] <= high[axis] + margin[axis]:
+            raise ValueError(
+                f"{path}: key 'K': the principal point {name} = {c[axis]:.6g} px lies outside the observed pixels "
+                f"({low[axis]:.6g} to {high[axis]:.6g} px, {len(obs_z)} observations); it should be near the "
+                "image centre. Are cu and cv swapped, or K from another camera?")
+
+
+def _check_marker(obs_z, path):
+    """Refuse pixels far left of or above the image, and a repeated ``[x, x, x, x]``: another 'missing' marker."""
+    low = obs_z.min(axis=0)
+    if np.any(low < MIN_PIXEL):
+        i, plane = (int(v) for v in np.argwhere(obs_z == low.min())[0])
+        raise ValueError(
+            f"{path}: key 'features': an observation has {('uL', 'vL', 'uR', 'vR')[plane]} = {low.min():.6g} px, far "
+            f"outside the image (pixels are >= 0; the course marks 'not observed' with -1 in all four). Is another "
+            "marker used for missing observations?")
+    same = obs_z[np.all(obs_z == obs_z[:, :1], axis=1), 0]
+    if len(same):
+        values, counts = np.unique(same, return_counts=True)
+        if counts.max() > max(_MARKER_MIN_COUNT, _MARKER_SHARE * len(obs_z)):
+            raise ValueError(
+                f"{path}: key 'features': {counts.max()} observations are [x, x, x, x] with x = "
+                f"{values[counts.argmax()]:.6g}, which looks like a marker for 'not observed' (a real stereo "
+                "observation has u != v); the course marks 'not observed' with -1 in all four")
+
+
+def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
+    """When M = T, refuse features whose landmark and frame axes are swapped, if the data says so.
+
+    The shape cannot tell ``(4, M, T)`` from ``(4, T, M)`` when M = T. The tracks can: a
+    feature tracker follows each landmark over one contiguous run of frames, so in the right
+    layout most landmarks' frames are contiguous. Swapped, each "landmark" is a frame and its
+    "frames" are the landmarks seen then, rarely contiguous, while each "frame" (a landmark)
+    is one contiguous run of ids. The file is refused when every frame's ids are contiguous
+    and more than half of the landmarks (seen at least twice) have gaps; otherwise it loads
+    (tracks with gaps are allowed).
+
+    Parameters
+    ----------
+    frame_ptr : ndarray of int, shape (T + 1,)
+    obs_ids : ndarray of int, shape (N,)
+        Frame-major (sorted by frame, then id).
+    num_landmarks : int
+    path : pathlib.Path or str
+    """
+    T = len(frame_ptr) - 1
+    if num_landmarks != T or len(obs_ids) == 0:
+        return
+    frames = np.repeat(np.arange(T), np.diff(frame_ptr))
+    per_frame = np.diff(frame_ptr)
+    seen = per_frame > 0
+    id_span = np.zeros(T, dtype=np.int64)
+    first = frame_ptr[:-1][seen]
+    id_span[seen] = obs_ids[frame_ptr[1:][seen] - 1] - obs_ids[first] + 1
+    frames_contiguous = np.all(id_span[seen] == per_frame[seen]) and np.any(per_frame > 1)
+    count = np.bincount(obs_ids, minlength=T)
+    lo = np.full(T, T)
+    hi = np.full(T, -1)
+    np.minimum.at(lo, obs_ids, frames)
+    np.maximum.at(hi, obs_ids, frames)
+    tracked = count > 1
+    gappy = int(np.sum(hi[tracked] - lo[tracked] + 1 != count[tracked]))
+    if frames_contiguous and gappy > 0.5 * max(1, int(tracked.sum())):
+        raise ValueError(
+            f"{path}: key 'features' looks transposed: M = T = {T}, and {gappy} of {int(tracked.sum())} landmarks "
+            "are seen in frames with gaps while every frame sees one contiguous run of landmark ids, the pattern "
+            "of a (4, T, M) array (a tracker follows a landmark over contiguous frames). Store it as (4, M, T), "
+            "e.g. features.transpose(0, 2, 1)")
+
+
+def calibration_problems(dataset):
+    """Messages of the calibration checks (:func:`check_calibration`) an in-memory Dataset fails.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+
+    Returns
+    -------
+    list of str
+        Empty when the calibration is plausible.
+    """
+    return _problems([lambda: check_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
+                                                np.asarray(dataset.imu_T_cam, dtype=float))])
+
+
+def dataset_problems(dataset):
+    """Messages of every plausibility check an in-memory Dataset fails (empty when none).
+
+    Calibration, time stamps, velocities and the observed pixels, as the loader checks a file.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+
+    Returns
+    -------
+    list of str
+    """
+    name = dataset.name
+    return calibration_problems(dataset) + _problems([
+        lambda: check_time_stamps(np.asarray(dataset.time_stamps, dtype=float), name),
+        lambda: check_velocities(np.asarray(dataset.linear_velocity).T, np.asarray(dataset.angular_velocity).T,
+                                 ("linear_velocity", "angular_velocity"), name),
+        lambda: check_observations(np.asarray(dataset.K, dtype=float), dataset.obs_z, name),
+    ])
+
+
+def _problems(checks):
+    problems = []
+    for check in checks:
+        try:
+            check()
+        except (ValueError, ArithmeticError) as err:
+            problems.append(str(err))
+    return problems

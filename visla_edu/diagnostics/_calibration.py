@@ -1,0 +1,349 @@
+"""One decision from the evidence: :func:`calibrate` and the :class:`Calibration` it returns.
+
+The rules (one setting for every drive, never per-drive tuning):
+
+* **Extrinsic correction**: the track-reprojection evidence must choose it (every other
+  correction worse with 95% confidence, :class:`~._tracks.TrackScorer`), and the visual
+  odometry's slopes, when it has enough pairs, must not contradict it (verdict
+  "disagrees"); otherwise the file's calibration is kept (``"none"``).
+* **IMU lag**: the track evidence among the lags -2..+2 with that correction; otherwise 0.
+  The odometry's rotation residuals per lag are reported alongside.
+* **Velocity noise**: white + hold noise per axis, with floors (:mod:`._noise`).
+* **Gyro bias and velocity scale**: reported with a standard error and a verdict, not applied.
+
+:func:`calibrate` keeps its result in ``dataset.extra`` and, with ``cache=True``, in the user
+cache folder (:mod:`visla_edu.cache`), keyed by a content hash of the dataset's arrays and
+:data:`CALIBRATION_VERSION`: a second run on the same data reuses it.
+"""
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from visla_edu import cache as user_cache
+from visla_edu.dataset import Dataset, repeated_frames
+from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
+from visla_edu.diagnostics._noise import imu_noise
+from visla_edu.diagnostics._report import calibration_report
+from visla_edu.diagnostics._tracks import TrackEvidence, TrackScorer
+from visla_edu.diagnostics._vo import (
+    CORRECTIONS,
+    DISAGREES,
+    LAGS,
+    check_extrinsics,
+    odometry_of,
+    time_alignment,
+    vo_pairs,
+)
+
+__all__ = ["CALIBRATION_VERSION", "CACHED_ARRAYS", "VoEvidence", "Calibration", "calibrate", "cache_path",
+           "outlier_indicators"]
+
+#: Bump whenever the diagnostics change what they compute: cached calibrations of older
+#: versions are then ignored.
+CALIBRATION_VERSION = 1
+#: The dataset arrays the cache key is computed from.
+CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
+                 "obs_ids", "obs_z")
+
+
+def _finite_or_none(x):
+    """A float, or None for NaN and infinity (JSON has neither)."""
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+@dataclass
+class VoEvidence:
+    """What the robust visual odometry says (JSON-safe: None where it has no value).
+
+    Attributes
+    ----------
+    frame_pairs, pairs : int
+        Consecutive frame pairs, and those usable (valid, at least 4 inliers).
+    stale_pairs, stale_points : int
+        Frame pairs with stale copies (points whose pixels repeat the previous frame's bit for
+        bit) and the number of such points.
+    slope_lag : int
+        Lag of the slopes below.
+    rotation_slope, translation_slope : dict
+        Correction -> slope of the odometry's motion on the IMU's (1 = agreement).
+    rotation_slope_error, translation_slope_error : float or None
+    extrinsic_verdict : dict
+        Correction -> "agrees", "disagrees" or "not enough evidence".
+    lag_residual : list
+        Median rotation disagreement (rad per frame) for each lag of ``LAGS``.
+    lag_best : int or None
+        Lag with the smallest residual (None with too few pairs).
+    gyro_bias, velocity_scale : dict
+        See :func:`~._motion.gyro_bias` and :func:`~._motion.velocity_scale` (at the chosen
+        correction and lag).
+    """
+
+    frame_pairs: int
+    pairs: int
+    stale_pairs: int
+    stale_points: int
+    slope_lag: int
+    rotation_slope: dict
+    translation_slope: dict
+    rotation_slope_error: object
+    translation_slope_error: object
+    extrinsic_verdict: dict
+    lag_residual: list
+    lag_best: object
+    gyro_bias: dict
+    velocity_scale: dict
+
+
+@dataclass
+class Calibration:
+    """What the filter will use, and why.
+
+    Attributes
+    ----------
+    extrinsic_correction : str
+        Key of :data:`CORRECTIONS` applied to the file's ``imu_T_cam``.
+    imu_T_cam : ndarray, shape (4, 4)
+        The calibration to use, ``CORRECTIONS[extrinsic_correction] @ dataset.imu_T_cam``.
+    imu_lag : int
+        The step ``t -> t+1`` uses the velocity sample ``u[t + imu_lag]``.
+    sigma_linear_velocity, sigma_angular_velocity : ndarray, shape (3,)
+        Velocity noise per axis (m/s, rad/s): ``sqrt(white^2 + hold^2)`` with floors.
+    white_noise, hold_noise : ndarray, shape (6,)
+        The two parts, linear axes first.
+    reasons : dict
+        ``"extrinsic_correction"`` and ``"imu_lag"`` -> one line of why.
+    tracks : TrackEvidence
+    vo : VoEvidence
+    repeated_frames : list of int
+        Frames repeating the previous frame exactly.
+    outliers : dict
+        :func:`outlier_indicators`.
+    seconds : float
+        Time the computation took.
+    source : str
+        ``"computed"`` or ``"cache <path>"``.
+    version : int
+        :data:`CALIBRATION_VERSION` of the code that computed it.
+    """
+
+    extrinsic_correction: str
+    imu_T_cam: np.ndarray
+    imu_lag: int
+    sigma_linear_velocity: np.ndarray
+    sigma_angular_velocity: np.ndarray
+    white_noise: np.ndarray
+    hold_noise: np.ndarray
+    reasons: dict
+    tracks: TrackEvidence
+    vo: VoEvidence
+    repeated_frames: list
+    outliers: dict
+    seconds: float = 0.0
+    source: str = "computed"
+    version: int = CALIBRATION_VERSION
+
+    _ARRAYS = {"imu_T_cam": (4, 4), "sigma_linear_velocity": (3,), "sigma_angular_velocity": (3,),
+               "white_noise": (6,), "hold_noise": (6,)}
+
+    def report(self, name=""):
+        """The readable evidence and decision (what ``visla-edu info`` prints), ending with
+        "the filter will use: ..."."""
+        return calibration_report(self, name)
+
+    def to_dict(self):
+        """JSON-safe dict (arrays as nested lists); :meth:`from_dict` inverts it."""
+        out = {key: value for key, value in asdict(self).items() if key not in ("tracks", "vo", "source")}
+        for key in self._ARRAYS:
+            out[key] = np.asarray(getattr(self, key), dtype=float).tolist()
+        out["tracks"] = self.tracks.to_dict()
+        out["vo"] = asdict(self.vo)
+        return out
+
+    @classmethod
+    def from_dict(cls, d, source="computed"):
+        """A :class:`Calibration` from :meth:`to_dict`'s output; ValueError if it is malformed."""
+        try:
+            fields = dict(d)
+            for key, shape in cls._ARRAYS.items():
+                fields[key] = np.array(fields[key], dtype=float)
+                if fields[key].shape != shape or not np.all(np.isfinite(fields[key])):
+                    raise ValueError(f"{key} must be finite with shape {shape}, got {fields[key].shape}")
+            fields["tracks"] = TrackEvidence.from_dict(fields["tracks"])
+            fields["vo"] = VoEvidence(**fields["vo"])
+            if fields["extrinsic_correction"] not in CORRECTIONS:
+                raise ValueError(f"unknown extrinsic_correction {fields['extrinsic_correction']!r}")
+            return cls(**fields, source=source)
+        except (KeyError, TypeError, AttributeError) as err:
+            raise ValueError(f"Calibration.from_dict: malformed calibration ({type(err).__name__}: {err})") from None
+
+
+def outlier_indicators(dataset, epipolar_px=3.0):
+    """Shares of observations that break the rectified stereo geometry.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    epipolar_px : float
+        An observation breaks the epipolar line when ``|vL - vR|`` exceeds this.
+
+    Returns
+    -------
+    dict
+        ``non_positive_disparity`` (uL - uR <= 0), ``epipolar`` (|vL - vR| > epipolar_px),
+        and ``vo_rejected`` (share of the tracked points of the valid odometry pairs that are
+        not inliers), each in [0, 1].
+    """
+    z = dataset.obs_z
+    n = max(len(z), 1)
+    vo = odometry_of(dataset)
+    tracked = int(vo.tracked[vo.valid].sum())
+    return {
+        "non_positive_disparity": float(np.sum(z[:, 0] - z[:, 2] <= 0) / n),
+        "epipolar": float(np.sum(np.abs(z[:, 1] - z[:, 3]) > epipolar_px) / n),
+        "vo_rejected": float(1 - vo.inliers[vo.valid].sum() / tracked) if tracked else 0.0,
+    }
+
+
+def _decide_correction(choice, check):
+    """The correction to use and why, from the track choice and the odometry's check."""
+    if choice.chosen is None:
+        return "none", f"kept the file's imu_T_cam ('none'): track reprojection, {choice.verdict}"
+    vo_says = check.verdict[choice.chosen]
+    if vo_says == DISAGREES:
+        return "none", (f"kept the file's imu_T_cam ('none'): track reprojection chooses {choice.chosen!r} "
+                        f"but the visual odometry disagrees with it")
+    what = "no correction" if choice.chosen == "none" else f"correction {choice.chosen!r}"
+    return choice.chosen, (f"{what}: every other correction has a larger track-reprojection error "
+                           f"with 95% confidence; visual odometry: {vo_says}")
+
+
+def _decide_lag(choice):
+    """The lag to use and why, from the track choice among the lags."""
+    if choice.chosen is None:
+        return 0, f"kept lag 0: track reprojection, {choice.verdict}"
+    return int(choice.chosen), "every other lag has a larger track-reprojection error with 95% confidence"
+
+
+def _vo_evidence(dataset, check, slope_lag, imu_T_cam, lag):
+    """Collect the odometry's evidence at the chosen calibration into a :class:`VoEvidence`."""
+    vo = odometry_of(dataset)
+    timing = time_alignment(dataset, imu_T_cam, LAGS)
+    return VoEvidence(
+        frame_pairs=len(vo.valid), pairs=int(vo_pairs(vo).sum()), stale_pairs=int(np.sum(vo.stale > 0)),
+        stale_points=int(vo.stale.sum()), slope_lag=int(slope_lag),
+        rotation_slope={k: _finite_or_none(v) for k, v in check.rotation_slope.items()},
+        translation_slope={k: _finite_or_none(v) for k, v in check.translation_slope.items()},
+        rotation_slope_error=_finite_or_none(check.rotation_slope_error),
+        translation_slope_error=_finite_or_none(check.translation_slope_error),
+        extrinsic_verdict=dict(check.verdict),
+        lag_residual=[_finite_or_none(timing["residual"][lag_]) for lag_ in LAGS], lag_best=timing["best"],
+        gyro_bias=gyro_bias(dataset, imu_T_cam, lag), velocity_scale=velocity_scale(dataset, imu_T_cam, lag))
+
+
+def _check_inputs(dataset):
+    """TypeError for a non-dataset, ValueError naming the first bad time stamp or velocity sample.
+
+    Pixels are checked by the odometry (:func:`visla_edu.odometry.visual_odometry`).
+    """
+    if not isinstance(dataset, Dataset):
+        raise TypeError(f"calibrate: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")
+    stamps = np.asarray(dataset.time_stamps, dtype=float).reshape(-1)
+    for name in ("linear_velocity", "angular_velocity"):
+        shape = np.shape(getattr(dataset, name))
+        if shape != (len(stamps), 3):
+            raise ValueError(f"calibrate: {dataset.name}: {name} must have shape ({len(stamps)}, 3), one sample "
+                             f"per time stamp, got {shape}")
+    bad = ~np.all(np.isfinite(dataset.twists), axis=1) | ~np.isfinite(stamps)
+    if bad.any():
+        raise ValueError(f"calibrate: {dataset.name}: non-finite time stamp or velocity at frame {np.argmax(bad)}; "
+                         f"fix or drop it before calibrating")
+    if np.any(np.diff(stamps) <= 0):
+        raise ValueError(f"calibrate: {dataset.name}: time stamps must increase, but frame "
+                         f"{np.argmax(np.diff(stamps) <= 0) + 1} does not")
+
+
+def _compute(dataset):
+    """The calibration of ``dataset`` from its data (no cache)."""
+    start = time.perf_counter()
+    odometry_of(dataset)  # checks the pixels
+    scorer = TrackScorer(dataset)
+    correction_choice = scorer.choose_correction()
+    best = correction_choice.best or "none"
+    slope_lag = LAGS[int(np.argmin(scorer.scores[:, list(CORRECTIONS).index(best)]))] if scorer.enough else 0
+    check = check_extrinsics(dataset, slope_lag)
+    correction, why_correction = _decide_correction(correction_choice, check)
+    lag_choice = scorer.choose_lag(correction)
+    lag, why_lag = _decide_lag(lag_choice)
+    imu_T_cam = CORRECTIONS[correction] @ dataset.imu_T_cam
+    noise = imu_noise(dataset.twists)
+    return Calibration(
+        extrinsic_correction=correction, imu_T_cam=imu_T_cam, imu_lag=lag,
+        sigma_linear_velocity=noise["sigma"][:3], sigma_angular_velocity=noise["sigma"][3:],
+        white_noise=noise["white"], hold_noise=noise["hold"],
+        reasons={"extrinsic_correction": why_correction, "imu_lag": why_lag},
+        tracks=scorer.evidence(correction_choice, lag_choice),
+        vo=_vo_evidence(dataset, check, slope_lag, imu_T_cam, lag),
+        repeated_frames=repeated_frames(dataset), outliers=outlier_indicators(dataset),
+        seconds=time.perf_counter() - start)
+
+
+def cache_path(dataset):
+    """The cache file of ``dataset``'s calibration: ``<cache dir>/calibration-<content hash>.json``.
+
+    The hash covers :data:`CACHED_ARRAYS` and :data:`CALIBRATION_VERSION`.
+    """
+    key = user_cache.content_hash({name: getattr(dataset, name) for name in CACHED_ARRAYS},
+                                  f"visla-edu calibration {CALIBRATION_VERSION}")
+    return user_cache.cache_dir() / f"calibration-{key}.json"
+
+
+def _load(path):
+    """The calibration cached at ``path``, or None (missing, unreadable, corrupt or another version)."""
+    stored = user_cache.load_json(path)
+    if stored is None or stored.get("version") != CALIBRATION_VERSION:
+        return None
+    try:
+        return Calibration.from_dict(stored.get("calibration"), source=f"cache {path}")
+    except ValueError:
+        return None
+
+
+def calibrate(dataset, cache=True):
+    """Calibration of a drive from its own data: extrinsic correction, IMU lag, velocity noise.
+
+    See the module docstring for the rules. The result is computed once per dataset object
+    (kept in ``dataset.extra["calibration"]``).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    cache : bool
+        Reuse (and store) the result in the user cache folder (:func:`cache_path`); a corrupt
+        cache file is recomputed, a folder that cannot be written is skipped.
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    TypeError
+        ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
+    ValueError
+        A time stamp, velocity or pixel is not finite, the time stamps do not increase, or the
+        velocities have the wrong shape (the message names the frame).
+    """
+    _check_inputs(dataset)
+    if "calibration" in dataset.extra:
+        return dataset.extra["calibration"]
+    path = cache_path(dataset) if cache else None
+    calibration = _load(path) if path is not None else None
+    if calibration is None:
+        calibration = _compute(dataset)
+        if path is not None:
+            user_cache.save_json(path, {"version": CALIBRATION_VERSION, "calibration": calibration.to_dict()})
+    dataset.extra["calibration"] = calibration
+    return calibration

@@ -1,0 +1,102 @@
+"""The single checks with their defaults taken from :func:`~._calibration.calibrate`.
+
+These keep the names the course and the driver have always used: :func:`resolve_extrinsics`
+(the camera the filter uses), :func:`check_time_alignment` and :func:`imu_noise_and_bias`
+(with the calibration found by default), and :func:`diagnose` (the report).
+"""
+
+import numpy as np
+
+from visla_edu.diagnostics._calibration import calibrate
+from visla_edu.diagnostics._motion import gyro_bias
+from visla_edu.diagnostics._noise import imu_noise
+from visla_edu.diagnostics._vo import CORRECTIONS, LAGS, time_alignment
+
+__all__ = ["resolve_extrinsics", "check_time_alignment", "imu_noise_and_bias", "diagnose"]
+
+
+def resolve_extrinsics(dataset, correction="auto"):
+    """The ``imu_T_cam`` to use and a line of evidence (empty when nothing was changed).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    correction : str
+        ``"auto"`` (what :func:`calibrate` decides), ``"none"`` or a key of :data:`CORRECTIONS`.
+
+    Returns
+    -------
+    imu_T_cam : ndarray, shape (4, 4)
+    evidence : str
+    """
+    if correction == "auto":
+        calibration = calibrate(dataset)
+        if calibration.extrinsic_correction == "none":
+            return dataset.imu_T_cam, ""
+        return calibration.imu_T_cam, (
+            f"applied extrinsic correction {calibration.extrinsic_correction!r} (extrinsic_correction='auto'): "
+            f"{calibration.reasons['extrinsic_correction']}")
+    if correction not in CORRECTIONS:
+        raise ValueError(f"extrinsic_correction must be 'auto' or one of {list(CORRECTIONS)}, got {correction!r}")
+    if correction == "none":
+        return dataset.imu_T_cam, ""
+    return CORRECTIONS[correction] @ dataset.imu_T_cam, f"applied extrinsic correction {correction!r} as requested"
+
+
+def check_time_alignment(dataset, imu_T_cam=None, lags=LAGS):
+    """Which velocity sample best explains the odometry's rotation from frame t to t+1.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    imu_T_cam : ndarray, shape (4, 4), optional
+        Calibration to use (default: the one :func:`calibrate` chooses).
+    lags : sequence of int
+        Candidate offsets: the step ``t -> t+1`` uses ``u[t + lag]``.
+
+    Returns
+    -------
+    dict
+        ``residual`` (lag -> median rotation disagreement, rad per frame), ``best`` (or None
+        without enough pairs), ``pairs``; see :func:`visla_edu.diagnostics._vo.time_alignment`.
+    """
+    if imu_T_cam is None:
+        imu_T_cam = calibrate(dataset).imu_T_cam
+    return time_alignment(dataset, imu_T_cam, lags)
+
+
+def imu_noise_and_bias(dataset, imu_T_cam=None, lag=0):
+    """IMU noise levels from the velocities and the gyro bias seen by the visual odometry.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    imu_T_cam : ndarray, shape (4, 4), optional
+        Calibration for the odometry (default: the one :func:`calibrate` chooses).
+    lag : int
+        The step ``t -> t+1`` uses ``u[t + lag]`` in the gyro-bias comparison.
+
+    Returns
+    -------
+    dict
+        ``linear_noise`` (3,) m/s and ``angular_noise`` (3,) rad/s: the white noise from second
+        differences; ``linear_hold``, ``angular_hold`` (3,): the hold noise; ``gyro_bias`` (3,)
+        rad/s and ``gyro_bias_stderr`` (3,) (NaN and inf without usable pairs), ``gyro_bias_verdict``.
+    """
+    if imu_T_cam is None:
+        imu_T_cam = calibrate(dataset).imu_T_cam
+    noise = imu_noise(dataset.twists)
+    bias = gyro_bias(dataset, imu_T_cam, lag)
+    known = bias["bias"] is not None
+    return {
+        "linear_noise": noise["white"][:3], "angular_noise": noise["white"][3:],
+        "linear_hold": noise["hold"][:3], "angular_hold": noise["hold"][3:],
+        "gyro_bias": np.array(bias["bias"]) if known else np.full(3, np.nan),
+        "gyro_bias_stderr": np.array(bias["stderr"]) if known else np.full(3, np.inf),
+        "gyro_bias_verdict": bias["verdict"],
+    }
+
+
+def diagnose(dataset):
+    """Run every diagnostic and return the readable report of :func:`calibrate` (str)."""
+    return calibrate(dataset).report(dataset.name)

@@ -1,0 +1,243 @@
+"""Visual-odometry evidence: the extrinsic axes check and the time alignment.
+
+The robust stereo odometry (:func:`visla_edu.odometry.visual_odometry`) gives the left
+camera's motion ``cam_T_next`` between consecutive frames. Mapped into the IMU frame through
+a candidate ``imu_T_cam`` (``imu_T_cam cam_T_next cam_T_imu``) it must agree with the IMU's own
+motion ``exp(tau_t u[t + lag])``: a calibration whose axes disagree turns the slope of one on
+the other negative, and the lag that explains the motion best has the smallest rotation
+disagreement.
+
+Only frame pairs with a valid odometry of at least :data:`MIN_INLIERS` inliers are used: pairs
+of 3 points (common on sparse drives) have heavy-tailed rotation errors. Pairs whose points
+are stale copies of the previous frame are left out by the odometry itself.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from visla_edu import lie
+from visla_edu.motion import select_twists
+from visla_edu.odometry import visual_odometry
+
+__all__ = [
+    "CORRECTIONS",
+    "LAGS",
+    "MIN_INLIERS",
+    "MIN_VO_PAIRS",
+    "MIN_SLOPE",
+    "MIN_SIGNIFICANCE",
+    "ExtrinsicCheck",
+    "check_extrinsics",
+    "time_alignment",
+    "odometry_of",
+    "vo_pairs",
+    "vo_in_imu_frame",
+    "vo_motion_in_imu_frame",
+    "imu_step_twists",
+]
+
+#: Candidate corrections of ``imu_T_cam``: rotations that flip two IMU axes, applied on the
+#: left (``corrected = C @ imu_T_cam``). ``flip_yz`` turns an x-forward/y-right/z-down IMU
+#: frame into x-forward/y-left/z-up.
+CORRECTIONS = {
+    "none": np.diag([1.0, 1.0, 1.0, 1.0]),
+    "flip_yz": np.diag([1.0, -1.0, -1.0, 1.0]),
+    "flip_xy": np.diag([-1.0, -1.0, 1.0, 1.0]),
+    "flip_xz": np.diag([-1.0, 1.0, -1.0, 1.0]),
+}
+#: Candidate lags: the step ``t -> t+1`` uses the velocity sample ``u[t + lag]``.
+LAGS = (-2, -1, 0, 1, 2)
+#: Frame pairs need at least this many odometry inliers to enter a check.
+MIN_INLIERS = 4
+#: Fewer usable frame pairs than this: "not enough evidence".
+MIN_VO_PAIRS = 30
+#: A calibration agrees with the IMU when both VO-vs-IMU slopes exceed this.
+MIN_SLOPE = 0.5
+#: ... and disagrees when a slope is below ``MIN_SLOPE`` by this many standard errors.
+MIN_SIGNIFICANCE = 3.0
+#: Verdicts of the extrinsic check, per correction.
+AGREES, DISAGREES, UNDECIDED = "agrees", "disagrees", "not enough evidence"
+
+
+def odometry_of(dataset):
+    """The robust visual odometry of ``dataset``, computed once and kept in ``dataset.extra``.
+
+    Returns
+    -------
+    visla_edu.odometry.VisualOdometry
+    """
+    if "visual_odometry" not in dataset.extra:
+        dataset.extra["visual_odometry"] = visual_odometry(dataset)
+    return dataset.extra["visual_odometry"]
+
+
+def vo_pairs(vo):
+    """Frame pairs the checks use: valid odometry with at least :data:`MIN_INLIERS` inliers, (T-1,) bool."""
+    return vo.valid & (vo.inliers >= MIN_INLIERS)
+
+
+def vo_motion_in_imu_frame(vo, imu_T_cam):
+    """VO motions as IMU motions ``imu_T_cam cam_T_next cam_T_imu``, shape (T-1, 4, 4)."""
+    return imu_T_cam @ vo.cam_T_next @ lie.se3_inv(imu_T_cam)
+
+
+def vo_in_imu_frame(vo, imu_T_cam):
+    """VO motions as IMU motions (:func:`vo_motion_in_imu_frame`), as twists ``[v; w]``, shape (T-1, 6)."""
+    return lie.se3_log(vo_motion_in_imu_frame(vo, imu_T_cam))
+
+
+def imu_step_twists(dataset, lag=0):
+    """IMU motion over each frame interval as twists ``tau_t u[t + lag]`` (:func:`select_twists`), (T-1, 6)."""
+    return dataset.time_steps[:, None] * select_twists(dataset.twists, lag)
+
+
+def _slope(vo, imu):
+    """Least-squares slope ``s`` of ``vo ~ s imu`` over all entries, and its standard error (nan, inf if empty)."""
+    if len(imu) == 0:
+        return float("nan"), float("inf")
+    power = max(float(np.sum(imu * imu)), 1e-300)
+    s = float(np.sum(vo * imu)) / power
+    resid = vo - s * imu
+    return s, float(np.sqrt(np.mean(resid**2) / power))
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.sum(x**2, axis=1)))) if len(x) else float("nan")
+
+
+@dataclass
+class ExtrinsicCheck:
+    """Result of :func:`check_extrinsics`.
+
+    Attributes
+    ----------
+    rotation_slope, translation_slope : dict
+        Correction name -> least-squares slope of the VO motion against the IMU motion
+        (rotation vectors, translations). Near +1 when the axes agree; a flipped axis pair
+        turns the rotation slope negative. NaN without usable pairs (see ``verdict``).
+    rotation_rms : dict
+        Correction name -> RMS of the per-frame rotation disagreement (rad).
+    rotation_slope_error, translation_slope_error : float
+        Standard errors of the slopes (those of the best-fitting candidate): a drive with
+        little turning cannot tell the candidates apart. Infinite without pairs.
+    recommended : str
+        The odometry's own recommendation, only on strong evidence: the file's calibration
+        disagrees and another candidate agrees (the best such); otherwise ``"none"``.
+    pairs : int
+        Frame pairs used (valid odometry with at least :data:`MIN_INLIERS` inliers).
+    verdict : dict
+        Correction name -> ``"agrees"`` (both slopes above :data:`MIN_SLOPE`), ``"disagrees"``
+        (a slope below it by :data:`MIN_SIGNIFICANCE` standard errors) or ``"not enough
+        evidence"`` (also with fewer than :data:`MIN_VO_PAIRS` pairs).
+    """
+
+    rotation_slope: dict
+    translation_slope: dict
+    rotation_rms: dict
+    rotation_slope_error: float
+    recommended: str
+    pairs: int
+    translation_slope_error: float = float("inf")
+    verdict: dict = field(default_factory=dict)
+
+    def agrees(self, key):
+        """Both slopes of correction ``key`` above ``MIN_SLOPE``."""
+        return self.rotation_slope[key] > MIN_SLOPE and self.translation_slope[key] > MIN_SLOPE
+
+    def report(self, name=""):
+        """Readable evidence, one line per candidate."""
+        head = (f"extrinsic check{' of ' + name if name else ''}: visual odometry on {self.pairs} frame pairs "
+                f"against the IMU motion through imu_T_cam (slope 1 = agreement)")
+        if self.pairs < MIN_VO_PAIRS:
+            return head + f": not enough evidence (fewer than {MIN_VO_PAIRS} pairs)"
+        lines = [head + f", slope standard errors: rotation {self.rotation_slope_error:.2f}, "
+                 f"translation {self.translation_slope_error:.2f}"]
+        for key in CORRECTIONS:
+            mark = "  <- recommended by the odometry" if key == self.recommended and key != "none" else ""
+            lines.append(f"  {key:8s} rotation slope {self.rotation_slope[key]:+6.2f} "
+                         f"(rms {1e3 * self.rotation_rms[key]:6.2f} mrad/frame)   "
+                         f"translation slope {self.translation_slope[key]:+6.2f}   {self.verdict[key]}{mark}")
+        return "\n".join(lines)
+
+
+def _verdict(rotation, translation, rotation_error, translation_error, pairs):
+    """Verdict of one candidate from its slopes and their standard errors."""
+    if pairs < MIN_VO_PAIRS:
+        return UNDECIDED
+    if rotation > MIN_SLOPE and translation > MIN_SLOPE:
+        return AGREES
+    if (MIN_SLOPE - rotation > MIN_SIGNIFICANCE * rotation_error
+            or MIN_SLOPE - translation > MIN_SIGNIFICANCE * translation_error):
+        return DISAGREES
+    return UNDECIDED
+
+
+def check_extrinsics(dataset, lag=0):
+    """Score each axis-flip correction of ``imu_T_cam`` against the IMU's motion.
+
+    For every usable frame pair (:func:`vo_pairs`), the VO twist mapped into the IMU frame is
+    regressed on ``tau u[t + lag]``: a calibration whose axes disagree with the IMU's shows up
+    as a negative rotation slope (turns seen the wrong way round) or translation slope.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    lag : int
+        Velocity sample used per interval (see :func:`visla_edu.motion.select_twists`).
+
+    Returns
+    -------
+    ExtrinsicCheck
+    """
+    vo = odometry_of(dataset)
+    used = vo_pairs(vo)
+    imu = imu_step_twists(dataset, lag)[used]
+    rot_slope, trans_slope, rot_rms, rot_err, trans_err = {}, {}, {}, {}, {}
+    for key, C in CORRECTIONS.items():
+        vo_imu = vo_in_imu_frame(vo, C @ dataset.imu_T_cam)[used]
+        rot_slope[key], rot_err[key] = _slope(vo_imu[:, 3:], imu[:, 3:])
+        trans_slope[key], trans_err[key] = _slope(vo_imu[:, :3], imu[:, :3])
+        rot_rms[key] = _rms(vo_imu[:, 3:] - imu[:, 3:])
+    pairs = int(used.sum())
+    rotation_error, translation_error = min(rot_err.values()), min(trans_err.values())
+    verdict = {key: _verdict(rot_slope[key], trans_slope[key], rotation_error, translation_error, pairs)
+               for key in CORRECTIONS}
+    recommended = "none"
+    agreeing = [key for key in CORRECTIONS if verdict[key] == AGREES]
+    if verdict["none"] == DISAGREES and agreeing:
+        recommended = max(agreeing, key=lambda k: rot_slope[k] + trans_slope[k])
+    return ExtrinsicCheck(rot_slope, trans_slope, rot_rms, rotation_error, recommended, pairs,
+                          translation_error, verdict)
+
+
+def time_alignment(dataset, imu_T_cam, lags=LAGS):
+    """Which velocity sample best explains the odometry's rotation from frame t to t+1.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    imu_T_cam : ndarray, shape (4, 4)
+        Calibration to map the odometry into the IMU frame.
+    lags : sequence of int
+        Candidate offsets: the step ``t -> t+1`` uses ``u[t + lag]``.
+
+    Returns
+    -------
+    dict
+        ``residual``: lag -> median over the usable pairs of the rotation disagreement
+        ``|log(R_vo) - tau w[t + lag]|`` (rad per frame; rotation changes faster than speed, so
+        it carries the timing); ``best``: the lag with the smallest, or None with fewer than
+        :data:`MIN_VO_PAIRS` pairs (residuals then NaN); ``pairs``: the pairs used.
+    """
+    vo = odometry_of(dataset)
+    used = vo_pairs(vo)
+    rotation = vo_in_imu_frame(vo, imu_T_cam)[used, 3:]
+    residual = {}
+    for lag in lags:
+        imu = imu_step_twists(dataset, lag)[used, 3:]
+        norms = np.linalg.norm(rotation - imu, axis=1)
+        residual[lag] = float(np.median(norms)) if len(norms) else float("nan")
+    pairs = int(used.sum())
+    best = min(residual, key=residual.get) if pairs >= MIN_VO_PAIRS else None
+    return {"residual": residual, "best": best, "pairs": pairs}

@@ -1,0 +1,192 @@
+"""Strict settings: what each :class:`~visla_edu.filters.FilterConfig` field accepts, in one place.
+
+Every field is declared with :func:`setting`, which stores a :class:`SettingSpec` in the
+field's metadata: its kind (float, int, bool or str), its plausible range and why, the words
+it accepts besides values (e.g. ``"auto"``) and whether it may be None. The same spec
+checks a value given in Python (:func:`check_settings`, from ``FilterConfig.__post_init__``)
+and parses one given as text on the command line (:func:`parse_setting`, for
+``visla-edu run --set NAME=VALUE``):
+
+* booleans are ``true/false``, ``1/0``, ``yes/no`` (any case); anything else is an error;
+* integers are integer literals (``2``, not ``2.5`` or ``2.0``);
+* numbers are finite (``nan``, ``inf`` and overflowing literals like ``1e400`` are refused);
+* a value outside its range is refused with the range and the reason, never clipped;
+* ``none`` sets an optional field to None; a declared word (``auto``) is accepted as is.
+"""
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SettingSpec", "setting", "spec_of", "check_settings", "parse_setting", "parse_settings"]
+
+#: Key of the :class:`SettingSpec` in a dataclass field's metadata.
+SPEC = "visla_edu.setting"
+
+_TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
+
+
+@dataclass(frozen=True)
+class SettingSpec:
+    """What one setting accepts.
+
+    Attributes
+    ----------
+    kind : {float, int, bool, str}
+    low, high : float or None
+        The plausible range (None: unbounded on that side).
+    low_open : bool
+        The range excludes ``low``.
+    words : tuple of str
+        Text values accepted as they are (e.g. ``("auto",)``); for ``str`` settings, empty
+        means any text (checked where it is used).
+    optional : bool
+        None is allowed (``none`` on the command line).
+    unit, why : str
+        For messages: the unit of the value and why the range is what it is.
+    """
+
+    kind: type
+    low: float = None
+    high: float = None
+    low_open: bool = False
+    words: tuple = ()
+    optional: bool = False
+    unit: str = ""
+    why: str = ""
+
+    def describe(self):
+        """What is valid, e.g. ``"a number in (0.001, 100] px"`` or ``"an integer in [-2, 2] or 'auto'"``."""
+        if self.kind is bool:
+            text = "true or false (also 1/0, yes/no)"
+        elif self.kind is str:
+            text = "one of " + ", ".join(repr(w) for w in self.words) if self.words else "a text"
+        else:
+            noun = "an integer" if self.kind is int else "a number"
+            text = noun + _range_text(self.low, self.high, self.low_open) + (f" {self.unit}" if self.unit else "")
+            text += "".join(f" or {w!r}" for w in self.words)
+        return text + (" or none" if self.optional else "")
+
+    def check(self, name, value):
+        """``value`` if valid (an integral float becomes an int for int settings), else ValueError."""
+        if value is None and self.optional or (isinstance(value, str) and value in self.words):
+            return value
+        ok, value = _coerce(self.kind, value)
+        if ok and self.kind in (int, float):
+            ok = math.isfinite(value) and _in_range(value, self.low, self.high, self.low_open)
+        if not ok or (self.kind is str and self.words and value not in self.words):
+            why = f" ({self.why})" if self.why else ""
+            raise ValueError(f"FilterConfig.{name} must be {self.describe()}{why}, got {value!r}")
+        return value
+
+    def parse(self, name, text):
+        """The value of ``text`` as given on the command line, checked; ValueError naming the setting."""
+        word = text.strip()
+        if self.optional and word.lower() == "none":
+            return None
+        if word.lower() in self.words:
+            return word.lower()
+        try:
+            value = _from_text(self.kind, word)
+        except ValueError:
+            why = f"; {self.why}" if self.why else ""
+            article = "an" if self.kind is int else "a"
+            raise ValueError(f"{name} needs {article} {self.kind.__name__} ({self.describe()}{why}), "
+                             f"got {text!r}") from None
+        try:
+            return self.check(name, value)
+        except ValueError as err:
+            raise ValueError(str(err).removeprefix("FilterConfig.")) from None
+
+
+def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why=""):
+    """A dataclass field with its :class:`SettingSpec` (arguments as its attributes)."""
+    spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why)
+    return dataclasses.field(default=default, metadata={SPEC: spec})
+
+
+def spec_of(cls, name):
+    """The :class:`SettingSpec` of field ``name`` of dataclass ``cls`` (KeyError if it has none)."""
+    return {f.name: f for f in dataclasses.fields(cls)}[name].metadata[SPEC]
+
+
+def check_settings(config):
+    """Check every declared field of ``config`` in place (integral floats of int fields become ints)."""
+    for f in dataclasses.fields(config):
+        if SPEC in f.metadata:
+            setattr(config, f.name, f.metadata[SPEC].check(f.name, getattr(config, f.name)))
+
+
+def parse_setting(cls, pair):
+    """``"NAME=VALUE"`` -> ``(name, value)`` for a field of ``cls``, parsed strictly; ValueError otherwise."""
+    name, sep, text = pair.partition("=")
+    name = name.strip()
+    specs = {f.name: f.metadata[SPEC] for f in dataclasses.fields(cls) if SPEC in f.metadata}
+    if not sep or name not in specs:
+        what = "expected NAME=VALUE" if not sep else f"unknown setting {name!r}"
+        raise ValueError(f"{pair!r}: {what}; settings are {', '.join(specs)}")
+    return name, specs[name].parse(name, text)
+
+
+def parse_settings(cls, pairs):
+    """``["sigma_pixel=2", ...]`` -> keyword arguments of ``cls``; a name given twice is an error."""
+    out = {}
+    for pair in pairs:
+        name, value = parse_setting(cls, pair)
+        if name in out:
+            raise ValueError(f"{pair!r}: {name} is set twice")
+        out[name] = value
+    return out
+
+
+def _range_text(low, high, low_open):
+    if low is None and high is None:
+        return ""
+    if high is None:
+        return f" {'>' if low_open else '>='} {_number(low)}"
+    if low is None:
+        return f" <= {_number(high)}"
+    return f" in {'(' if low_open else '['}{_number(low)}, {_number(high)}]"
+
+
+def _number(x):
+    """``1000000`` rather than ``1e+06`` for whole numbers below 1e7."""
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e7 else f"{x:g}"
+
+
+def _in_range(value, low, high, low_open):
+    above = low is None or (value > low if low_open else value >= low)
+    return above and (high is None or value <= high)
+
+
+def _coerce(kind, value):
+    """``(ok, value)``: whether ``value`` is of ``kind`` (numpy scalars too), converted to it."""
+    if kind is bool:
+        return isinstance(value, (bool, np.bool_)), bool(value) if isinstance(value, np.bool_) else value
+    if kind is str:
+        return isinstance(value, str), value
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return False, value
+    if kind is int:
+        integral = float(value).is_integer() if math.isfinite(float(value)) else False
+        return integral, int(value) if integral else value
+    return True, float(value)
+
+
+def _from_text(kind, word):
+    """Strict conversion of command-line text; ValueError when it is not of ``kind``."""
+    lower = word.lower()
+    if kind is bool:
+        if lower in _TRUE or lower in _FALSE:
+            return lower in _TRUE
+        raise ValueError(word)
+    if kind is int:
+        return int(word.replace("_", "x"))  # int() would accept "1_0"
+    if kind is float:
+        value = float(word.replace("_", "x"))
+        if not math.isfinite(value):
+            raise ValueError(word)
+        return value
+    return word
