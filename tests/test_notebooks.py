@@ -4,7 +4,8 @@
   must reproduce ``notebooks/`` byte for byte.
 * Both are stored without outputs, each file under 1 MB.
 * The solutions are well formed for nbgrader (unique grade ids, balanced markers, a graded
-  check after every exercise, every check exists in ``visla_edu.checks``).
+  check after every exercise, every check exists in ``visla_edu.checks`` and is called through a
+  fresh copy of the checks, hidden tests in every notebook).
 * Every student notebook runs top to bottom with errors only where an exercise is still a
   stub: in the stub cell itself or in the graded check right after it.
 
@@ -101,7 +102,7 @@ def test_solution_notebook_structure(name):
     ids = [_nbgrader(c)["grade_id"] for c in nb.cells if _nbgrader(c)]
     assert len(ids) == len(set(ids)), f"{name}: duplicate grade ids {ids}"
     previous = None
-    exercises = 0
+    exercises = hidden = 0
     for index, cell in enumerate(nb.cells):
         meta = _nbgrader(cell)
         has_markers = release.BEGIN_SOLUTION in cell.source
@@ -115,13 +116,26 @@ def test_solution_notebook_structure(name):
             assert meta.get("locked") and meta.get("points", 0) > 0, f"{name} cell {index}: graded cells are locked"
             assert previous is not None and release.BEGIN_SOLUTION in previous.source, (
                 f"{name} cell {index}: a graded check must follow its exercise cell")
-            called = re.findall(r"checks\.(check_\w+)\(", cell.source)
-            assert called, f"{name} cell {index}: a graded cell calls a visla_edu.checks function"
-            for fn in called:
-                assert fn in checks.__all__, f"{name} cell {index}: checks.{fn} does not exist"
+            _check_graded_cell(cell.source, f"{name} cell {index}")
+            hidden += release.BEGIN_HIDDEN in cell.source
         if cell.cell_type == "code":
             previous = cell
     assert 2 <= exercises <= 4, f"{name}: {exercises} exercises (the course has 2-4 per notebook)"
+    assert hidden >= 1, f"{name}: no graded cell has hidden tests ({release.BEGIN_HIDDEN})"
+
+
+def _check_graded_cell(source, where):
+    """A graded cell loads the checks fresh and calls them only through that fresh copy."""
+    lines = [line for line in source.split("\n") if line.strip() and not line.startswith("###")]
+    assert lines[0].startswith("import importlib, visla_edu.checks"), f"{where}: starts with {lines[0]!r}"
+    assert lines[1] == "_checks = importlib.reload(visla_edu.checks)", f"{where}: no fresh checks: {lines[1]!r}"
+    for line in lines[2:]:
+        assert re.fullmatch(r"_checks\.check_\w+\(\w+(, hidden=True)?\)", line), (
+            f"{where}: a graded cell only calls the fresh checks: {line!r}")
+    called = re.findall(r"_checks\.(check_\w+)\(", source)
+    assert called, f"{where}: a graded cell calls a visla_edu.checks function"
+    for fn in called:
+        assert fn in checks.__all__, f"{where}: checks.{fn} does not exist"
 
 
 @pytest.mark.parametrize("name", NAMES)

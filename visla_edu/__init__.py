@@ -7,7 +7,8 @@ IMU prediction, ``ekf`` the update steps, ``filters`` the filter modes and their
 ``codes`` observation codes and mode names, ``run`` the driver, ``metrics`` (ATE, drift, NEES),
 ``trajectory`` KITTI and TUM trajectory files, ``odometry`` stereo visual odometry,
 ``diagnostics`` the calibration from the data, ``cache`` the user cache, ``plotting``,
-``stepper`` the filter stepper (model, figure, widget, Voila page), ``checks``, ``cli``.
+``stepper`` the filter stepper (model, figure, widget, Voila page), ``checks`` the exercise
+checks (``numdiff`` their central-difference reference), ``cli``.
 """
 
 __version__ = "0.1.0"

@@ -362,12 +362,17 @@ def _cmd_release(args):
     if dst.exists() and not dst.is_dir():
         raise NotADirectoryError(f"release: --dst {dst} is a file, not a folder; give the folder of the student "
                                  "notebooks")
+    teaching = src.resolve().parent / "TEACHING.md"
     if args.check:
         drifted = release.check_in_sync(src, dst)
+        if teaching.is_file() and release.update_points_table(src, teaching, check=True):
+            drifted.append(teaching.name)
         print("\n".join(f"drifted: {name}" for name in drifted) or "notebooks/ is in sync with solutions/")
         raise SystemExit(1 if drifted else 0)
     release.make_student_notebooks(src, dst)
     print(f"wrote student notebooks to {dst}")
+    if teaching.is_file() and release.update_points_table(src, teaching):
+        print(f"updated the points table in {teaching}")
 
 
 _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release}

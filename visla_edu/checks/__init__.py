@@ -1,0 +1,107 @@
+"""Checks for the notebook exercises: compare a student's function with the library.
+
+Every ``check_<name>(student_fn, hidden=False)`` calls the student's function on random and
+edge-case inputs (near the identity, near pi, far points, empty frames...), compares with the
+library version and
+
+* prints one ``✓ ...`` line when everything agrees (``hidden=True`` runs other cases, drawn
+  from ``VISLA_EDU_HIDDEN_SEED`` if set, and prints nothing);
+* raises ``AssertionError`` otherwise (nbgrader counts the cell as failed). The message's
+  first line (at most 79 characters, as ``nbgrader validate`` cuts long lines) names the
+  likely mistake in its first words; details follow. Mistakes are recognised by computing
+  deliberately wrong variants from the library (twist order ``[w; v]``, a transposed
+  rotation, a missing minus sign, a closed form without its small-angle series...) and
+  seeing whether the student's output equals one of them;
+* raises ``NotImplementedError`` (with a pointer to the cell to fill in) while the exercise
+  is still the stub of the student notebook.
+
+While the student's function runs, the library's own version of the exercise is hidden
+(calling it, under any name, raises "write your own ...") and the library must stay as
+installed; see :mod:`visla_edu.checks._hiding`.
+
+Graded cells load a fresh copy, so that nothing an answer cell assigned to the checks counts::
+
+    import importlib, visla_edu.checks
+    _checks = importlib.reload(visla_edu.checks)
+    _checks.check_hat(hat)
+
+Re-executing this file (``importlib.reload``) reloads each submodule below, in order.
+
+Conventions (see DESIGN.md): twist ``u = [v; w]``, ``twist_hat(u) = [[hat(w), v], [0, 0]]``,
+pose ``world_T_imu``, motion ``T_{t+1} = T_t exp(tau u^)``, right perturbation
+``T = mu exp(delta^)``. The visible inputs are drawn from a fixed seed, so a check gives the
+same verdict every time.
+"""
+
+import importlib as _importlib
+import sys as _sys
+
+#: Submodules in dependency order; a reload of this package reloads them all.
+_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_kinematics", "_camera", "_jacobians", "_filters",
+               "_consistency")
+
+
+def _load_submodules():
+    """Import each submodule, or re-execute it if it is loaded (a fresh copy after a reload)."""
+    for short in _SUBMODULES:
+        full = f"{__name__}.{short}"
+        if full in _sys.modules:
+            _importlib.reload(_sys.modules[full])
+        else:
+            _importlib.import_module(full)
+
+
+_load_submodules()
+
+from visla_edu.checks._camera import (check_init_landmark, check_project, check_stereo_matrix,  # noqa: E402
+                                      check_triangulate)
+from visla_edu.checks._consistency import check_average_nees_bounds, check_motion_noise, check_nees  # noqa: E402
+from visla_edu.checks._core import student_or_reference  # noqa: E402
+from visla_edu.checks._data import check_observations_at, check_track_spans  # noqa: E402
+from visla_edu.checks._filters import (check_dense_covariance_bytes, check_landmark_update,  # noqa: E402
+                                       check_marginalize, check_pose_update, check_slam_jacobian)
+from visla_edu.checks._hiding import LibraryFunctionHidden  # noqa: E402
+from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
+                                         check_pose_jacobian, check_projection_jacobian,
+                                         reference_numerical_jacobian)
+from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat,  # noqa: E402
+                                          check_pose_transition, check_se3_exp, check_so3_exp)
+
+__all__ = [
+    "student_or_reference",
+    "reference_numerical_jacobian",
+    "LibraryFunctionHidden",
+    # 00 know your data
+    "check_observations_at",
+    "check_track_spans",
+    # 01 SE(3) kinematics
+    "check_hat",
+    "check_so3_exp",
+    "check_se3_exp",
+    "check_dead_reckon",
+    # 02 stereo camera
+    "check_stereo_matrix",
+    "check_project",
+    "check_triangulate",
+    # 03 Jacobians
+    "check_projection_jacobian",
+    "check_odot",
+    "check_numerical_jacobian",
+    "check_pose_jacobian",
+    # 04 landmark mapping
+    "check_landmark_jacobian",
+    "check_init_landmark",
+    "check_landmark_update",
+    # 05 pose uncertainty
+    "check_curly_hat",
+    "check_pose_transition",
+    "check_pose_update",
+    # 06 joint SLAM
+    "check_slam_jacobian",
+    "check_dense_covariance_bytes",
+    "check_marginalize",
+    # 07 tuning and consistency
+    "check_motion_noise",
+    "check_nees",
+    "check_average_nees_bounds",
+]

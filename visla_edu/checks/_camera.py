@@ -1,0 +1,135 @@
+"""Checks of notebooks 02 and 04 (the stereo camera): Ks, projection, triangulation, initialisation."""
+
+import numpy as np
+
+from visla_edu import camera as cam
+from visla_edu import ekf, lie
+from visla_edu.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
+from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, project_with, random_pose, rig,
+                                      rotation_transposed, stereo_camera, wrong_inverses)
+
+__all__ = ["check_stereo_matrix", "check_project", "check_triangulate", "check_init_landmark"]
+
+
+def _calibrations(generator, hidden=False):
+    """``(K, b)`` pairs: the simulator's rig, a KITTI-like one and random ones."""
+    out = [] if hidden else [rig()[:2], (np.array([[552.55, 0, 682.05], [0, 552.55, 238.77], [0, 0, 1]]), 0.5962)]
+    for _ in range(4 if hidden else 2):
+        f = generator.uniform(300, 900)
+        K = np.array([[f, 0, generator.uniform(300, 700)], [0, f * generator.uniform(0.9, 1.1),
+                                                            generator.uniform(150, 300)], [0, 0, 1]])
+        out.append((K, generator.uniform(0.1, 1.0)))
+    return out
+
+
+@exercise_check
+def check_stereo_matrix(stereo_matrix, hidden=False):
+    """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``."""
+    name = "stereo_matrix"
+    call = student(stereo_matrix, name, hide=[cam.stereo_matrix])
+    for K, b in _calibrations(rng(hidden), hidden):
+        got = as_array(call(K, b), name, (4, 4))
+        ref = cam.stereo_matrix(K, b)
+        plus = ref.copy()
+        plus[2, 3] *= -1
+        no_f = ref.copy()
+        no_f[2, 3] = -b
+        compare(name, got, ref, f"for fsu = {K[0, 0]:.2f}, b = {b:.3f}", [
+            ("the sign of the baseline term: the entry is -fsu b\nthe right camera sits at +b along x, "
+             "so a point at depth z appears at uR = uL - fsu b / z", lambda: plus),
+            ("the baseline term must be in pixels: -fsu * b, not -b", lambda: no_f),
+            ("Ks is transposed", lambda: ref.T),
+        ])
+    ok(f"{name}: Ks agrees with the library for 4 calibrations", hidden)
+
+
+def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
+    """The deliberate mistakes of ``project``: (hint, callable) pairs."""
+    imu_T_world = lie.se3_inv(world_T_imu)
+    p_h = np.c_[p_world, np.ones(len(p_world))]
+    transposed = [lambda W=W: project_with(Ks, cam_T_imu, W, p_world) for W in wrong_inverses(world_T_imu)]
+    transposed.append(lambda: project_with(Ks, rotation_transposed(cam_T_imu), imu_T_world, p_world))
+    return [
+        ("you used world_T_imu where its inverse is needed\nthe point in the IMU frame is "
+         "inv(world_T_imu) @ m", lambda: project_with(Ks, cam_T_imu, world_T_imu, p_world)),
+        ("you used imu_T_cam where cam_T_imu is needed\ncam_T_imu = inv(imu_T_cam), written o_T_i",
+         lambda: project_with(Ks, imu_T_cam, imu_T_world, p_world)),
+        ("divide by the depth q3 (the third coordinate), not q4",
+         lambda: (p_h @ (cam_T_imu @ imu_T_world).T) @ Ks.T),
+    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+
+
+@exercise_check
+def check_project(project, hidden=False):
+    """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``."""
+    name = "project"
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
+    call = student(project, name, hide=[cam.StereoCamera.predict, cam.StereoCamera.predict_with_jacobians,
+                                        cam.StereoCamera.points_in_camera])
+    for trial in range(6 if hidden else 4):
+        world_T_imu = np.eye(4) if trial == 0 else random_pose(generator)
+        M = 1 if hidden and trial == 1 else 12
+        far = trial == 3
+        p_world = points_in_view(generator, world_T_imu, imu_T_cam, M, depth=(2.0, 300.0 if far else 60.0))
+        got = as_array(call(camera.Ks, camera.cam_T_imu, world_T_imu, p_world), name, (M, 4))
+        compare(name, got, camera.predict(world_T_imu, p_world), f"for a random pose and {M} points in view",
+                _project_variants(camera.Ks, camera.cam_T_imu, imu_T_cam, world_T_imu, p_world),
+                rtol=1e-7, atol=1e-6)
+    ok(f"{name}: pixels agree with StereoCamera.predict at 4 poses, points from 2 m to 300 m", hidden)
+
+
+@exercise_check
+def check_triangulate(triangulate, hidden=False):
+    """Exercise 02: ``triangulate(z (M, 4), K, b) -> (M, 3)`` points in the left camera (disparity form)."""
+    name = "triangulate"
+    generator = rng(hidden)
+    call = student(triangulate, name, hide=[cam.triangulate_disparity, cam.triangulate_bearing])
+    for K, b in _calibrations(generator, hidden):
+        d = generator.uniform(1.5, 400.0 if hidden else 120.0, 10)
+        p = np.stack([generator.uniform(-0.8, 0.8, 10) * d, generator.uniform(-0.3, 0.3, 10) * d, d], axis=1)
+        z = cam.projection(np.c_[p, np.ones(10)]) @ cam.stereo_matrix(K, b).T
+        got = as_array(call(z, K, b), name, (10, 3))
+        compare(name, got, p, f"for fsu = {K[0, 0]:.1f} px, b = {b:.3f} m", [
+            ("disparity sign: depth = fsu b / (uL - uR)\nthe disparity uL - uR is positive for points in front",
+             lambda: -p),
+            ("depth uses the wrong focal length or units\ndepth = fsu * b / disparity (fsu in px, b in m)",
+             lambda: cam.triangulate_disparity(z, K, b) / K[0, 0]),
+            ("x and y are not scaled by the depth\nx = (uL - cu) * depth / fsu, y = (vL - cv) * depth / fsv",
+             lambda: np.c_[(z[:, 0] - K[0, 2]) / K[0, 0], (z[:, 1] - K[1, 2]) / K[1, 1], p[:, 2]]),
+            ("x and y used the same focal length: y = (vL - cv) * depth / fsv",
+             lambda: np.c_[p[:, 0], (z[:, 1] - K[1, 2]) * p[:, 2] / K[0, 0], p[:, 2]]),
+        ], rtol=1e-6, atol=1e-6)
+    ok(f"{name}: recovers points from 1.5 m to 120 m for 4 calibrations", hidden)
+
+
+def _init_variants(p_cam, imu_T_cam, T):
+    """The deliberate mistakes of ``init_landmark``: (hint, callable) pairs."""
+    p_h = np.r_[p_cam, 1.0]
+    transposed = [lambda: (rotation_transposed(T) @ imu_T_cam @ p_h)[:3],
+                  lambda: (T @ rotation_transposed(imu_T_cam) @ p_h)[:3],
+                  lambda: (rotation_transposed(T) @ rotation_transposed(imu_T_cam) @ p_h)[:3]]
+    return [
+        ("the point is still in the camera frame\nmap it with world_T_imu @ imu_T_cam", lambda: p_cam),
+        ("the point is in the IMU frame: also apply world_T_imu", lambda: (imu_T_cam @ p_h)[:3]),
+        ("you used cam_T_imu (the inverse of imu_T_cam)\nworld_T_cam = world_T_imu @ imu_T_cam",
+         lambda: (T @ lie.se3_inv(imu_T_cam) @ p_h)[:3]),
+        ("you used inv(world_T_imu)\nworld_T_cam = world_T_imu @ imu_T_cam",
+         lambda: (lie.se3_inv(T) @ imu_T_cam @ p_h)[:3]),
+    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+
+
+@exercise_check
+def check_init_landmark(init_landmark, hidden=False):
+    """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point."""
+    name = "init_landmark"
+    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    call = student(init_landmark, name, hide=[cam.StereoCamera.triangulate, ekf.initialize_landmarks])
+    for trial in range(6 if hidden else 4):
+        T = np.eye(4) if trial == 0 else random_pose(generator)
+        m = points_in_view(generator, T, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
+        z = camera.predict(T, m[None])[0]
+        got = as_array(call(z, K, b, imu_T_cam, T), name, (3,))
+        p_cam = cam.triangulate_disparity(z, K, b)
+        compare(name, got, m, f"for z = {fmt(z)}", _init_variants(p_cam, imu_T_cam, T), rtol=1e-6, atol=1e-6)
+    ok(f"{name}: triangulated points land on the true landmarks in the world frame", hidden)

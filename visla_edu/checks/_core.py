@@ -1,0 +1,283 @@
+"""The machinery every check shares: calling the student's code, comparing, failure messages.
+
+A failure is an ``AssertionError`` whose **first line** (at most 79 characters) names the
+mistake in its first words; the input, the explanation and the numbers follow on later lines,
+wrapped at 79 characters. (``nbgrader validate`` indents each line of a traceback by 4 and cuts
+it at 87 characters, ``AssertionError: `` included, so the later lines show whole and the first
+one shows its first 67 characters.)
+"""
+
+import functools
+import os
+import textwrap
+
+import numpy as np
+
+from visla_edu.checks import _hiding
+
+__all__ = [
+    "exercise_check",
+    "SEED",
+    "HIDDEN_SEED_VARIABLE",
+    "rng",
+    "ok",
+    "fmt",
+    "fail",
+    "student",
+    "as_array",
+    "close",
+    "compare",
+    "student_or_reference",
+]
+
+#: Seed of the visible cases: a check gives the same verdict every time.
+SEED = 276
+#: Environment variable with the seed of the hidden cases (a teacher may set a private one).
+HIDDEN_SEED_VARIABLE = "VISLA_EDU_HIDDEN_SEED"
+_DEFAULT_HIDDEN_SEED = 1827
+
+
+def exercise_check(check):
+    """Decorator of the public checks: failures show the message, not the checks' own frames.
+
+    A failure found by a comparison is re-raised from the check itself, so a notebook (and
+    ``nbgrader validate``) shows the student's cell and the message, not the lines of the
+    checks. A crash of the student's code keeps its chained traceback (where it crashed).
+    """
+
+    @functools.wraps(check)
+    def run(fn, hidden=False):
+        try:
+            return check(fn, hidden=hidden)
+        except (AssertionError, NotImplementedError) as err:
+            if err.__cause__ is not None:
+                raise
+            raise type(err)(str(err)) from None
+
+    return run
+
+
+def _hidden_seed():
+    text = os.environ.get(HIDDEN_SEED_VARIABLE, "").strip()
+    if not text:
+        return _DEFAULT_HIDDEN_SEED
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError(f"{HIDDEN_SEED_VARIABLE} must be an integer, got {text!r}: unset it or "
+                         "set it to a number") from None
+
+
+def rng(hidden=False):
+    """The random generator of a check's visible (fixed seed) or hidden cases."""
+    return np.random.default_rng(_hidden_seed() if hidden else SEED)
+
+
+def ok(message, hidden=False):
+    """Print the success line of a check (hidden cases pass silently)."""
+    if not hidden:
+        print(f"\u2713 {message}")
+
+
+def fmt(x):
+    """Short text for an input in a failure message."""
+    if callable(x):
+        return getattr(x, "__name__", "a function")
+    arr = np.asarray(x)
+    if arr.dtype == object:
+        return repr(x)
+    if arr.size <= 8:
+        return np.array2string(arr, precision=6, separator=", ", suppress_small=False).replace("\n", "")
+    return f"an array of shape {arr.shape}"
+
+
+def _split_first_line(text):
+    """``(first, rest)`` with ``first`` at most MAX_FIRST_LINE characters (wrapped at a space)."""
+    first, _, rest = text.partition("\n")
+    limit = _hiding.MAX_FIRST_LINE
+    if len(first) > limit:
+        cut = first.rfind(" ", 0, limit + 1)
+        cut = cut if cut > limit // 2 else limit
+        first, rest = first[:cut].rstrip(), (first[cut:].strip() + ("\n" + rest if rest else ""))
+    return first, rest
+
+
+def fail(name, hint, *details):
+    """An ``AssertionError``: ``"{name}: {first line of hint}"``, then the details.
+
+    Parameters
+    ----------
+    name : str
+        The student's function ("" if ``hint`` names it already).
+    hint : str
+        First line: the mistake in a few words; later lines: the explanation.
+    details : str
+        Further lines (the input, expected and actual values...); empty ones are skipped.
+
+    Returns
+    -------
+    AssertionError
+        To be raised by the caller.
+    """
+    first, rest = _split_first_line(f"{name}: {hint}" if name else hint)
+    lines = [first]
+    for text in (rest, *details):
+        for line in text.split("\n") if text else ():
+            short = len(line) <= _hiding.MAX_FIRST_LINE
+            lines.extend([line] if short else textwrap.wrap(line, _hiding.MAX_FIRST_LINE, break_on_hyphens=False))
+    return AssertionError("\n".join(lines))
+
+
+def _materialize(out, name):
+    """The student's output as plain float arrays (tuples stay tuples), computed now.
+
+    Converting inside the guarded call means a lazy object cannot call the library later.
+    """
+    if isinstance(out, tuple):
+        return tuple(_materialize(item, name) for item in out)
+    try:
+        return np.array(out, dtype=float)
+    except _hiding.LibraryFunctionHidden as err:
+        raise fail("", str(err)) from None
+    except (TypeError, ValueError) as err:
+        if isinstance(out, list):
+            return [_materialize(item, name) for item in out]
+        raise fail(name, f"the result is not a numeric array ({type(out).__name__})", str(err)) from None
+
+
+class _Student:
+    """The student's function, called with the library's versions hidden and state guarded."""
+
+    def __init__(self, fn, name, hide):
+        self.fn, self.name, self.hide = fn, name, tuple(hide)
+
+    def _run(self, args, kwargs):
+        """Call the student's function; turn its exceptions into readable failures."""
+        try:
+            return self.fn(*args, **kwargs)
+        except NotImplementedError:
+            raise NotImplementedError(
+                f"{self.name} is not implemented yet: replace the `raise NotImplementedError` line in "
+                "the exercise cell above with your code, run that cell, then run this check again") from None
+        except _hiding.LibraryFunctionHidden as err:
+            raise fail("", str(err), f"(while calling {self.name}({_shown(args)}))") from None
+        except Exception as err:  # noqa: BLE001 - any crash is a failed exercise with a message
+            raise fail(self.name, f"raised {type(err).__name__}: {err}",
+                       f"when called as {self.name}({_shown(args)})") from err
+
+    def __call__(self, *args, **kwargs):
+        with _hiding.guard(self.hide, self.name):
+            return _materialize(self._run(args, kwargs), self.name)
+
+
+def _shown(args):
+    return ", ".join(fmt(a) for a in args)
+
+
+def student(fn, name, hide=()):
+    """Wrap the student's ``fn``: calls hide ``hide`` (library functions) and guard the library.
+
+    Returns
+    -------
+    callable
+        Same arguments as ``fn``; returns its output as float arrays; raises
+        ``NotImplementedError`` for a stub and ``AssertionError`` (a short first line) for a
+        crash, a call to a hidden function or a change to visla_edu.
+    """
+    return _Student(fn, name, hide)
+
+
+def as_array(out, name, shape, what="result"):
+    """The student's output as a float array of the expected shape, or a failure with a hint."""
+    try:
+        arr = np.asarray(out, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise fail(name, f"the {what} is not a numeric array ({type(out).__name__})", str(err)) from None
+    shape = tuple(shape)
+    if arr.shape != shape:
+        sizes = f"got shape {arr.shape}, expected {shape}"
+        if arr.shape == shape[::-1] and len(shape) >= 2:
+            raise fail(name, f"wrong shape of the {what}: it is transposed",
+                       f"{sizes}: visla-edu is time/row-major, one row per point or frame")
+        if arr.size == int(np.prod(shape)):
+            raise fail(name, f"wrong shape of the {what}", f"{sizes}: same number of entries, reshape")
+        raise fail(name, f"wrong shape of the {what}", sizes)
+    return arr
+
+
+def close(a, b, rtol, atol):
+    """True if ``a`` and ``b`` have one shape and agree (NaN equal to NaN)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=rtol, atol=atol, equal_nan=True))
+
+
+def _matching_variant(got, variants, rtol, atol):
+    """The hint of the first deliberate mistake whose output equals ``got`` (or None)."""
+    for hint, variant in variants:
+        try:
+            wrong = variant()
+        except Exception:  # noqa: BLE001 - a variant that cannot be computed just does not match
+            continue
+        if close(got, wrong, max(rtol, 1e-6), max(atol, 1e-8)):
+            return hint
+    return None
+
+
+def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_hint="", extra=None):
+    """Fail with the most specific message if ``got`` differs from ``expected``.
+
+    Parameters
+    ----------
+    name : str
+    got, expected : array_like
+    where : str
+        The input, e.g. ``"for w = [1, 2, 3]"`` (second line of the message).
+    variants : sequence of (hint, callable)
+        Each callable returns the output of one deliberate mistake on the same input; the
+        first that matches ``got`` names the mistake. A hint's first line is short.
+    nan_hint : str
+        Hint when ``got`` has NaN or inf and ``expected`` has not.
+    extra : callable, optional
+        ``extra(got)`` returns a hint (or "") for mistakes found by a property of the
+        output (e.g. "not a rotation").
+    """
+    if close(got, expected, rtol, atol):
+        return
+    expected = np.asarray(expected, dtype=float)
+    if not np.all(np.isfinite(got)) and np.all(np.isfinite(expected)):
+        raise fail(name, f"NaN or inf {nan_hint or 'in the result'}", where)
+    hint = _matching_variant(got, variants, rtol, atol) or (extra(got) if extra is not None else "")
+    if hint:
+        raise fail(name, hint, where)
+    raise fail(name, "wrong values (no known mistake matches)", where,
+               f"expected:\n{np.array2string(expected, precision=6)}",
+               f"got:\n{np.array2string(np.asarray(got), precision=6)}")
+
+
+def _close_nested(got, expected, rtol=1e-5, atol=1e-7):
+    """:func:`close` that also compares tuples and lists (e.g. ``(mean, covariance)``) entry by entry."""
+    if isinstance(expected, (tuple, list)):
+        return (isinstance(got, (tuple, list)) and len(got) == len(expected)
+                and all(_close_nested(g, e, rtol, atol) for g, e in zip(got, expected)))
+    return close(got, expected, rtol, atol)
+
+
+def student_or_reference(student_fn, reference_fn, *probe_args, name=None):
+    """The student's function if it runs on ``probe_args`` and agrees with the reference.
+
+    Later cells of a notebook use this so that an unfinished exercise never blocks them.
+
+    Returns
+    -------
+    callable
+    """
+    name = name or getattr(student_fn, "__name__", "your function")
+    try:
+        agrees = _close_nested(student_fn(*probe_args), reference_fn(*probe_args))
+    except Exception:  # noqa: BLE001 - stubs raise NotImplementedError, broken code anything
+        agrees = False
+    if agrees:
+        print(f"using your {name}")
+        return student_fn
+    print(f"using the library's {name} (yours is not finished or disagrees)")
+    return reference_fn

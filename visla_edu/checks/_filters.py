@@ -1,0 +1,238 @@
+"""Checks of notebooks 04-06 (the EKF): landmark and pose updates, the joint Jacobian, memory, marginals."""
+
+import numpy as np
+
+from visla_edu import camera as cam
+from visla_edu import ekf, lie
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, points_in_view, random_covariance, random_pose,
+                                      rotation_transposed, stereo_camera, wrong_inverses)
+
+__all__ = [
+    "check_landmark_update",
+    "check_pose_update",
+    "check_slam_jacobian",
+    "check_dense_covariance_bytes",
+    "check_marginalize",
+]
+
+#: The visla-edu state is [pose (6); landmarks (3 each)].
+_POSE_DIM = 6
+
+
+def _landmark_update_with(m, Sigma, z, imu_T_world, Ks, cam_T_imu, noise_var):
+    """One EKF update of a landmark with explicit transforms: ``(m_new (3,), Sigma_new (3, 3))``."""
+    q = cam_T_imu @ imu_T_world @ np.r_[m, 1.0]
+    H = Ks @ cam.projection_jacobian(q) @ cam_T_imu @ imu_T_world[:, :3]
+    gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))
+    return m + gain @ (z - Ks @ cam.projection(q)), (np.eye(3) - gain @ H) @ Sigma
+
+
+def _landmark_update_reference(m, Sigma, z, T, camera, noise_var):
+    """The library's single-landmark update (mean (3,), covariance (3, 3))."""
+    m_new, S_new = ekf.landmark_update(m[None], Sigma[None], z[None], T, camera, noise_var)
+    return m_new[0], S_new[0]
+
+
+def _landmark_mean_variants(m, Sigma, z, T, camera, noise_var):
+    flipped_z = 2 * camera.predict(T, m[None])[0] - z
+    Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
+    transposed = [lambda W=W: _landmark_update_with(m, Sigma, z, W, Ks, cam_T_imu, noise_var)[0]
+                  for W in wrong_inverses(T)]
+    transposed.append(lambda: _landmark_update_with(m, Sigma, z, lie.se3_inv(T), Ks,
+                                                    rotation_transposed(cam_T_imu), noise_var)[0])
+    return [
+        ("the innovation must be z - z_pred (observed minus predicted)",
+         lambda: _landmark_update_reference(m, Sigma, flipped_z, T, camera, noise_var)[0]),
+        ("the mean did not move: add K (z - z_pred)", lambda: m),
+    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+
+
+def _landmark_covariance_variants(m, Sigma, T, camera, noise_var):
+    H = camera.jacobian_landmark(T, m[None])[0]
+    gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))
+    return [
+        ("Sigma_new = (I - K H) Sigma, with a minus sign", lambda: (np.eye(3) + gain @ H) @ Sigma),
+        ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
+        ("the observation noise is missing from S = H Sigma H^T + noise_var I",
+         lambda: Sigma - Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T) @ H @ Sigma),
+    ]
+
+
+def _pair(out, name, what):
+    if not isinstance(out, tuple) or len(out) != 2:
+        raise fail(name, f"must return a tuple {what}, got {type(out).__name__}")
+    return out
+
+
+@exercise_check
+def check_landmark_update(landmark_update, hidden=False):
+    """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``."""
+    name = "landmark_update"
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
+    call = student(landmark_update, name, hide=[ekf.landmark_update, ekf.joint_update, ekf.cholesky_update])
+    noise_var = 1.0 if hidden else 4.0
+    for trial in range(6 if hidden else 4):
+        T = random_pose(generator)
+        m_true = points_in_view(generator, T, imu_T_cam, 1, depth=(4.0, 40.0))[0]
+        z = camera.predict(T, m_true[None])[0] + generator.normal(scale=2.0, size=4)
+        m = m_true + generator.normal(scale=1.0, size=3)
+        A = generator.normal(size=(3, 3))
+        Sigma = A @ A.T + np.eye(3)
+        out = _pair(call(m, Sigma, z, T, camera.Ks, camera.cam_T_imu, noise_var), name, "(m_new, Sigma_new)")
+        m_ref, S_ref = _landmark_update_reference(m, Sigma, z, T, camera, noise_var)
+        compare(name, as_array(out[0], name, (3,), "mean"), m_ref, "(mean)",
+                _landmark_mean_variants(m, Sigma, z, T, camera, noise_var), rtol=1e-6, atol=1e-6)
+        compare(name, as_array(out[1], name, (3, 3), "covariance"), S_ref, "(covariance)",
+                _landmark_covariance_variants(m, Sigma, T, camera, noise_var), rtol=1e-6, atol=1e-8)
+    ok(f"{name}: mean and covariance agree with ekf.landmark_update", hidden)
+
+
+def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_world=None, side="right", sign=1.0):
+    """The visual pose update from its formula; ``imu_T_world`` replaces ``inv(mu)`` (for mistakes)."""
+    imu_T_world = lie.se3_inv(mu) if imu_T_world is None else imu_T_world
+    s = np.c_[p_world, np.ones(len(p_world))] @ imu_T_world.T  # (k, 4) landmarks in the IMU frame
+    q = s @ cam_T_imu.T
+    H = (-Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(s)).reshape(-1, _POSE_DIM)
+    gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(len(H)))
+    delta = sign * gain @ (z - cam.projection(q) @ Ks.T).ravel()
+    mu_new = mu @ lie.se3_exp(delta) if side == "right" else lie.se3_exp(delta) @ mu
+    return mu_new, (np.eye(_POSE_DIM) - gain @ H) @ Sigma
+
+
+def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
+    args = (mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, noise_var)
+    transposed = [lambda W=W: _pose_update_with(*args, imu_T_world=W)[0] for W in wrong_inverses(mu)]
+    transposed.append(lambda: _pose_update_with(mu, Sigma, z, p_world, camera.Ks,
+                                                rotation_transposed(camera.cam_T_imu), noise_var)[0])
+    return [
+        ("the correction is applied on the left; use mu_new = mu @ se3_exp(K r)\n"
+         "with the right perturbation T = mu exp(delta^) the correction K (z - z_pred) multiplies mu "
+         "on the right",
+         lambda: _pose_update_with(*args, side="left")[0]),
+        ("the correction has the wrong sign\ncheck the minus sign of the pose Jacobian "
+         "(-Ks dpi/dq o_T_i (mu^-1 m)^odot) and the innovation z - z_pred",
+         lambda: _pose_update_with(*args, sign=-1.0)[0]),
+        ("the pose did not move", lambda: mu),
+    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+
+
+@exercise_check
+def check_pose_update(pose_update, hidden=False):
+    """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``."""
+    name = "pose_update"
+    generator, camera = rng(hidden), stereo_camera()
+    imu_T_cam = camera.imu_T_cam
+    call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update])
+    for trial in range(5 if hidden else 3):
+        k = 1 if hidden and trial == 0 else 8
+        T_true = random_pose(generator)
+        p_world = points_in_view(generator, T_true, imu_T_cam, k, depth=(4.0, 40.0))
+        z = camera.predict(T_true, p_world) + generator.normal(scale=1.0, size=(k, 4))
+        A = generator.normal(size=(6, 6)) * 0.05
+        Sigma = A @ A.T + 1e-3 * np.eye(6)
+        mu = T_true @ lie.se3_exp(generator.multivariate_normal(np.zeros(6), Sigma))
+        out = _pair(call(mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, 4.0), name, "(mu_new, Sigma_new)")
+        mu_ref, S_ref = _pose_update_with(mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, 4.0)
+        compare(name, as_array(out[0], name, (4, 4), "pose"), mu_ref, f"(pose mean, {k} observations)",
+                _pose_mean_variants(mu, Sigma, z, p_world, camera, 4.0), rtol=1e-6, atol=1e-7,
+                extra=not_se3)
+        compare(name, as_array(out[1], name, (6, 6), "covariance"), S_ref, "(covariance)", [
+            ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
+        ], rtol=1e-6, atol=1e-10)
+    ok(f"{name}: pose and covariance agree with ekf.pose_update", hidden)
+
+
+def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=True, offset=_POSE_DIM):
+    H = np.zeros((4 * len(slots), _POSE_DIM + 3 * n_landmarks))
+    for i, s in enumerate(slots):
+        rows = slice(4 * i, 4 * i + 4)
+        if pose_first:
+            H[rows, :_POSE_DIM] = J_pose[i]
+            H[rows, offset + 3 * s: offset + 3 * s + 3] = J_landmark[i]
+        else:
+            H[rows, 3 * n_landmarks:] = J_pose[i]
+            H[rows, 3 * s: 3 * s + 3] = J_landmark[i]
+    return H
+
+
+@exercise_check
+def check_slam_jacobian(slam_jacobian, hidden=False):
+    """Exercise 06: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``."""
+    name = "slam_jacobian"
+    generator = rng(hidden)
+    call = student(slam_jacobian, name, hide=[ekf.slot_columns])
+    cases = [(5, [3, 0]), (9, [8, 2, 5, 6]), (1, [0])]
+    if hidden:
+        cases = [(12, [11, 0, 4]), (3, [2, 1, 0]), (20, [19])]
+    for n, slots in cases:
+        slots = np.array(slots, dtype=int)
+        J_pose = generator.normal(size=(len(slots), 4, 6))
+        J_landmark = generator.normal(size=(len(slots), 4, 3))
+        ref = _slam_jacobian_reference(J_pose, J_landmark, slots, n)
+        got = as_array(call(J_pose, J_landmark, slots, n), name, ref.shape)
+        compare(name, got, ref, f"for slots {slots.tolist()} of {n} landmarks", [
+            ("the pose columns come first: the state is [pose (6); landmarks (3n)]\n"
+             "(the seed report orders it [landmarks; pose])",
+             lambda: _slam_jacobian_reference(J_pose, J_landmark, slots, n, pose_first=False)),
+            ("landmark slot s occupies columns 6 + 3 s ... 6 + 3 s + 2\n(after the 6 pose columns)",
+             lambda: _slam_jacobian_reference(J_pose, J_landmark, slots, n, offset=0)),
+        ], atol=0)
+    ok(f"{name}: H has the pose block first and each landmark in its slot's columns", hidden)
+
+
+def _dense_bytes(num_landmarks, stride=1):
+    n = len(range(0, num_landmarks, stride))
+    return (_POSE_DIM + 3 * n) ** 2 * 8
+
+
+@exercise_check
+def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
+    """Exercise 06: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64."""
+    name = "dense_covariance_bytes"
+    cases = [(5105, 1), (13289, 1), (5105, 10), (13289, 20), (7, 3), (1, 1)]
+    if hidden:
+        cases = [(100, 7), (3, 5), (0, 1), (2, 1), (40000, 3), (99, 33)]
+    call = student(dense_covariance_bytes, name)
+    for M, stride in cases:
+        got = call(M, stride)
+        n = len(range(0, M, stride))
+        compare(name, got, _dense_bytes(M, stride), f"for {M} landmarks with stride {stride}", [
+            ("the pose adds 6 dimensions: the state has 6 + 3 n entries", lambda: (3 * n) ** 2 * 8),
+            ("a float64 has 8 bytes", lambda: (6 + 3 * n) ** 2 * 4),
+            ("a covariance is D x D: square the dimension", lambda: (6 + 3 * n) * 8),
+            ("every stride-th landmark gives ceil(M / stride) landmarks, not M // stride\n"
+             "landmarks 0, stride, 2 stride, ... are kept", lambda: (6 + 3 * (M // stride)) ** 2 * 8),
+            ("each landmark has 3 coordinates", lambda: (6 + n) ** 2 * 8),
+        ], rtol=0, atol=0.5)
+    ok(f"{name}: 5105 landmarks -> {_dense_bytes(5105) / 1e9:.2f} GB, 13289 -> {_dense_bytes(13289) / 1e9:.1f} GB",
+       hidden)
+
+
+def _marginal_cases(hidden):
+    if hidden:
+        return [(21, np.r_[0:6, 9:12, 18:21]), (6, np.arange(6)), (12, np.arange(6)), (15, np.r_[0:6, 12:15])]
+    return [(12, np.array([0, 1, 2, 3, 4, 5, 9, 10, 11])), (15, np.arange(9)), (9, np.arange(9))]
+
+
+@exercise_check
+def check_marginalize(marginalize, hidden=False):
+    """Exercise 06: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``."""
+    name = "marginalize"
+    generator = rng(hidden)
+    call = student(marginalize, name)
+    for D, keep in _marginal_cases(hidden):
+        Sigma = random_covariance(generator, D)
+        got = as_array(call(Sigma, keep), name, (len(keep), len(keep)))
+        ref = Sigma[np.ix_(keep, keep)]
+        drop = np.setdiff1d(np.arange(D), keep)
+        conditioned = ref - Sigma[np.ix_(keep, drop)] @ np.linalg.solve(
+            Sigma[np.ix_(drop, drop)], Sigma[np.ix_(drop, keep)]) if len(drop) else ref
+        compare(name, got, ref, f"keeping {len(keep)} of {D} dimensions", [
+            ("this is the Schur complement (conditioning), not the marginal\nmarginalising a Gaussian in "
+             "covariance form just deletes the rows and columns of the removed entries", lambda: conditioned),
+            ("you inverted twice: marginalise in covariance form\nno information matrix is needed",
+             lambda: np.linalg.inv(np.linalg.inv(Sigma)[np.ix_(keep, keep)])),
+        ])
+    ok(f"{name}: deleting rows and columns, the exact marginal", hidden)

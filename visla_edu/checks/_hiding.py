@@ -1,0 +1,191 @@
+"""What a check guards while it runs the student's code: hidden library functions, intact state.
+
+While a check calls the student's function:
+
+* the library's own version of the exercise (and the functions that would make it trivial)
+  is **hidden**: its ``__code__`` is swapped for a stub that raises
+  :class:`LibraryFunctionHidden`, so every alias fails alike (``lie.hat``,
+  ``visla_edu.lie.hat``, a ``from visla_edu.lie import hat`` binding, and every library
+  function that calls it); the real code comes back in a ``finally``;
+* the **library and the checks must stay as shipped**: before and after each call every
+  function of every loaded ``visla_edu`` module is checked to come from the package's files
+  (not from a notebook cell), and a module attribute the call reassigned (``importlib.reload``,
+  ``checks._core.compare = ...``) is put back and reported.
+
+The checks compute every expected value after the call, with nothing hidden.
+"""
+
+import functools
+import os
+import sys
+import types
+from contextlib import contextmanager
+
+__all__ = ["LibraryFunctionHidden", "label", "hidden_message", "hide", "guard", "verify_library"]
+
+#: The ``visla_edu`` package folder: library code must come from files under it.
+PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+
+#: Longest line of a failure message (``nbgrader validate`` cuts lines at 87 characters).
+MAX_FIRST_LINE = 79
+
+
+class LibraryFunctionHidden(RuntimeError):
+    """Raised by a library function that a check hides while it runs the student's code."""
+
+
+def label(fn):
+    """Short dotted name of a library function: ``lie.hat``, ``camera.StereoCamera.predict``."""
+    parts = [p for p in fn.__module__.split(".")[1:] if not p.startswith("_")]
+    return ".".join(parts + [fn.__qualname__])
+
+
+def hidden_message(exercise, fn):
+    """The error text of a hidden function: a short first line, the details after it."""
+    name = label(fn)
+    first = next(line for line in (
+        f"write your own {exercise}; the library's {name} is not available inside this check",
+        f"write your own {exercise}: {name} is hidden inside this check",
+        f"write your own {exercise}: {name} is hidden here",
+        f"write your own {exercise}: the library's version is hidden here",
+    ) if len(line) <= MAX_FIRST_LINE)
+    return (f"{first}\nThe check hides visla_edu's {name} while it runs your {exercise}, so that it "
+            "grades your code, not the library's. Use numpy/scipy and the functions the exercise "
+            "text allows.")
+
+
+def _stub_code(fn, message):
+    """A code object with ``fn``'s name whose body raises :class:`LibraryFunctionHidden`."""
+    source = (f"def {fn.__name__}(*args, **kwargs):\n"
+              f"    raise __import__('sys').modules[{__name__!r}].LibraryFunctionHidden({message!r})\n")
+    namespace = {}
+    exec(compile(source, f"<hidden by visla_edu.checks: {label(fn)}>", "exec"), namespace)  # noqa: S102
+    return namespace[fn.__name__].__code__
+
+
+@contextmanager
+def hide(functions, exercise):
+    """Within the block, calling any of ``functions`` raises :class:`LibraryFunctionHidden`.
+
+    Parameters
+    ----------
+    functions : iterable of function
+        Plain Python functions without closures (module functions or methods).
+    exercise : str
+        The student's function, named in the error message.
+    """
+    saved = []
+    try:
+        for fn in dict.fromkeys(functions):  # each once, in order
+            saved.append((fn, fn.__code__, fn.__defaults__, fn.__kwdefaults__))
+            fn.__code__ = _stub_code(fn, hidden_message(exercise, fn))
+            fn.__defaults__, fn.__kwdefaults__ = None, None
+        yield
+    finally:
+        for fn, code, defaults, kwdefaults in reversed(saved):
+            fn.__code__, fn.__defaults__, fn.__kwdefaults__ = code, defaults, kwdefaults
+
+
+def _visla_modules(include_checks=True):
+    """``(name, module)`` of every loaded ``visla_edu`` module."""
+    return [(name, module) for name, module in list(sys.modules.items())
+            if (name == "visla_edu" or name.startswith("visla_edu.")) and isinstance(module, types.ModuleType)
+            and (include_checks or not name.startswith("visla_edu.checks"))]
+
+
+def _functions_of(module):
+    """``(short name, function)`` for the functions and methods defined in ``module``'s namespace."""
+    short = module.__name__.removeprefix("visla_edu.")
+    for attr, value in list(vars(module).items()):
+        if isinstance(value, types.FunctionType):
+            yield f"{short}.{attr}", value
+        elif isinstance(value, type) and value.__module__.startswith("visla_edu"):
+            for key, member in list(vars(value).items()):
+                member = getattr(member, "__func__", getattr(member, "fget", member))
+                if isinstance(member, types.FunctionType):
+                    yield f"{short}.{value.__name__}.{key}", member
+
+
+def _foreign(fn):
+    """True if ``fn`` was written in a notebook, or is a library function running notebook code."""
+    home = str(fn.__globals__.get("__name__", ""))
+    if home in ("__main__", "__mp_main__"):
+        return True  # defined in the notebook (or script) itself
+    if not home.startswith("visla_edu"):
+        return False  # a helper of numpy, the standard library... bound in a library module
+    filename = fn.__code__.co_filename
+    if filename.startswith("<"):  # generated code (dataclass methods) or an interactive cell
+        return filename.startswith("<ipython-input")
+    return not _in_package(filename)
+
+
+@functools.lru_cache(maxsize=4096)
+def _in_package(filename):
+    """True if the file ``filename`` lies under :data:`PACKAGE_DIR` (cached: realpath is slow)."""
+    return os.path.realpath(filename).startswith(PACKAGE_DIR + os.sep)
+
+
+def verify_library(modules=None):
+    """Fail if a function of a loaded library module was replaced by notebook code.
+
+    Parameters
+    ----------
+    modules : list of module, optional
+        The library modules to verify; all loaded ``visla_edu`` modules but the checks by default.
+
+    Raises
+    ------
+    AssertionError
+        Naming the first replaced function.
+    """
+    if modules is None:
+        modules = [module for _, module in _visla_modules(include_checks=False)]
+    for module in modules:
+        for name, fn in _functions_of(module):
+            if _foreign(fn):
+                raise AssertionError(
+                    f"visla_edu's {name} was replaced by code from this notebook\n"
+                    "The checks compare your functions with the library, so the library must stay as "
+                    "installed: restart the kernel and run the notebook without assigning to visla_edu.")
+
+
+def _restore_changes(snapshot):
+    """Put back what was reassigned since ``snapshot``; return the names that changed."""
+    changed = []
+    for name, module, saved in snapshot:
+        if sys.modules.get(name) is not module:
+            sys.modules[name] = module
+            changed.append(name)
+        namespace = vars(module)
+        for key, value in saved.items():
+            if not key.startswith("__") and namespace.get(key, saved) is not value:
+                namespace[key] = value
+                changed.append(f"{name}.{key}")
+    return changed
+
+
+@contextmanager
+def guard(functions, exercise):
+    """Verify the library, hide ``functions``, run the block, restore and verify again.
+
+    Raises
+    ------
+    AssertionError
+        If the library was replaced before the block, or the block reassigned an attribute of a
+        ``visla_edu`` module (put back first) or replaced library code.
+    """
+    modules = _visla_modules()
+    library = [module for name, module in modules if not name.startswith("visla_edu.checks")]
+    verify_library(library)
+    snapshot = [(name, module, dict(vars(module))) for name, module in modules]
+    try:
+        with hide(functions, exercise):
+            yield
+    finally:
+        changed = _restore_changes(snapshot)
+        if changed:
+            raise AssertionError(
+                f"your {exercise} changed visla_edu while the check ran\n"
+                f"It reassigned {', '.join(changed[:5])}; the check put them back. A solution must "
+                "compute its result, not modify the library or the checks.")
+    verify_library(library)

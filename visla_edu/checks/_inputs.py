@@ -1,0 +1,147 @@
+"""Inputs the checks draw (rotations, twists, poses, points in view, rigs) and shared mistakes."""
+
+import numpy as np
+
+from visla_edu import camera as cam
+from visla_edu import lie
+
+__all__ = [
+    "NEAR_ZERO_HINT",
+    "TRANSPOSED_R_HINT",
+    "unit",
+    "rotation_vectors",
+    "twists",
+    "random_pose",
+    "rig",
+    "stereo_camera",
+    "points_in_view",
+    "random_covariance",
+    "swap_twist",
+    "not_rotation",
+    "not_se3",
+    "rotation_transposed",
+    "wrong_inverses",
+    "project_with",
+]
+
+NEAR_ZERO_HINT = (
+    "near angle 0: use the small-angle series\n"
+    "For tiny angles a closed form like sin(t)/t or (1 - cos t)/t^2 divides 0 by 0 (and loses its "
+    "digits well before): below a small angle (visla-edu switches at 0.1 rad) use the Taylor series "
+    "(sin(t)/t ~ 1 - t^2/6, (1 - cos t)/t^2 ~ 1/2 - t^2/24, (t - sin t)/t^3 ~ 1/6 - t^2/120).")
+
+TRANSPOSED_R_HINT = (
+    "looks like you used R instead of R^T (a transposed rotation)\n"
+    "A rotation block was transposed somewhere: inv(world_T_imu) = [[R^T, -R^T p], [0, 1]] (both "
+    "R^T), world_T_imu maps IMU coordinates into the world with R (not R^T), and cam_T_imu = "
+    "inv(imu_T_cam) (use lie.se3_inv rather than transposing by hand).")
+
+
+def unit(rng):
+    """A random unit 3-vector."""
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+def rotation_vectors(rng, hidden=False):
+    """Rotation vectors over every regime: zero, tiny, at the series switch, generic, near pi."""
+    angles = [0.0, 1e-12, 1e-9, 1e-6, 1e-3, 0.05, 0.1, 0.5, 1.0, 2.0, 3.0, np.pi - 1e-6, np.pi]
+    if hidden:
+        angles = [0.0, 1e-15, 3e-8, 2e-4, 0.0999, 0.1001, 0.7, 1.5, 2.5, np.pi - 1e-9, np.pi - 1e-3]
+    return [a * unit(rng) for a in angles] + [rng.normal(size=3) for _ in range(4)]
+
+
+def twists(rng, hidden=False):
+    """Twists ``[v; w]`` with the rotation vectors of :func:`rotation_vectors`, at rest, pure translation."""
+    out = [np.concatenate([rng.normal(scale=3.0, size=3), w]) for w in rotation_vectors(rng, hidden)]
+    out.append(np.zeros(6))
+    out.append(np.array([2.0, -1.0, 0.5, 0.0, 0.0, 0.0]))
+    return out
+
+
+def random_pose(rng, scale=10.0):
+    """A random pose: translation of size ``scale``, any rotation."""
+    u = np.concatenate([rng.normal(scale=scale, size=3), rng.normal(size=3)])
+    return lie.se3_exp(u)
+
+
+def rig():
+    """A KITTI-like stereo rig (the simulator's): K, b, imu_T_cam."""
+    from visla_edu.simulate import default_rig
+
+    return default_rig()
+
+
+def stereo_camera():
+    """The :class:`~visla_edu.camera.StereoCamera` of :func:`rig`."""
+    return cam.StereoCamera(*rig())
+
+
+def points_in_view(rng, world_T_imu, imu_T_cam, n, depth=(2.0, 60.0)):
+    """World points (n, 3) the left camera sees at depths in ``depth`` (m)."""
+    d = rng.uniform(*depth, size=n)
+    x = rng.uniform(-0.8, 0.8, size=n) * d
+    y = rng.uniform(-0.3, 0.3, size=n) * d
+    p_cam = np.stack([x, y, d], axis=1)
+    world_T_cam = world_T_imu @ imu_T_cam
+    return p_cam @ world_T_cam[:3, :3].T + world_T_cam[:3, 3]
+
+
+def random_covariance(rng, D):
+    """A well-conditioned random covariance (D, D)."""
+    A = rng.normal(size=(D, D))
+    return A @ A.T + D * np.eye(D)
+
+
+def swap_twist(u):
+    """``[w; v]`` for ``u = [v; w]`` (the other twist order)."""
+    u = np.asarray(u, dtype=float)
+    return np.concatenate([u[3:], u[:3]])
+
+
+def not_rotation(R):
+    """A hint if ``R`` is not a rotation, else ""."""
+    R = np.asarray(R)
+    if not np.allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-9):
+        return "the result is not a rotation (R R^T != I)\nIs a term of Rodrigues' formula missing?"
+    if np.linalg.det(R) < 0:
+        return "det(R) = -1: a reflection, not a rotation"
+    return ""
+
+
+def not_se3(T):
+    """A hint if ``T`` is not a pose, else ""."""
+    T = np.asarray(T)
+    if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
+        return "the bottom row of a pose must be [0, 0, 0, 1]: the result is not in SE(3)"
+    hint = _not_rotation_block(T[:3, :3])
+    return hint
+
+
+def _not_rotation_block(R):
+    hint = not_rotation(R)
+    return hint.replace("the result is not a rotation", "the rotation block is not a rotation")
+
+
+def rotation_transposed(T):
+    """``T`` with its rotation block transposed and its translation kept."""
+    out = np.array(T, dtype=float)
+    out[:3, :3] = out[:3, :3].T
+    return out
+
+
+def wrong_inverses(T):
+    """Inverses of ``T`` written with R where R^T belongs: ``[[R, -R p]]``, ``[[R, -R^T p]]``, ``[[R^T, -R p]]``."""
+    R, p = T[:3, :3], T[:3, 3]
+    out = []
+    for block, shift in ((R, -R @ p), (R, -R.T @ p), (R.T, -R @ p)):
+        W = np.eye(4)
+        W[:3, :3], W[:3, 3] = block, shift
+        out.append(W)
+    return out
+
+
+def project_with(Ks, cam_T_imu, imu_T_world, p_world):
+    """Stereo pixels (M, 4) ``Ks pi(cam_T_imu imu_T_world m)`` with explicit transforms."""
+    p_h = np.c_[p_world, np.ones(len(p_world))]
+    return cam.projection(p_h @ (cam_T_imu @ imu_T_world).T) @ Ks.T

@@ -1,0 +1,270 @@
+"""Checks of notebooks 01 and 05 (SE(3) kinematics): hat, exponentials, dead reckoning, curly-hat, F."""
+
+import numpy as np
+
+from visla_edu import lie, motion
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
+from visla_edu.checks._inputs import (NEAR_ZERO_HINT, not_rotation, not_se3, rotation_vectors, swap_twist,
+                                      twists, unit)
+
+__all__ = [
+    "check_hat",
+    "check_so3_exp",
+    "check_se3_exp",
+    "check_dead_reckon",
+    "check_curly_hat",
+    "check_pose_transition",
+]
+
+_EPS = np.finfo(float).eps
+
+
+def _hat_inputs(generator, hidden):
+    if hidden:
+        fixed = [np.array([1, -2, 3]), [0.5, 0.0, -1.0], 1e8 * unit(generator)]
+    else:
+        fixed = [np.array([1.0, 2.0, 3.0]), np.zeros(3)]
+    return fixed + [generator.normal(size=3) for _ in range(5)]
+
+
+@exercise_check
+def check_hat(hat, hidden=False):
+    """Exercise 01: ``hat(w) -> (3, 3)`` with ``hat(w) @ x == cross(w, x)``."""
+    name = "hat"
+    call = student(hat, name, hide=[lie.hat])
+    for w in _hat_inputs(rng(hidden), hidden):
+        got = as_array(call(w), name, (3, 3))
+        w = np.asarray(w, dtype=float)
+        ref = lie.hat(w)
+        compare(name, got, ref, f"for w = {fmt(w)}", [
+            ("the signs are flipped (you built hat(w)^T = -hat(w))\nhat(w) @ x must equal np.cross(w, x)",
+             lambda: ref.T),
+            ("right numbers in the wrong places\nrow 0 is [0, -w3, w2], row 1 [w3, 0, -w1], row 2 [-w2, w1, 0]",
+             lambda: lie.hat(w[[2, 0, 1]])),
+        ], extra=lambda g: "" if np.allclose(g, -g.T) else "hat(w) must be skew-symmetric (hat(w)^T = -hat(w))")
+    ok(f"{name}: skew-symmetric and hat(w) @ x == cross(w, x)", hidden)
+
+
+def _rodrigues_unnormalised(w):
+    """A mistake: Rodrigues with the unit axis replaced by the rotation vector itself."""
+    t = np.linalg.norm(w)
+    W = lie.hat(w)
+    return np.eye(3) + np.sin(t) * W + (1 - np.cos(t)) * W @ W
+
+
+def _rodrigues_minus(w):
+    """A mistake: the second-order term subtracted."""
+    t = np.linalg.norm(w)
+    W = lie.hat(w) / t
+    return np.eye(3) + np.sin(t) * W - (1 - np.cos(t)) * W @ W
+
+
+def _tiny_rotation_vectors(generator, hidden):
+    """Angles where ``(1 - cos t)/t^2`` and ``(t - sin t)/t^3`` lose digits, axes far from the axes."""
+    angles = (3e-7, 3e-6, 2e-5) if hidden else (1e-7, 1e-6, 1e-5)
+    out = []
+    for t in angles:
+        axis = np.array([1.0, -1.0, 1.0]) + generator.uniform(-0.2, 0.2, 3)
+        out.append(t * axis / np.linalg.norm(axis))
+    return out
+
+
+def _series_B(t):
+    """``(1 - cos t)/t^2`` to full precision for any ``t > 0``: ``2 sin^2(t/2) / t^2``."""
+    return 0.5 * (np.sin(t / 2) / (t / 2)) ** 2
+
+
+def _series_C(t):
+    """``(t - sin t)/t^3`` by its series (for ``t <= 1e-4`` the truncation is below 1e-30)."""
+    t2 = t * t
+    return (1 - t2 / 20 * (1 - t2 / 42)) / 6
+
+
+def _tiny_angle_failure(name, t, error):
+    digits = max(0.0, -np.log10(_EPS / (t * t / 2)))
+    return fail(name, f"no small-angle series: digits lost at {t:.0e} rad",
+                f"at the angle t = {t:.0e} rad your result is off by {error:.1e} (relative) in the terms "
+                f"with hat(w); in float64 (1 - cos t)/t^2 keeps only about {digits:.0f} correct digit(s) there "
+                "and (t - sin t)/t^3 fewer.",
+                "Below a small angle (visla-edu switches at 0.1 rad) use the Taylor series "
+                "(1 - cos t)/t^2 ~ 1/2 - t^2/24 + t^4/720, (t - sin t)/t^3 ~ 1/6 - t^2/120 + t^4/5040; "
+                "a guard at exactly t == 0 is not enough.")
+
+
+def _check_tiny_rotation(name, R, w):
+    """Fail if the second-order part ``B hat(w)^2`` of ``R`` lost digits (off-diagonal, symmetric part)."""
+    t = float(np.linalg.norm(w))
+    ref = _series_B(t) * np.array([w[0] * w[1], w[0] * w[2], w[1] * w[2]])
+    sym = 0.5 * (R + R.T)
+    got = sym[[0, 0, 1], [1, 2, 2]]
+    error = float(np.max(np.abs(got - ref) / np.abs(ref)))
+    if not error <= 1e-6:
+        raise _tiny_angle_failure(name, t, error)
+
+
+@exercise_check
+def check_so3_exp(so3_exp, hidden=False):
+    """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
+
+    Hides ``lie.so3_exp``, ``lie.se3_exp`` and their coefficient helpers; ``lie.hat`` stays.
+    """
+    name = "so3_exp"
+    generator = rng(hidden)
+    call = student(so3_exp, name, hide=[lie.so3_exp, lie.se3_exp, lie._sin_over_theta,
+                                        lie._one_minus_cos_over_theta2])
+    for w in rotation_vectors(generator, hidden):
+        got = as_array(call(w), name, (3, 3))
+        ref = lie.so3_exp(w)
+        compare(name, got, ref, f"for w = {fmt(w)} (angle {np.linalg.norm(w):.3g} rad)", [
+            ("you returned R^T (the rotation by -w)\ncheck the sign of the hat(w) term", lambda: ref.T),
+            ("the axis is not normalised\nRodrigues uses hat(w / theta), i.e. "
+             "I + sin(t)/t hat(w) + (1 - cos t)/t^2 hat(w)^2", lambda: _rodrigues_unnormalised(w)),
+            ("the hat(w)^2 term has the wrong sign\nit is + (1 - cos t)/t^2 hat(w)^2",
+             lambda: _rodrigues_minus(w)),
+        ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_rotation)
+    for w in _tiny_rotation_vectors(generator, hidden):
+        _check_tiny_rotation(name, as_array(call(w), name, (3, 3)), w)
+    ok(f"{name}: Rodrigues agrees with the library from 0 to pi, to full precision at 1e-7 rad", hidden)
+
+
+def _se3_no_jacobian(u):
+    T = lie.se3_exp(u)
+    T[:3, 3] = u[:3]
+    return T
+
+
+def _check_tiny_twist(name, T, u):
+    """Fail if ``V v`` (or the rotation) of ``T = se3_exp(u)`` lost digits at a tiny angle."""
+    v, w = u[:3], u[3:]
+    t = float(np.linalg.norm(w))
+    wv = np.cross(w, v)
+    ref = v + _series_B(t) * wv + _series_C(t) * np.cross(w, wv)
+    error = float(np.max(np.abs(T[:3, 3] - ref)) / np.linalg.norm(v))
+    if not error <= 1e-12:
+        raise _tiny_angle_failure(name, t, error)
+    _check_tiny_rotation(name, T[:3, :3], w)
+
+
+@exercise_check
+def check_se3_exp(se3_exp, hidden=False):
+    """Exercise 01: ``se3_exp(u) -> (4, 4)`` for a twist ``u = [v; w]``, closed form.
+
+    Hides ``lie.se3_exp`` (and the library's (t - sin t)/t^3); ``lie.so3_exp`` and ``lie.hat`` stay.
+    """
+    name = "se3_exp"
+    generator = rng(hidden)
+    call = student(se3_exp, name, hide=[lie.se3_exp, lie._theta_minus_sin_over_theta3])
+    for u in twists(generator, hidden):
+        got = as_array(call(u), name, (4, 4))
+        ref = lie.se3_exp(u)
+        compare(name, got, ref, f"for u = {fmt(u)} (angle {np.linalg.norm(u[3:]):.3g} rad)", [
+            ("wrong twist order: u = [v; w] (linear first); you used [w; v]",
+             lambda: lie.se3_exp(swap_twist(u))),
+            ("you returned the inverse pose exp(-u^)\ncheck the signs", lambda: lie.se3_exp(-u)),
+            ("the translation is v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + "
+             "(t - sin t)/t^3 hat(w)^2 (the left Jacobian of SO(3))", lambda: _se3_no_jacobian(u)),
+            ("the rotation block is transposed (R^T instead of R)",
+             lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
+        ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_se3)
+    for w in _tiny_rotation_vectors(generator, hidden):
+        u = np.concatenate([generator.normal(scale=3.0, size=3), w])
+        _check_tiny_twist(name, as_array(call(u), name, (4, 4)), u)
+    ok(f"{name}: agrees with the library for twists [v; w] from rest to angles near pi", hidden)
+
+
+def _dead_reckon_left(time_stamps, twist_samples):
+    poses = [np.eye(4)]
+    for t, tau in enumerate(np.diff(time_stamps)):
+        poses.append(lie.se3_exp(tau * twist_samples[t]) @ poses[-1])
+    return np.array(poses)
+
+
+def _dead_reckon_no_tau(time_stamps, twist_samples):
+    poses = [np.eye(4)]
+    for t in range(len(time_stamps) - 1):
+        poses.append(poses[-1] @ lie.se3_exp(twist_samples[t]))
+    return np.array(poses)
+
+
+def _drive(generator, T, hidden):
+    """Time stamps (T,) and twists (T, 6) of a random drive (hidden: irregular steps, a stop)."""
+    time_stamps = 100.0 + np.cumsum(generator.uniform(0.02 if hidden else 0.08, 0.12, T))
+    samples = np.concatenate([generator.normal([8, 0, 0], [1, 0.3, 0.1], (T, 3)),
+                              generator.normal([0, 0, 0.1], [0.05, 0.05, 0.3], (T, 3))], axis=1)
+    if hidden:
+        samples[T // 3: T // 2] = 0.0  # the car stops
+    return time_stamps, samples
+
+
+@exercise_check
+def check_dead_reckon(dead_reckon, hidden=False):
+    """Exercise 01: ``dead_reckon(time_stamps (T,), twists (T, 6)) -> (T, 4, 4)`` from the identity."""
+    name = "dead_reckon"
+    T = 45 if hidden else 30
+    time_stamps, samples = _drive(rng(hidden), T, hidden)
+    call = student(dead_reckon, name, hide=[motion.dead_reckon, motion.predict_pose])
+    got = as_array(call(time_stamps, samples), name, (T, 4, 4))
+    ref = motion.dead_reckon(time_stamps, samples)
+    compare(name, got, ref, f"on a random {T}-step drive", [
+        ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
+         "T_{t+1} = T_t exp(tau_t u_t^) (multiply on the right)", lambda: _dead_reckon_left(time_stamps, samples)),
+        ("wrong twist order: u = [v; w] (linear first)",
+         lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]])),
+        ("the step from t to t+1 must use u_t, not u_{t+1}\nu_t is the sample at the start of the interval",
+         lambda: motion.dead_reckon(time_stamps, samples, lag=1)),
+        ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u_t^)",
+         lambda: _dead_reckon_no_tau(time_stamps, samples)),
+        ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
+    ], atol=1e-8)
+    ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon", hidden)
+
+
+@exercise_check
+def check_curly_hat(curly_hat, hidden=False):
+    """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``."""
+    name = "curly_hat"
+    generator = rng(hidden)
+    fixed = [np.zeros(6), np.array([0.0, 0, 0, 1e-9, 0, 0])] if hidden else [np.array([1.0, 2, 3, 4, 5, 6])]
+    call = student(curly_hat, name, hide=[lie.curly_hat])
+    for u in fixed + [generator.normal(size=6) for _ in range(4)]:
+        got = as_array(call(u), name, (6, 6))
+        ref = lie.curly_hat(u)
+        v, w = lie.hat(u[:3]), lie.hat(u[3:])
+        Z = np.zeros((3, 3))
+        compare(name, got, ref, f"for u = {fmt(u)}", [
+            ("wrong twist order: u = [v; w]\nthe diagonal blocks are hat(w) = hat(u[3:]) and the "
+             "off-diagonal one hat(v) = hat(u[:3])", lambda: lie.curly_hat(swap_twist(u))),
+            ("hat(v) belongs in the upper-right block\n[[hat(w), hat(v)], [0, hat(w)]] for [v; w]",
+             lambda: np.block([[w, Z], [v, w]])),
+            ("the signs are flipped (you built curly_hat(-u))", lambda: -ref),
+            ("curly_hat is transposed", lambda: ref.T),
+        ])
+    ok(f"{name}: expm(curly_hat(u)) == adjoint(se3_exp(u)) holds with your matrix", hidden)
+
+
+@exercise_check
+def check_pose_transition(pose_transition, hidden=False):
+    """Exercise 05: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
+
+    Hides ``motion.pose_transition``, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp`` stays.
+    """
+    name = "pose_transition"
+    generator = rng(hidden)
+    call = student(pose_transition, name, hide=[motion.pose_transition, motion.imu_step, lie.adjoint])
+    for u in twists(generator, hidden)[1 if hidden else 0::2]:
+        tau = float(generator.uniform(0.05, 0.2))
+        out = call(u, tau)
+        if np.shape(out) == (4, 4):
+            raise fail(name, "got a 4x4 matrix; F is 6x6, it acts on perturbations",
+                       "use the adjoint of exp(-tau u^), a 6x6 matrix")
+        got = as_array(out, name, (6, 6))
+        ref = motion.pose_transition(u, tau)
+        compare(name, got, ref, f"for u = {fmt(u)}, tau = {tau:.3f}", [
+            ("missing minus sign: F = exp(-tau curly_hat(u)) = Ad(exp(-tau u^))\nthe perturbation is "
+             "carried backwards through the motion step", lambda: motion.pose_transition(u, -tau)),
+            ("F is transposed", lambda: ref.T),
+            ("wrong twist order: u = [v; w]", lambda: motion.pose_transition(swap_twist(u), tau)),
+            ("you used I - tau curly_hat(u), the first-order approximation\nuse the exact closed form "
+             "Ad(exp(-tau u^))", lambda: np.eye(6) - tau * lie.curly_hat(u)),
+        ], rtol=1e-7, atol=1e-9, nan_hint=NEAR_ZERO_HINT)
+    ok(f"{name}: closed form agrees with expm(-tau curly_hat(u)), including at rest", hidden)
