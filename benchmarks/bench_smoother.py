@@ -130,7 +130,7 @@ def _noisy_twin(dataset, seed=0):
 
 def case_0020(trace, noisy=False):
     from visla_edu import data, motion, run, smoother
-    from visla_edu.ekf import FilterConfig
+    from visla_edu.filters import FilterConfig
 
     dataset = data.load("0020")
     truth = _kitti_truth(dataset, data.data_dir() / "kitti_odometry_06_poses.txt")

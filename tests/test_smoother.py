@@ -11,7 +11,7 @@ from scipy.sparse import linalg as sparse_linalg
 
 from fdiff import fd_jacobian  # tests/fdiff.py
 from visla_edu import lie, metrics, motion, run, simulate, smoother
-from visla_edu.ekf import FilterConfig
+from visla_edu.filters import FilterConfig
 from visla_edu.smoother import _batch, _envelope, _normal, _problem
 
 FD_REL = 1e-6
