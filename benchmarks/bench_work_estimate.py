@@ -4,7 +4,7 @@ Usage::
 
     VISLA_EDU_DATA=/path/to/course/data python benchmarks/bench_work_estimate.py [--frames 60]
 
-For each case, :func:`visla_edu.run.estimate_work` is computed for the first ``--frames``
+For each case, :func:`visla_edu.workload.estimate_work` is computed for the first ``--frames``
 frames of the drive, then the filter runs over those frames in its own process (one BLAS
 thread, as the CLI runs it), and the table prints estimated and measured seconds and the
 estimated peak bytes against the measured growth of the resident memory (ru_maxrss after the
@@ -58,12 +58,12 @@ def _first_frames(ds, frames):
 
 
 def _measure(name, mode, dense, stride, frames):
-    from visla_edu import run
+    from visla_edu import run, workload
     from visla_edu.filters import FilterConfig
 
     ds = _dataset(name, frames)
     config = FilterConfig(landmark_stride=stride, extrinsic_correction="none")
-    estimate = run.estimate_work(ds, mode, config, dense)
+    estimate = workload.estimate_work(ds, mode, config, dense)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     start = time.perf_counter()
     run.run_filter(ds, mode, config, dense=dense, progress=False)

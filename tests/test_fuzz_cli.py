@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import fuzzgen as fz  # tests/fuzzgen.py
-from visla_edu import data, ekf, motion, release, run
+from visla_edu import data, ekf, motion, release, run, workload
 from visla_edu.data import _features
 from visla_edu.filters import _state
 
@@ -341,7 +341,7 @@ def test_port_out_of_range_is_refused(capsys):
 def test_dense_run_past_the_limits_is_refused_then_forced(tmp_path, capsys, monkeypatch):
     """5-unbounded-work: past the limit (shrunk for the tiny drive) refused with a stride; --force runs."""
     path = fz.course_file(tmp_path)
-    monkeypatch.setattr(run, "WORK_LIMIT_BYTES", 2**16)  # the tiny drive's 2 D^2 8 is about 3 MiB
+    monkeypatch.setattr(workload, "WORK_LIMIT_BYTES", 2**16)  # the tiny drive's 2 D^2 8 is about 3 MiB
     argv = ["run", path, "--mode", "slam", "--dense", "--quiet", "--set", "extrinsic_correction=none"]
     outcome = fz.cli_run(argv, capsys, measure=False)
     line = fz.assert_one_line(outcome, 2, r"--mode slam --dense on drive with landmark stride 1 would need "
@@ -350,7 +350,7 @@ def test_dense_run_past_the_limits_is_refused_then_forced(tmp_path, capsys, monk
     assert "slam (dense): states up to 456 dimensions" in outcome.out and "mode slam" not in outcome.out  # not run
     stride = int(re.search(r"--landmark-stride (\d+)", line).group(1))
     config = run.FilterConfig(landmark_stride=stride)
-    assert run.estimate_work(data.load(path), "slam", config, dense=True).peak_bytes <= 2**16
+    assert workload.estimate_work(data.load(path), "slam", config, dense=True).peak_bytes <= 2**16
     fz.assert_ok(fz.cli_run([*argv, "--force"], capsys, measure=False))
 
 

@@ -37,7 +37,7 @@ import traceback
 import warnings
 from pathlib import Path
 
-from visla_edu.codes import MODES, SLAM
+from visla_edu.codes import RUN_MODES, SLAM, SMOOTHER_MODES
 
 __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
 
@@ -102,7 +102,7 @@ def build_parser():
 def _add_run_parser(sub, common):
     run = sub.add_parser("run", parents=[common], help="run a filter over a dataset")
     run.add_argument("dataset", help="03, 0022, 10, sim, sim-small, sim-tiny or a path to an .npz file")
-    run.add_argument("--mode", default=SLAM, choices=MODES)
+    run.add_argument("--mode", default=SLAM, choices=RUN_MODES)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--force", action="store_true",
                      help="run even when the estimated memory or time exceeds the limits (2 GiB, 15 min)")
@@ -193,7 +193,7 @@ def _cmd_info(args):
 def _cmd_run(args):
     import numpy as np
 
-    from visla_edu import run
+    from visla_edu import run, workload
     from visla_edu.filters import FilterDivergedError
 
     config = _run_config(args)
@@ -203,10 +203,15 @@ def _cmd_run(args):
         print(dataset.label)
     _check_work(dataset, args, config)
     try:
-        result = run.run_filter(dataset, args.mode, config, dense=args.dense, progress=False if args.quiet else None,
-                                verbose=True, blas_threads=args.blas_threads)
+        progress = False if args.quiet else None
+        if args.mode in SMOOTHER_MODES:
+            result = run.run_smoother(dataset, args.mode, config, progress=progress, verbose=True,
+                                      blas_threads=args.blas_threads)
+        else:
+            result = run.run_filter(dataset, args.mode, config, dense=args.dense, progress=progress,
+                                    verbose=True, blas_threads=args.blas_threads)
     except (FilterDivergedError, np.linalg.LinAlgError, ArithmeticError, MemoryError) as err:
-        err.hint = run.divergence_hint(dataset, config, getattr(err, "frame", None))
+        err.hint = workload.divergence_hint(dataset, config, getattr(err, "frame", None))
         raise
     print(result.summary())
     if dataset.ground_truth is not None:
@@ -283,9 +288,9 @@ def _check_work(dataset, args, config):
     """Print the estimated cost of a dense (or a heavy) run; refuse one past the limits unless ``--force``."""
     import dataclasses
 
-    from visla_edu import run
+    from visla_edu import workload
 
-    estimate = run.estimate_work(dataset, args.mode, config, args.dense)
+    estimate = workload.estimate_work(dataset, args.mode, config, args.dense)
     over = estimate.over_limits()
     if args.dense or over:
         print(estimate.summary())
@@ -295,7 +300,7 @@ def _check_work(dataset, args, config):
         print(f"--force: running anyway ({' and '.join(over)})")
         return
     stride = config.landmark_stride
-    while stride < dataset.num_landmarks and run.estimate_work(
+    while stride < dataset.num_landmarks and workload.estimate_work(
             dataset, args.mode, dataclasses.replace(config, landmark_stride=stride), args.dense).over_limits():
         stride *= 2
     dense = " --dense" if args.dense else ""
@@ -330,7 +335,10 @@ def _print_evaluation(evaluations, ground_truth, mode):
     """The lines ``visla-edu run`` prints about the ground truth, estimate and dead reckoning."""
     source = Path(ground_truth.source).name if ground_truth.source else "the simulation"
     print(f"ATE against ground truth ({source}, {ground_truth.num_frames} frames), drift over 100-800 m segments:")
-    rows = {f"{mode} estimate": evaluations["estimate"], "dead reckoning": evaluations["dead_reckoning"]}
+    rows = {f"{mode} estimate": evaluations["estimate"]}
+    if "start" in evaluations:
+        rows["slam (EKF) it started from"] = evaluations["start"]
+    rows["dead reckoning"] = evaluations["dead_reckoning"]
     width = max(map(len, rows)) + 2
     for label, evaluation in rows.items():
         print(f"  {label:{width}s}{evaluation.summary()}")

@@ -1,4 +1,4 @@
-"""Names shared by every layer: observation status codes and filter mode names.
+"""Names shared by every layer: observation status codes, filter and smoother mode names.
 
 A leaf module (it imports nothing of the package), so views and the command line can use the
 codes and the mode names without importing the filters.
@@ -28,6 +28,10 @@ __all__ = [
     "VIO",
     "SLAM",
     "MODES",
+    "SMOOTH",
+    "WINDOW",
+    "SMOOTHER_MODES",
+    "RUN_MODES",
 ]
 
 OBS_USED = 0  #: used in the update
@@ -45,3 +49,11 @@ SLAM = "slam"  #: joint EKF over the pose and the landmarks (active set or dense
 
 #: Filter modes by name, in teaching order.
 MODES = (DEADRECKON, MAPPING, VIO, SLAM)
+
+SMOOTH = "smooth"  #: batch least squares over the whole drive, started from the joint EKF
+WINDOW = "window"  #: fixed-lag sliding-window least squares, frame by frame
+
+#: Smoother modes (:mod:`visla_edu.smoother`); they run over the whole drive, not step by step.
+SMOOTHER_MODES = (SMOOTH, WINDOW)
+#: Everything ``visla-edu run --mode`` takes: the filters, then the smoothers.
+RUN_MODES = MODES + SMOOTHER_MODES

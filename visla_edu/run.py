@@ -5,8 +5,10 @@
 :class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
 :func:`load_result` write and read it (atomically, :func:`visla_edu._files.atomic_write`). How
 the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
-(:func:`limit_blas_threads`) and the progress bar. :func:`estimate_work` says what a run will cost
-before it starts; :func:`divergence_hint` names the likely cause when a run fails.
+(:func:`limit_blas_threads`) and the progress bar. :func:`run_smoother` runs the batch or the
+sliding-window smoother (:mod:`visla_edu.smoother`) into the same :class:`RunResult`.
+:mod:`visla_edu.workload` says what a run will cost before it starts and names the likely cause
+when one fails.
 
 >>> from visla_edu import data, run
 >>> ds = data.load("sim-tiny")
@@ -16,7 +18,6 @@ True
 """
 
 import contextlib
-import functools
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,53 +25,20 @@ from pathlib import Path
 import numpy as np
 
 from visla_edu import data, diagnostics, filters, metrics, motion
+from visla_edu._blas import check_blas_threads as _check_blas_threads
+from visla_edu._blas import limit_blas_threads
 from visla_edu._files import atomic_write, format_bytes
 from visla_edu.camera import StereoCamera
-from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
+from visla_edu.codes import (DEADRECKON, MAPPING, MODES, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED, SLAM, SMOOTH,
+                             SMOOTHER_MODES, STATUS_NAMES, VIO, WINDOW)
 from visla_edu.filters import FilterConfig
 
-__all__ = ["MODES", "RunArrays", "RunResult", "WorkEstimate", "limit_blas_threads", "make_filter", "resolve_config",
-           "iterate_filter", "run_filter", "evaluate_result", "save_result", "load_result", "estimate_work",
-           "divergence_hint"]
+__all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "resolve_config", "iterate_filter",
+           "run_filter", "run_smoother", "evaluate_result", "save_result", "load_result"]
 
 #: The filter class of each mode but ``"slam"`` (``filters.JointSlam`` takes ``dense``).
 _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMapping,
                  VIO: filters.VisualInertialOdometry}
-
-
-def limit_blas_threads(n):
-    """Context manager limiting the BLAS threads of numpy and scipy to ``n`` (None: leave as is).
-
-    The filter's per-step matrices are a few hundred rows at most; on a 2-core machine a
-    multi-threaded BLAS spends more time synchronising than computing, so the driver runs
-    with one thread unless told otherwise (the ``blas_threads`` argument of
-    :func:`run_filter`, :func:`iterate_filter` and :class:`visla_edu.stepper.Stepper`).
-    The BLAS libraries are looked up once per process: a lookup costs about 1.5 ms, as much
-    as a filter step, and the stepper enters the limit at every move.
-
-    Parameters
-    ----------
-    n : int or None
-        Threads, >= 1.
-    """
-    if _check_blas_threads(n) is None:
-        return contextlib.nullcontext()
-    return _blas_controller().limit(limits=int(n), user_api="blas")
-
-
-def _check_blas_threads(n):
-    if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1):
-        raise ValueError(f"blas_threads must be a positive integer or None, got {n!r}")
-    return n
-
-
-@functools.cache
-def _blas_controller():
-    """The BLAS libraries loaded in this process (numpy's and scipy's), looked up once."""
-    import scipy.linalg  # noqa: F401  (loads scipy's BLAS before the lookup)
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
 
 
 def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
@@ -181,8 +149,13 @@ class RunResult:
         The calibration used (after any correction).
     evaluation : dict
         Figures against ground truth, filled by :func:`evaluate_result` (empty without):
-        ``estimate_<name>`` and ``dead_reckoning_<name>`` for every field of
+        ``estimate_<name>``, ``dead_reckoning_<name>`` (and for the batch smoother
+        ``start_<name>``, the EKF it started from) for every field of
         :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
+    start_world_T_imu : ndarray, shape (T, 4, 4), or None
+        Batch smoother: the joint EKF's trajectory it started from (None otherwise).
+    notes : str
+        Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
     """
 
     name: str
@@ -201,6 +174,8 @@ class RunResult:
     config: dict = field(default_factory=dict)
     imu_T_cam: np.ndarray = None
     evaluation: dict = field(default_factory=dict)
+    start_world_T_imu: np.ndarray = None
+    notes: str = ""
 
     def status_totals(self):
         """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``."""
@@ -217,7 +192,11 @@ class RunResult:
         ]
         if seen:
             lines.append(f"gated as outliers: {100 * totals['gated'] / seen:.2f}% of observations")
-        lines.append(f"time: {self.step_seconds.sum():.2f} s, median step {1e3 * np.median(self.step_seconds):.2f} ms")
+        if self.notes:
+            lines.append(self.notes)
+        else:
+            lines.append(f"time: {self.step_seconds.sum():.2f} s, median step "
+                         f"{1e3 * np.median(self.step_seconds):.2f} ms")
         return "\n".join(lines)
 
 
@@ -248,7 +227,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     ------
     visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError
         The filter failed; the exception's ``frame`` attribute is the frame it failed at
-        (see :func:`divergence_hint`).
+        (see :func:`visla_edu.workload.divergence_hint`).
     """
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
@@ -277,6 +256,82 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     )
 
 
+def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progress=None, verbose=False,
+                 blas_threads=1):
+    """Run a smoother over the whole dataset, into the same :class:`RunResult` as the filters.
+
+    ``"smooth"``: the batch smoother (:func:`visla_edu.smoother.smooth`) started from the joint
+    EKF's trajectory and map (:func:`run_filter` with ``"slam"``, kept as
+    ``start_world_T_imu``). ``"window"``: the fixed-lag sliding window
+    (:func:`visla_edu.smoother.smooth_window`). Both use the filter's model: the resolved
+    ``config`` (velocity noise and lag measured from the data when ``"auto"``) and its camera
+    calibration.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    mode : {"smooth", "window"}
+        One of :data:`visla_edu.codes.SMOOTHER_MODES`.
+    config : visla_edu.filters.FilterConfig, optional
+    smoother_config : visla_edu.smoother.SmootherConfig, optional
+        Default: :meth:`~visla_edu.smoother.SmootherConfig.from_filter_config` of ``config``.
+    progress, verbose, blas_threads
+        As in :func:`run_filter` (the progress bar is the EKF's).
+
+    Returns
+    -------
+    RunResult
+        ``nis`` is NaN (a smoother has no innovations); ``status_counts`` count per frame the
+        observations the smoother used (``used``), rejected as outliers (``gated``), could not
+        use (``no depth``) or left out (``ignored``: landmarks dropped, repeated frames).
+    """
+    from visla_edu import smoother
+
+    if mode not in SMOOTHER_MODES:
+        raise ValueError(f"mode must be one of {SMOOTHER_MODES}, got {mode!r}")
+    config = resolve_config(dataset, config or FilterConfig())
+    start = None
+    if mode == SMOOTH:
+        start = run_filter(dataset, SLAM, config, progress=progress, verbose=verbose, blas_threads=blas_threads)
+        imu_T_cam = start.imu_T_cam
+    else:
+        imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
+        if verbose and evidence:
+            print(evidence)
+    settings = smoother_config or smoother.SmootherConfig.from_filter_config(config)
+    if mode == SMOOTH:
+        solved = smoother.smooth(dataset, start.world_T_imu, start.landmarks, imu_T_cam, settings, blas_threads)
+    else:
+        solved = smoother.smooth_window(dataset, None, imu_T_cam, settings, blas_threads)
+    return _smoother_run_result(dataset, config, solved, start)
+
+
+#: Smoother observation status (:data:`visla_edu.smoother.STATUS_NAMES`) -> the filters' codes.
+_SMOOTHER_STATUS = {"used": OBS_USED, "rejected": OBS_GATED, "nonpositive_disparity": OBS_NO_DEPTH,
+                    "repeated_frame": OBS_IGNORED, "landmark_dropped": OBS_IGNORED}
+
+
+def _smoother_run_result(dataset, config, solved, start):
+    """A :class:`RunResult` from a :class:`~visla_edu.smoother.SmootherResult`."""
+    from visla_edu import smoother
+
+    T = dataset.num_frames
+    codes = np.array([_SMOOTHER_STATUS[name] for name in smoother.STATUS_NAMES])[solved.obs_status]
+    counts = np.zeros((T, len(STATUS_NAMES)), dtype=np.int64)
+    np.add.at(counts, (dataset.observation_frames(), codes), 1)
+    seconds = solved.frame_seconds if len(solved.frame_seconds) else np.full(T, solved.timing["total"] / T)
+    settings = {**config.to_dict(), **{f"smoother_{k}": v for k, v in solved.config.items()}}
+    return RunResult(
+        name=dataset.name, mode=solved.mode, dense=False, time_stamps=dataset.time_stamps.copy(),
+        world_T_imu=solved.world_T_imu, pose_cov=solved.pose_cov, landmarks=solved.landmarks,
+        landmark_cov=solved.landmark_cov,
+        dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=config.imu_lag),
+        nis=np.full(T, np.nan), nis_dof=np.zeros(T, dtype=np.int64), status_counts=counts, step_seconds=seconds,
+        config=settings, imu_T_cam=solved.imu_T_cam, start_world_T_imu=None if start is None else start.world_T_imu,
+        notes="\n".join(solved.summary().splitlines()[2:]),
+    )
+
+
 def evaluate_result(result, ground_truth):
     """ATE and KITTI drift of a run's estimate and of its dead reckoning against the ground truth.
 
@@ -291,11 +346,14 @@ def evaluate_result(result, ground_truth):
     Returns
     -------
     dict of str to visla_edu.metrics.TrajectoryEvaluation
-        ``{"estimate": ..., "dead_reckoning": ...}``.
+        ``{"estimate": ..., "dead_reckoning": ...}`` and, for the batch smoother, ``"start"``
+        (the joint EKF it started from).
     """
     truth = ground_truth.world_T_imu
     evaluations = {"estimate": metrics.evaluate(result.world_T_imu, truth),
                    "dead_reckoning": metrics.evaluate(result.dead_reckoning, truth)}
+    if result.start_world_T_imu is not None:
+        evaluations["start"] = metrics.evaluate(result.start_world_T_imu, truth)
     result.evaluation = {"ground_truth_source": ground_truth.source or "simulation"}
     for who, evaluation in evaluations.items():
         result.evaluation.update(evaluation.as_dict(prefix=f"{who}_"))
@@ -377,7 +435,8 @@ def save_result(result, path):
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
     ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
     so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
-    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`).
+    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`); the
+    smoothers add ``notes`` and the batch smoother ``start_world_T_imu``.
 
     Parameters
     ----------
@@ -395,7 +454,7 @@ def save_result(result, path):
     path = Path(path).expanduser()
     if path.suffix.lower() != ".npz":
         path = path.with_name(path.name + ".npz")
-    arrays = {k: v for k, v in vars(result).items() if k not in ("config", "evaluation")}
+    arrays = {k: v for k, v in vars(result).items() if k not in ("config", "evaluation") and v is not None}
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
     arrays.update({f"eval_{k}": v for k, v in result.evaluation.items()})
     with atomic_write(path, "wb") as f:
@@ -416,181 +475,8 @@ def load_result(path):
         config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
         evaluation = {k[len("eval_"):]: f[k].item() for k in f.files if k.startswith("eval_")}
         fields = {k: f[k] for k in f.files if not k.startswith(("config_", "eval_"))}
-    for key in ("name", "mode"):
-        fields[key] = str(fields[key])
+    for key in ("name", "mode", "notes"):
+        if key in fields:
+            fields[key] = str(fields[key])
     fields["dense"] = bool(fields["dense"])
     return RunResult(config=config, evaluation=evaluation, **fields)
-
-
-#: Cost model of the filter's updates, fitted on the 2-core development machine with one BLAS
-#: thread (``benchmarks/bench_work_estimate.py`` prints estimates against measurements). A joint
-#: update with a D-dimensional state and m observation rows costs ``D^2 (a + b m)`` seconds (the
-#: covariance update ``Sigma -= A^T A`` streams the D x D covariance and multiplies (D, m) by
-#: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``; every
-#: frame some milliseconds more. Estimated/measured time on 40-frame runs (a loaded 2-core
-#: machine): 0.7 to 2.5 for dense SLAM (strides 2 to 8, simulated and dataset 03), 0.8 for
-#: active-set SLAM and 2.8 for VIO with about 700 landmarks in view; dense SLAM on every
-#: landmark of dataset 03 (D = 15321) measured 2.2 s a frame against 3.3 s estimated.
-SECONDS_PER_ENTRY = 1e-8  # a
-SECONDS_PER_ENTRY_ROW = 2e-11  # b
-SECONDS_PER_ROW_CUBED = 4e-11  # c
-SECONDS_PER_ROW_SQUARED = 2e-8  # d
-SECONDS_PER_FRAME = 5e-3  # the rest of a step (prediction, gating, bookkeeping)
-#: ``visla-edu run`` refuses a run estimated past these limits unless given ``--force``.
-WORK_LIMIT_BYTES = 2 * 2**30
-WORK_LIMIT_SECONDS = 15 * 60
-
-
-@dataclass
-class WorkEstimate:
-    """What a run will cost, estimated from the observations before it starts (:func:`estimate_work`).
-
-    Attributes
-    ----------
-    mode : str
-    dense : bool
-    state_dim : int
-        Largest state: ``6 + 3 n`` with n the landmarks in the joint state (SLAM), else 6.
-    frames : int
-    max_rows : int
-        Most observation rows of one update (3 per observation in SLAM, 4 in VIO).
-    peak_bytes : int
-        The largest matrices at once: in SLAM the covariance and the same-size product of its
-        update (``2 D^2 8`` bytes) and the (D, m) and (m, m) blocks of the update, in VIO the
-        innovation covariance and its factor.
-    seconds : float
-        See :data:`SECONDS_PER_ENTRY`.
-    """
-
-    mode: str
-    dense: bool
-    state_dim: int
-    frames: int
-    max_rows: int
-    peak_bytes: int
-    seconds: float
-
-    def over_limits(self, max_bytes=None, max_seconds=None):
-        """What exceeds the limits (default :data:`WORK_LIMIT_BYTES`, :data:`WORK_LIMIT_SECONDS`), as phrases.
-
-        Empty when the run is within them.
-        """
-        max_bytes = WORK_LIMIT_BYTES if max_bytes is None else max_bytes
-        max_seconds = WORK_LIMIT_SECONDS if max_seconds is None else max_seconds
-        over = []
-        if self.peak_bytes > max_bytes:
-            over.append(f"{format_bytes(self.peak_bytes)} of memory (limit {format_bytes(max_bytes)})")
-        if self.seconds > max_seconds:
-            over.append(f"about {_duration(self.seconds)} (limit {_duration(max_seconds)})")
-        return over
-
-    def summary(self):
-        """One line: the largest state and update, memory and time."""
-        what = f"{self.mode}{' (dense)' if self.dense else ''}"
-        return (f"{what}: states up to {self.state_dim} dimensions, updates up to {self.max_rows} rows: about "
-                f"{format_bytes(self.peak_bytes)} of memory and {_duration(self.seconds)} for {self.frames} frames "
-                "(estimate)")
-
-
-def estimate_work(dataset, mode=SLAM, config=None, dense=False):
-    """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
-
-    The dense filter carries every (strided) landmark; the active set those whose track
-    spans the frame; both update with 3 rows per observation. VIO solves one 4-row block
-    per observation; mapping and dead reckoning work in 3x3 and 6x6 blocks (cheap).
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    mode : str
-    config : visla_edu.filters.FilterConfig, optional
-        Its ``landmark_stride`` decides the landmarks used.
-    dense : bool
-
-    Returns
-    -------
-    WorkEstimate
-    """
-    config = config or FilterConfig()
-    T = max(1, dataset.num_frames)
-    in_stride = dataset.obs_ids % config.landmark_stride == 0
-    per_frame = np.bincount(dataset.observation_frames()[in_stride], minlength=T).astype(float)
-    if mode == SLAM:
-        landmarks = _landmarks_in_state(dataset, config.landmark_stride, dense)
-        D, m = 6 + 3 * landmarks, 3 * per_frame
-        seconds = np.sum(D * D * (SECONDS_PER_ENTRY + SECONDS_PER_ENTRY_ROW * m) + SECONDS_PER_ROW_CUBED * m**3)
-        peak = 16 * float(D.max()) ** 2 + 24 * float(np.max(D * m)) + 24 * float(m.max()) ** 2
-    elif mode == VIO:
-        D, m = np.full(T, 6.0), 4 * per_frame
-        seconds = np.sum(SECONDS_PER_ROW_CUBED * m**3 + SECONDS_PER_ROW_SQUARED * m**2)
-        peak = 24 * float(m.max()) ** 2
-    else:
-        D, m = np.full(T, 6.0), 3 * per_frame
-        seconds, peak = float(np.sum(SECONDS_PER_ROW_SQUARED * m)), 8 * 64 * float(m.max())
-    return WorkEstimate(mode=mode, dense=dense, state_dim=int(D.max()), frames=T, max_rows=int(m.max()),
-                        peak_bytes=int(peak), seconds=float(seconds) + SECONDS_PER_FRAME * T)
-
-
-def _landmarks_in_state(dataset, stride, dense):
-    """Landmarks in the joint state at each frame (T,): every strided one (dense), else those being tracked."""
-    T = max(1, dataset.num_frames)
-    if dense:
-        return np.full(T, float(len(range(0, dataset.num_landmarks, stride))))
-    spans = dataset.track_spans()[::stride]
-    spans = spans[spans[:, 0] >= 0]
-    change = np.zeros(T + 1)
-    np.add.at(change, spans[:, 0], 1)
-    np.add.at(change, spans[:, 1] + 1, -1)
-    return np.cumsum(change[:T])
-
-
-def divergence_hint(dataset, config, frame=None):
-    """The likely cause of a filter failure at ``frame``, as one sentence.
-
-    Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`:
-    calibration, time stamps, velocities), else the step into ``frame`` and the settings.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    config : visla_edu.filters.FilterConfig
-    frame : int, optional
-
-    Returns
-    -------
-    str
-    """
-    problems = data.dataset_problems(dataset)
-    if problems:
-        return "likely cause: " + problems[0]
-    calibration = dataset.extra.get("calibration")  # what the run resolved "auto" with, if it got that far
-    if calibration is not None and not config.resolved:
-        config = config.resolve(calibration)
-    where = ""
-    if frame is not None and 0 < frame < dataset.num_frames:
-        lag = config.imu_lag if isinstance(config.imu_lag, int) else 0
-        twist = motion.select_twists(dataset.twists, lag)[frame - 1]
-        speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
-        where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
-                 f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
-    return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
-            f"velocity noise {_setting_text(config.sigma_linear_velocity)} m/s and "
-            f"{_setting_text(config.sigma_angular_velocity)} rad/s) "
-            "and the calibration (visla-edu info shows the diagnostics)")
-
-
-def _setting_text(value):
-    """A setting for a message: ``0.5``, ``[0.05 0.006 0.014]`` or ``auto``."""
-    if isinstance(value, str):
-        return value
-    if np.ndim(value):
-        return np.array2string(np.asarray(value, dtype=float), precision=3)
-    return f"{value:g}"
-
-
-def _duration(seconds):
-    if seconds < 120:
-        return f"{seconds:.0f} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.0f} min"
-    return f"{seconds / 3600:.1f} h"

@@ -1,0 +1,236 @@
+"""Speed, memory and accuracy of the batch and sliding-window smoothers.
+
+Usage::
+
+    VISLA_EDU_DATA=/path/to/course/data python benchmarks/bench_smoother.py [--cases 03 0020 ...]
+
+Each case runs in its own process, so its peak resident memory (ru_maxrss) and its whole
+wall time (interpreter start, imports, loading, EKF, smoother) are its own. Cases:
+
+``03``         batch smoother started from the EKF on dataset 03 (1010 frames, 5105 landmarks):
+               whole-process wall time, the smoother's wall and CPU time, peak memory;
+``03-window``  the sliding window on 03: median and 95th-percentile time per frame;
+``0020``       KITTI odometry 06 with its ground truth (``kitti_odometry_06_poses.txt``):
+               ATE (no alignment; aligned in brackets) of dead reckoning, the EKF, the batch
+               smoother from dead reckoning and from the EKF, and the window, for two noise
+               settings (see the printed notes);
+``0020-noisy`` its noisy twin (N(0, 0.5) m/s and N(0, 0.05) rad/s added to every velocity
+               sample, seed 0), same figures;
+``10``         the dataset-10 stand-in (3026 frames, simulated tracks with ground truth):
+               time, memory and ATE of the EKF, batch and window;
+``sim``        simulated drives (preset "small", 5% outlier tracks, seeds 0-4): ATE of dead
+               reckoning, EKF, batch, window "fix" and window "marginalize" (the evidence for
+               the window's default) and the window's time per frame.
+
+``--tracemalloc`` also reports the peak of Python-tracked allocations during the smoother
+call (slower). Course-data cases are skipped, with a note, when the files are missing.
+"""
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+CASES = ("03", "03-window", "0020", "0020-noisy", "10", "sim")
+#: Noise settings compared on 0020: the library defaults (the noisiest course drive's level)
+#: and the drive's own small velocity noise.
+NOISE_0020 = {"default": {}, "small": {"sigma_linear_velocity": 0.05, "sigma_angular_velocity": 0.005}}
+
+
+def _peak_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _kitti_truth(dataset, poses_path):
+    """IMU poses from KITTI left-camera poses: ``world_T_imu = imu_T_cam P cam_T_imu`` (N, 4, 4)."""
+    import numpy as np
+
+    from visla_edu import lie
+
+    rows = np.loadtxt(poses_path).reshape(-1, 3, 4)
+    P = np.tile(np.eye(4), (len(rows), 1, 1))
+    P[:, :3, :] = rows
+    return dataset.imu_T_cam @ P @ lie.se3_inv(dataset.imu_T_cam)
+
+
+def _ate(est, truth):
+    from visla_edu import metrics
+
+    n = len(truth)
+    return [round(metrics.ate(est[:n], truth, align=False), 3), round(metrics.ate(est[:n], truth, align=True), 3)]
+
+
+def _timed(fn, *args, **kwargs):
+    wall, cpu = time.perf_counter(), time.process_time()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def _smooth(dataset, init, landmarks, imu_T_cam, config, trace=False):
+    """Run the batch smoother; returns the result and its figures (optionally tracemalloc's peak)."""
+    import tracemalloc
+
+    from visla_edu import smoother
+
+    if trace:
+        tracemalloc.start()
+    result, wall, cpu = _timed(smoother.smooth, dataset, init, landmarks, imu_T_cam, config)
+    figures = {"smooth_wall_s": round(wall, 2), "smooth_cpu_s": round(cpu, 2),
+               "iterations": int(len(result.history["cost"])), "rejected_obs": result.rejected["outliers"],
+               "dropped_landmarks": sum(v for k, v in result.rejected.items() if k.startswith("landmarks_"))}
+    if trace:
+        figures["tracemalloc_peak_mb"] = round(tracemalloc.get_traced_memory()[1] / 2**20, 1)
+        tracemalloc.stop()
+    return result, figures
+
+
+def case_03(trace):
+    from visla_edu import data, run, smoother
+
+    dataset, load_s, _ = _timed(data.load, "03")
+    ekf, ekf_s, _ = _timed(run.run_filter, dataset, "slam", progress=False)
+    result, figures = _smooth(dataset, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, smoother.SmootherConfig(), trace)
+    return {"load_s": round(load_s, 2), "ekf_s": round(ekf_s, 2), **figures,
+            "covariance_s": round(result.timing["covariance"], 2), "peak_rss_mb": round(_peak_mb())}
+
+
+def _window_figures(result, truth=None):
+    import numpy as np
+
+    out = {"median_frame_ms": round(1e3 * float(np.median(result.frame_seconds[1:])), 2),
+           "p95_frame_ms": round(1e3 * float(np.percentile(result.frame_seconds[1:], 95)), 2),
+           "window_total_s": round(result.timing["total"], 2)}
+    if truth is not None:
+        out["window_ate"] = _ate(result.world_T_imu, truth)
+        out["window_online_ate"] = _ate(result.online_world_T_imu, truth)
+    return out
+
+
+def case_03_window(_trace):
+    from visla_edu import data, run, smoother
+
+    dataset = data.load("03")
+    imu_T_cam = run.make_filter(dataset, "deadreckon").camera.imu_T_cam  # the corrected extrinsic
+    result = smoother.smooth_window(dataset, imu_T_cam=imu_T_cam)
+    return {**_window_figures(result), "peak_rss_mb": round(_peak_mb())}
+
+
+def _noisy_twin(dataset, seed=0):
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    dataset.linear_velocity = dataset.linear_velocity + rng.normal(0, 0.5, dataset.linear_velocity.shape)
+    dataset.angular_velocity = dataset.angular_velocity + rng.normal(0, 0.05, dataset.angular_velocity.shape)
+    return dataset
+
+
+def case_0020(trace, noisy=False):
+    from visla_edu import data, motion, run, smoother
+    from visla_edu.filters import FilterConfig
+
+    dataset = data.load("0020")
+    truth = _kitti_truth(dataset, data.data_dir() / "kitti_odometry_06_poses.txt")
+    if noisy:
+        dataset = _noisy_twin(dataset)
+    dead = motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=1)
+    out = {"dead_reckoning_ate": _ate(dead, truth)}
+    for name, noise in NOISE_0020.items():
+        ekf = run.run_filter(dataset, "slam", FilterConfig(imu_lag=1, **noise), progress=False)
+        config = smoother.SmootherConfig(imu_lag=1, **noise)
+        from_dr, figures = _smooth(dataset, dead, None, ekf.imu_T_cam, config, trace)
+        from_ekf, _ = _smooth(dataset, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, config)
+        window = smoother.smooth_window(dataset, imu_T_cam=ekf.imu_T_cam, config=config)
+        out[name] = {"ekf_ate": _ate(ekf.world_T_imu, truth), "smooth_from_dr_ate": _ate(from_dr.world_T_imu, truth),
+                     "smooth_from_ekf_ate": _ate(from_ekf.world_T_imu, truth), **figures,
+                     **_window_figures(window, truth)}
+    out["peak_rss_mb"] = round(_peak_mb())
+    return out
+
+
+def case_10(trace):
+    from visla_edu import data, motion, run, smoother
+
+    dataset = data.load("10")
+    truth = dataset.ground_truth.world_T_imu
+    ekf, ekf_s, _ = _timed(run.run_filter, dataset, "slam", progress=False)
+    result, figures = _smooth(dataset, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, smoother.SmootherConfig(), trace)
+    peak = round(_peak_mb())
+    window = smoother.smooth_window(dataset, imu_T_cam=ekf.imu_T_cam)
+    dead = motion.dead_reckon(dataset.time_stamps, dataset.twists)
+    return {"frames": dataset.num_frames, "landmarks": dataset.num_landmarks, "ekf_s": round(ekf_s, 2), **figures,
+            "peak_rss_mb_batch": peak, "dead_reckoning_ate": _ate(dead, truth), "ekf_ate": _ate(ekf.world_T_imu, truth),
+            "smooth_ate": _ate(result.world_T_imu, truth), **_window_figures(window, truth)}
+
+
+def case_sim(_trace, seeds=(0, 1, 2, 3, 4)):
+    import numpy as np
+
+    from visla_edu import motion, run, simulate, smoother
+
+    rows = []
+    for seed in seeds:
+        dataset = simulate.simulate_drive("small", seed, outlier_share=0.05)
+        truth = dataset.ground_truth.world_T_imu
+        ekf = run.run_filter(dataset, "slam", progress=False)
+        batch, figures = _smooth(dataset, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, smoother.SmootherConfig())
+        row = {"seed": seed, "dead_reckoning": _ate(motion.dead_reckon(dataset.time_stamps, dataset.twists), truth)[0],
+               "ekf": _ate(ekf.world_T_imu, truth)[0], "batch": _ate(batch.world_T_imu, truth)[0],
+               "batch_cpu_s": figures["smooth_cpu_s"]}
+        for mode in smoother.WINDOW_MODES:
+            window = smoother.smooth_window(dataset, config=smoother.SmootherConfig(window_mode=mode))
+            row[f"window_{mode}"] = _ate(window.world_T_imu, truth)[0]
+            row[f"window_{mode}_ms"] = round(1e3 * float(np.median(window.frame_seconds[1:])), 2)
+        rows.append(row)
+    return {"rows": rows}
+
+
+RUNNERS = {"03": case_03, "03-window": case_03_window, "0020": case_0020,
+           "0020-noisy": lambda trace: case_0020(trace, noisy=True), "10": case_10, "sim": case_sim}
+NEEDS = {"03": "03.npz", "03-window": "03.npz", "0020": "kitti_odometry_06_poses.txt",
+         "0020-noisy": "kitti_odometry_06_poses.txt", "10": "10_imu_only.npz", "sim": None}
+
+
+def _available(case):
+    from visla_edu import data
+
+    need = NEEDS[case]
+    if need is None:
+        return True
+    try:
+        return (data.data_dir() / need).is_file()
+    except (FileNotFoundError, ValueError):
+        return False
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    parser.add_argument("--tracemalloc", action="store_true", help="also report tracemalloc's peak (slower)")
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print(json.dumps(RUNNERS[args.child](args.tracemalloc)))
+        return
+    for case in args.cases:
+        if not _available(case):
+            print(f"{case:11s} skipped: {NEEDS[case]} not in the data directory ({os.environ.get('VISLA_EDU_DATA')})")
+            continue
+        command = [sys.executable, str(Path(__file__).resolve()), "--child", case] + \
+            (["--tracemalloc"] if args.tracemalloc else [])
+        start = time.perf_counter()
+        done = subprocess.run(command, capture_output=True, text=True)
+        wall = time.perf_counter() - start
+        if done.returncode:
+            print(f"{case:11s} failed:\n{done.stderr[-2000:]}")
+            continue
+        figures = json.loads(done.stdout.strip().splitlines()[-1])
+        print(f"{case:11s} whole process {wall:.1f} s")
+        print(json.dumps(figures, indent=1))
+
+
+if __name__ == "__main__":
+    main()

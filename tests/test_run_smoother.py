@@ -1,0 +1,61 @@
+"""The smoothers through the driver and the command line: one result file for every mode."""
+
+import numpy as np
+import pytest
+
+from visla_edu import cli, data, run, simulate
+from visla_edu.codes import OBS_USED, SMOOTHER_MODES
+from visla_edu.filters import FilterConfig
+
+#: The tiny simulated drive has no lag or extrinsic error; fixed noise skips the calibration.
+CFG = FilterConfig(extrinsic_correction="none", sigma_linear_velocity=0.2, sigma_angular_velocity=0.02, imu_lag=0)
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    return data.load("sim-tiny")
+
+
+@pytest.mark.parametrize("mode", SMOOTHER_MODES)
+def test_run_smoother_writes_the_filters_result_file(tiny, mode, tmp_path):
+    r = run.run_smoother(tiny, mode, CFG, progress=False)
+    T, M = tiny.num_frames, tiny.num_landmarks
+    assert r.mode == mode and r.world_T_imu.shape == (T, 4, 4) and r.landmarks.shape == (M, 3)
+    assert r.pose_cov.shape == (T, 6, 6) and np.all(np.isnan(r.nis)) and not r.nis_dof.any()
+    # every observation is counted once, at its frame
+    np.testing.assert_array_equal(r.status_counts.sum(axis=1), np.diff(tiny.frame_ptr))
+    assert r.status_counts[:, OBS_USED].sum() > 0.9 * tiny.num_observations
+    assert (r.start_world_T_imu is not None) == (mode == "smooth")
+    assert r.config["smoother_sigma_pixel"] == CFG.sigma_pixel and "iterations" in r.summary()
+    back = run.load_result(run.save_result(r, tmp_path / "r.npz"))
+    np.testing.assert_array_equal(back.world_T_imu, r.world_T_imu)
+    assert back.notes == r.notes and back.mode == mode
+    if mode == "smooth":
+        np.testing.assert_array_equal(back.start_world_T_imu, r.start_world_T_imu)
+
+
+def test_batch_smoother_is_closer_to_the_truth_than_the_ekf_it_started_from():
+    """On average over drives (one realisation's optimum can be farther from the truth than the
+    EKF happened to be: measured on sim-tiny seed 0, 0.069 m against 0.047 m aligned)."""
+    smoothed, started = [], []
+    for seed in (1, 2, 3):
+        ds = simulate.simulate_drive("tiny", seed)
+        r = run.run_smoother(ds, "smooth", CFG, progress=False)
+        evaluations = run.evaluate_result(r, ds.ground_truth)
+        smoothed.append(evaluations["estimate"].ate_aligned)
+        started.append(evaluations["start"].ate_aligned)
+        assert r.evaluation["start_ate_raw"] == pytest.approx(evaluations["start"].ate_raw)
+    assert np.mean(smoothed) < np.mean(started), (smoothed, started)
+
+
+def test_run_smoother_rejects_a_filter_mode(tiny):
+    with pytest.raises(ValueError, match="mode must be one of"):
+        run.run_smoother(tiny, "slam", CFG)
+
+
+def test_cli_smooth_prints_the_ekf_beside_the_smoother(capsys):
+    assert cli.main(["run", "sim-tiny", "--mode", "smooth", "--quiet", "--set", "extrinsic_correction=none"]) == 0
+    text = capsys.readouterr().out
+    assert "mode smooth" in text and "smooth estimate" in text and "slam (EKF) it started from" in text
+    assert cli.main(["run", "sim-tiny", "--mode", "window", "--quiet"]) == 0
+    assert "per frame: median" in capsys.readouterr().out

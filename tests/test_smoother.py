@@ -1,0 +1,379 @@
+"""Tests for visla_edu.smoother: Jacobians, the Schur/envelope solver, marginals, convergence.
+
+Conventions under test (DESIGN.md): twist ``u = [v; w]``, poses ``world_T_imu``, right
+perturbation ``T = mu exp(delta^)``; motion residual ``e_t = log(exp(-tau u^) T_t^{-1} T_{t+1})``.
+Every analytic Jacobian is checked against finite differences (tests/fdiff.py).
+"""
+
+import numpy as np
+import pytest
+from scipy.sparse import linalg as sparse_linalg
+
+from fdiff import fd_jacobian  # tests/fdiff.py
+from visla_edu import lie, metrics, motion, run, simulate, smoother
+from visla_edu.filters import FilterConfig
+from visla_edu.smoother import _batch, _envelope, _normal, _problem
+
+FD_REL = 1e-6
+
+
+def rel(a, b):
+    return np.linalg.norm(np.asarray(a) - np.asarray(b)) / np.linalg.norm(b)
+
+
+# --- SE(3) right Jacobian -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.05, 0.0999, 0.1001, 0.7, 2.5])
+def test_right_jacobian_inverse_matches_finite_differences_of_log(angle):
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=6)
+    x[3:] *= angle / np.linalg.norm(x[3:])
+    fd = fd_jacobian(lambda d: lie.se3_log(lie.se3_exp(x) @ lie.se3_exp(d)), np.zeros(6), 1e-5)
+    assert rel(smoother.se3_right_jacobian_inv(x), fd) < FD_REL
+    fd_r = fd_jacobian(lambda d: lie.se3_log(lie.se3_inv(lie.se3_exp(x)) @ lie.se3_exp(x + d)), np.zeros(6), 1e-5)
+    assert rel(smoother.se3_right_jacobian(x), fd_r) < FD_REL
+    assert np.allclose(smoother.se3_right_jacobian(x) @ smoother.se3_right_jacobian_inv(x), np.eye(6), atol=1e-12)
+
+
+def test_right_jacobian_rejects_a_wrong_shape():
+    with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
+        smoother.se3_right_jacobian_inv(np.zeros(3))
+
+
+# --- residuals ------------------------------------------------------------------------------
+
+
+def _random_motion(rng, K=4):
+    poses = lie.se3_exp(np.concatenate([rng.normal(0, 5, (K + 1, 3)), rng.normal(0, 0.8, (K + 1, 3))], 1))
+    step_inv = lie.se3_exp(-np.concatenate([rng.normal(0, 1, (K, 3)), rng.normal(0, 0.1, (K, 3))], 1))
+    return poses, step_inv
+
+
+def test_motion_residual_jacobians_match_finite_differences():
+    rng = np.random.default_rng(2)
+    poses, step_inv = _random_motion(rng)
+    _, J_prev, J_next = smoother.motion_residuals(poses, step_inv)
+    for t in range(len(step_inv)):
+        for which, J in ((t, J_prev[t]), (t + 1, J_next[t])):
+            def e(d, which=which, t=t):
+                moved = poses.copy()
+                moved[which] = poses[which] @ lie.se3_exp(d)
+                return smoother.motion_residuals(moved, step_inv, jacobians=False)[t]
+            assert rel(J, fd_jacobian(e, np.zeros(6), 1e-6)) < FD_REL
+
+
+def test_motion_residual_is_zero_on_dead_reckoning():
+    rng = np.random.default_rng(3)
+    stamps = np.cumsum(rng.uniform(0.09, 0.11, 20))
+    twists = np.concatenate([rng.normal(5, 1, (20, 3)), rng.normal(0, 0.1, (20, 3))], 1)
+    for lag in (0, 1):
+        poses = motion.dead_reckon(stamps, twists, lag=lag)
+        step_inv, _ = smoother._factors.motion_steps(stamps, twists, lag)
+        assert np.abs(smoother.motion_residuals(poses, step_inv, jacobians=False)).max() < 1e-12
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return simulate.default_rig()
+
+
+def test_reprojection_equals_the_camera_model_and_its_jacobians(rig):
+    rng = np.random.default_rng(4)
+    cam = smoother._problem.StereoCamera(*rig)
+    poses = lie.se3_exp(np.concatenate([rng.normal(0, 3, (6, 3)), rng.normal(0, 0.2, (6, 3))], 1))
+    p_world = np.stack([(T @ cam.imu_T_cam @ np.r_[rng.uniform(-5, 5, 2), rng.uniform(5, 40), 1])[:3]
+                        for T in poses])
+    z, depth, J_m, J_p = smoother.reprojection(cam.Ks, cam.cam_T_imu, poses, p_world)
+    for i, T in enumerate(poses):
+        z_c, J_m_c, J_p_c = cam.predict_with_jacobians(T, p_world[i:i + 1])
+        assert np.allclose(z[i], z_c[0]) and np.allclose(J_m[i], J_m_c[0]) and np.allclose(J_p[i], J_p_c[0])
+        fd_p = fd_jacobian(lambda d, i=i: smoother.reprojection(
+            cam.Ks, cam.cam_T_imu, (poses[i] @ lie.se3_exp(d))[None], p_world[i:i + 1], False)[0][0], np.zeros(6), 1e-6)
+        fd_m = fd_jacobian(lambda d, i=i: smoother.reprojection(
+            cam.Ks, cam.cam_T_imu, poses[i:i + 1], (p_world[i] + d)[None], False)[0][0], np.zeros(3), 1e-6)
+        assert rel(J_p[i], fd_p) < FD_REL and rel(J_m[i], fd_m) < FD_REL
+    assert np.all(depth > 0)
+
+
+@pytest.mark.parametrize("loss", ["cauchy", "huber", "none"])
+def test_robust_weight_is_the_derivative_of_the_loss(loss):
+    s = np.array([0.1, 2.0, 8.9, 9.1, 30.0, 400.0])
+    rho, weight = smoother.robust_loss(s, loss, 3.0)
+    fd = np.array([(smoother.robust_loss(np.array([x + 1e-6]), loss, 3.0)[0][0]
+                    - smoother.robust_loss(np.array([x - 1e-6]), loss, 3.0)[0][0]) / 2e-6 for x in s])
+    assert np.allclose(weight, fd, rtol=1e-5)
+    assert np.all(rho <= s + 1e-12)
+
+
+# --- the problem on a tiny drive ------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    return simulate.simulate_drive("tiny", 3, outlier_share=0.05)
+
+
+def _problem_at(dataset, world_T_imu, config, landmarks=None):
+    """The batch problem at a state, after the initial landmark checks (as :func:`smooth` builds it)."""
+    camera = _problem.rig_camera(dataset)
+    problem, m, _, _ = _batch._setup(dataset, world_T_imu, landmarks, camera, config)
+    _batch.drop_landmarks(problem, world_T_imu, m, config.min_observations)
+    return problem, m
+
+
+def test_normal_equations_are_jtwj_of_the_checked_jacobians(tiny):
+    config = smoother.SmootherConfig(loss="huber", loss_scale=1.0)
+    T = tiny.ground_truth.world_T_imu
+    problem, m = _problem_at(tiny, T, config)
+    problem.active[::7] = False  # inactive observations must contribute nothing
+    lin = _normal.linearize(problem, T, m)
+    H, g = _normal.normal_equations(problem, lin)
+    n, L = problem.num_vars, problem.num_landmarks
+    z, _, J_m, J_p = smoother.reprojection(problem.Ks, problem.cam_T_imu, T[problem.obs_frame], m[problem.obs_landmark])
+    r = z - problem.obs_z
+    s = np.sum(r * r, axis=1) / config.sigma_pixel**2
+    w = smoother.robust_loss(s, config.loss, config.loss_scale)[1] / config.sigma_pixel**2 * problem.active
+    J = np.zeros((4 * len(r), 6 * n + 3 * L))
+    for i, (t, j) in enumerate(zip(problem.obs_frame, problem.obs_landmark)):
+        if t >= 1:
+            J[4 * i:4 * i + 4, 6 * (t - 1):6 * t] = J_p[i]
+        J[4 * i:4 * i + 4, 6 * n + 3 * j:6 * n + 3 * j + 3] = J_m[i]
+    W = np.repeat(w, 4)
+    H_ref, g_ref = J.T @ (W[:, None] * J), J.T @ (W * r.ravel())
+    e, J_prev, J_next = smoother.motion_residuals(T, problem.step_inv)
+    J_mo = np.zeros((6 * len(e), 6 * n + 3 * L))
+    sq = problem.motion_sqrt_information
+    for k in range(len(e)):
+        if k >= 1:
+            J_mo[6 * k:6 * k + 6, 6 * (k - 1):6 * k] = sq[k][:, None] * J_prev[k]
+        J_mo[6 * k:6 * k + 6, 6 * k:6 * k + 6] = sq[k][:, None] * J_next[k]
+    H_ref += J_mo.T @ J_mo
+    g_ref += J_mo.T @ (sq * e).ravel()
+    for j in np.flatnonzero(~problem.landmark_active):  # dropped landmarks: an identity block, no coupling
+        H_ref[6 * n + 3 * j:6 * n + 3 * j + 3, 6 * n + 3 * j:6 * n + 3 * j + 3] = np.eye(3)
+    assert rel(H.toarray(), H_ref) < 1e-12 and rel(g, g_ref) < 1e-12
+
+
+def test_gradient_matches_finite_differences_of_the_robust_cost(tiny):
+    ekf = run.run_filter(tiny, "slam", progress=False)
+    problem, m = _problem_at(tiny, ekf.world_T_imu, smoother.SmootherConfig(), ekf.landmarks)
+    T = ekf.world_T_imu
+    lin = _normal.linearize(problem, T, m)
+    for frame in (1, 30, 59):
+        def cost(d, frame=frame):
+            moved = T.copy()
+            moved[frame] = T[frame] @ lie.se3_exp(d)
+            return np.array([_normal.evaluate(problem, moved, m)])
+        assert rel(2 * lin.g_p[frame - 1], fd_jacobian(cost, np.zeros(6), 1e-6)[0]) < 1e-6
+    for j in (0, 40):
+        def cost(d, j=j):
+            moved = m.copy()
+            moved[j] = m[j] + d
+            return np.array([_normal.evaluate(problem, T, moved)])
+        assert rel(2 * lin.g_m[j], fd_jacobian(cost, np.zeros(3), 1e-6)[0]) < 1e-6
+
+
+def test_schur_solve_equals_the_full_sparse_solve(tiny):
+    """The Schur complement + envelope Cholesky step equals scipy's sparse LU on the full system.
+
+    The full system's condition number is about 1e10 (far landmarks), so the two agree to
+    about 1e-8 relative (rounding, and the 1e-12 relative floor on landmark blocks); a wrong
+    block would show up at order one.
+    """
+    T = motion.dead_reckon(tiny.time_stamps, tiny.twists)
+    problem, m = _problem_at(tiny, T, smoother.SmootherConfig())
+    lin = _normal.linearize(problem, T, m)
+    for damping in (0.0, 1e-3):
+        step = _normal.solve_step(problem, lin, damping)
+        H, g = _normal.normal_equations(problem, lin)
+        H = H + damping * sparse_diag(H)
+        full = sparse_linalg.spsolve(H.tocsc(), -g)
+        mine = np.concatenate([step.d_pose.ravel(), step.d_landmark.ravel()])
+        assert rel(mine, full) < 1e-6
+
+
+def sparse_diag(H):
+    from scipy import sparse
+    return sparse.diags(np.maximum(H.diagonal(), 1e-12))
+
+
+def test_marginals_equal_the_dense_inverse_of_the_hessian(tiny):
+    T = tiny.ground_truth.world_T_imu
+    problem, m = _problem_at(tiny, T, smoother.SmootherConfig())
+    lin = _normal.linearize(problem, T, m)
+    pose_cov, landmark_cov = _normal.marginals(problem, lin)
+    H, _ = _normal.normal_equations(problem, lin)
+    Sigma = np.linalg.inv(H.toarray())
+    n = problem.num_vars
+    for t in (0, 17, n - 1):
+        assert rel(pose_cov[t], Sigma[6 * t:6 * t + 6, 6 * t:6 * t + 6]) < 1e-8
+    for j in (0, 25, problem.num_landmarks - 1):
+        k = 6 * n + 3 * j
+        assert rel(landmark_cov[j], Sigma[k:k + 3, k:k + 3]) < 1e-8
+
+
+# --- the envelope solver ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n,corrections,longest", [(1, 0, 1), (3, 2, 3), (40, 30, 8), (150, 200, 6), (70, 30, 60)])
+def test_envelope_factor_solve_and_inverse_match_dense(n, corrections, longest):
+    rng = np.random.default_rng(n)
+    lo = rng.integers(0, n, corrections)
+    hi = np.minimum(lo + rng.integers(0, longest, corrections), n - 1)
+    start = np.concatenate([[0], np.cumsum(hi - lo + 1)])[:-1].astype(np.int64)
+    rows = 0.3 * rng.normal(size=(int(np.sum(hi - lo + 1)), 6, 3))
+    diag = rng.normal(size=(n, 6, 6))
+    diag = diag @ np.swapaxes(diag, 1, 2) + 60 * np.eye(6)
+    system = _envelope.EnvelopeSystem(diag, rng.normal(size=(n - 1, 6, 6)), lo, hi, start, rows)
+    A = _envelope.to_dense(system)
+    shift = max(0.0, 1.0 - np.linalg.eigvalsh(A).min())
+    system.diag += shift * np.eye(6)
+    A = _envelope.to_dense(system)
+    factor = _envelope.cholesky(system)
+    rhs = rng.normal(size=(n, 6))
+    assert rel(_envelope.solve(factor, rhs).ravel(), np.linalg.solve(A, rhs.ravel())) < 1e-10
+    A_inv = np.linalg.inv(A)
+    blocks = np.array([A_inv[6 * i:6 * i + 6, 6 * i:6 * i + 6] for i in range(n)])
+    assert rel(_envelope.inverse_diagonal(factor), blocks) < 1e-10
+
+
+def test_envelope_cholesky_reports_a_matrix_that_is_not_positive_definite():
+    system = _envelope.EnvelopeSystem(-np.eye(6)[None].repeat(2, 0), np.zeros((1, 6, 6)), np.zeros(0, int),
+                                      np.zeros(0, int), np.zeros(0, int), np.zeros((0, 6, 3)))
+    with pytest.raises(np.linalg.LinAlgError):
+        _envelope.cholesky(system)
+
+
+# --- the smoothers --------------------------------------------------------------------------
+
+
+def test_noise_free_drive_converges_to_the_truth():
+    ds = simulate.simulate_drive("tiny", 0, linear_velocity_sigma=0, angular_velocity_sigma=0, pixel_sigma=0,
+                                 outlier_share=0, nonpositive_disparity_share=0)
+    truth = ds.ground_truth.world_T_imu
+    rng = np.random.default_rng(0)
+    start = truth.copy()
+    start[1:] = truth[1:] @ lie.se3_exp(np.concatenate([rng.normal(0, 0.3, (ds.num_frames - 1, 3)),
+                                                         rng.normal(0, 0.01, (ds.num_frames - 1, 3))], 1))
+    result = smoother.smooth(ds, start)
+    assert np.abs(result.world_T_imu[:, :3, 3] - truth[:, :3, 3]).max() < 1e-6
+    kept = np.isfinite(result.landmarks[:, 0])
+    assert kept.sum() > 0.9 * ds.num_landmarks
+    assert np.abs(result.landmarks[kept] - ds.ground_truth.landmarks[kept]).max() < 1e-6
+    assert result.rejected["outliers"] == 0
+
+
+def test_batch_result_shapes_history_and_counts(tiny):
+    ekf = run.run_filter(tiny, "slam", progress=False)
+    result = smoother.smooth(tiny, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam)
+    T, M = tiny.num_frames, tiny.num_landmarks
+    assert result.world_T_imu.shape == (T, 4, 4) and result.landmarks.shape == (M, 3)
+    assert result.pose_cov.shape == (T, 6, 6) and result.landmark_cov.shape == (M, 3, 3)
+    assert np.all(result.pose_cov[0] == 0) and np.all(np.linalg.eigvalsh(result.pose_cov[1:]) > 0)
+    kept = np.isfinite(result.landmarks[:, 0])
+    assert np.all(np.isfinite(result.landmark_cov[kept])) and np.all(np.isnan(result.landmark_cov[~kept]))
+    h = result.history
+    assert set(h) == set(smoother.HISTORY_FIELDS) and len(h["cost"]) >= 2
+    accepted_costs = h["cost"][h["accepted"] & (h["round"] == h["round"][-1])]
+    assert np.all(np.diff(accepted_costs) < 0)
+    totals = result.status_totals()
+    assert totals["rejected"] == result.rejected["outliers"] > 0
+    assert totals["nonpositive_disparity"] == result.rejected["nonpositive_disparity"] > 0
+    assert "landmarks estimated" in result.summary()
+
+
+def test_batch_is_never_worse_than_the_ekf_on_a_tiny_drive_with_outliers(tiny):
+    ekf = run.run_filter(tiny, "slam", progress=False)
+    result = smoother.smooth(tiny, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam)
+    truth = tiny.ground_truth.world_T_imu
+    assert metrics.ate(result.world_T_imu, truth, align=False) < metrics.ate(ekf.world_T_imu, truth, align=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+def test_batch_is_never_worse_than_the_ekf_on_small_drives(seed):
+    ds = simulate.simulate_drive("small", seed, outlier_share=0.05)
+    ekf = run.run_filter(ds, "slam", progress=False)
+    result = smoother.smooth(ds, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam)
+    truth = ds.ground_truth.world_T_imu
+    assert metrics.ate(result.world_T_imu, truth, align=False) < 0.5 * metrics.ate(ekf.world_T_imu, truth, align=False)
+
+
+@pytest.mark.parametrize("mode", smoother.WINDOW_MODES)
+def test_window_smoother_runs_online_and_beats_dead_reckoning(tiny, mode):
+    result = smoother.smooth_window(tiny, config=smoother.SmootherConfig(window_mode=mode, window_size=8))
+    truth = tiny.ground_truth.world_T_imu
+    T = tiny.num_frames
+    assert result.mode == "window" and result.world_T_imu.shape == (T, 4, 4)
+    assert result.online_world_T_imu.shape == (T, 4, 4) and np.all(result.frame_seconds[1:] > 0)
+    assert np.all(np.isfinite(result.pose_cov[1:])) and np.all(np.linalg.eigvalsh(result.pose_cov[1:]) > 0)
+    dead = metrics.ate(motion.dead_reckon(tiny.time_stamps, tiny.twists), truth, align=False)
+    assert metrics.ate(result.world_T_imu, truth, align=False) < dead
+    assert metrics.ate(result.online_world_T_imu, truth, align=False) < dead
+
+
+# --- input checks ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("field,value", [
+    ("sigma_pixel", 0.0), ("sigma_linear_velocity", -1.0), ("sigma_angular_velocity", np.nan),
+    ("loss", "l1"), ("loss_scale", 0), ("max_iterations", 0), ("max_iterations", 2.5),
+    ("function_tolerance", -1e-6), ("rejection_probability", 0.0), ("rejection_probability", 1.5),
+    ("rejection_rounds", -1), ("min_observations", 1), ("min_depth", -0.1), ("min_disparity", np.inf),
+    ("imu_lag", 0.5), ("window_size", 1), ("window_iterations", 0), ("window_mode", "drop"),
+    ("initial_damping", 0.0), ("step_tolerance", np.inf),
+])
+def test_config_rejects_bad_values_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=f"SmootherConfig.{field}"):
+        smoother.SmootherConfig(**{field: value})
+
+
+def test_bad_initial_values_get_a_clear_error(tiny):
+    T = tiny.ground_truth.world_T_imu
+    with pytest.raises(ValueError, match=r"world_T_imu must have shape \(60, 4, 4\)"):
+        smoother.smooth(tiny, T[:-1])
+    bad = T.copy()
+    bad[7, 0, 3] = np.nan
+    with pytest.raises(ValueError, match="non-finite entries at frame 7"):
+        smoother.smooth(tiny, bad)
+    with pytest.raises(ValueError, match=r"landmarks must have shape"):
+        smoother.smooth(tiny, T, np.zeros((3, 3)))
+
+
+def test_initial_landmarks_come_from_the_largest_disparity_observation(tiny):
+    usable = tiny.obs_z[:, 0] - tiny.obs_z[:, 2] > 0
+    T = tiny.ground_truth.world_T_imu
+    given = np.full((tiny.num_landmarks, 3), np.nan)
+    given[0] = [1.0, 2.0, 3.0]  # a given position is kept
+    m = smoother.triangulate_landmarks(tiny, tiny.camera, T, usable, given)
+    assert np.array_equal(m[0], given[0])
+    frames = tiny.observation_frames()
+    for j in (5, 40, 90):
+        obs = np.flatnonzero((tiny.obs_ids == j) & usable)
+        best = obs[np.argmax(tiny.obs_z[obs, 0] - tiny.obs_z[obs, 2])]
+        assert np.allclose(m[j], tiny.camera.triangulate(tiny.obs_z[best:best + 1], T[frames[best]])[0])
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_batch_improves_on_the_ekf_and_dead_reckoning_on_kitti_0020(require_data, data_dir):
+    """0020 = KITTI odometry 06; its velocities are nearly noise-free, so both use small noise."""
+    from visla_edu import data
+
+    ds = data.load(str(require_data("0020")))
+    poses = data_dir / "kitti_odometry_06_poses.txt"
+    if not poses.is_file():
+        pytest.skip(f"{poses.name} not found in {data_dir}")
+    rows = np.loadtxt(poses).reshape(-1, 3, 4)
+    P = np.tile(np.eye(4), (len(rows), 1, 1))
+    P[:, :3, :] = rows
+    truth = ds.imu_T_cam @ P @ lie.se3_inv(ds.imu_T_cam)  # world_T_imu = imu_T_cam P cam_T_imu
+    noise = {"imu_lag": 1, "sigma_linear_velocity": 0.05, "sigma_angular_velocity": 0.005}
+    ekf = run.run_filter(ds, "slam", FilterConfig(**noise), progress=False)
+    result = smoother.smooth(ds, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, smoother.SmootherConfig(**noise))
+    n = len(truth)
+    ate = {name: metrics.ate(T[:n], truth, align=False) for name, T in (
+        ("smoother", result.world_T_imu), ("ekf", ekf.world_T_imu),
+        ("dead reckoning", motion.dead_reckon(ds.time_stamps, ds.twists, lag=1)))}
+    assert ate["smoother"] < ate["ekf"] < ate["dead reckoning"], ate

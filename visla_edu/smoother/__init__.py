@@ -1,0 +1,64 @@
+"""Batch and sliding-window least squares on SE(3): the course report's objective, solved.
+
+The EKF linearises each observation once; the smoother minimises the whole objective of the
+course report (section 2) over all poses ``world_T_imu[t]`` (the first held: it is the
+world frame) and landmarks ``m_j`` (world xyz)::
+
+    sum_obs rho(|z_tj - h(T_t, m_j)|^2_V) + sum_t |log((T_t exp(tau_t u_t^))^{-1} T_{t+1})|^2_{W_t}
+
+with the stereo model ``h`` of :mod:`visla_edu.camera`, ``V = sigma_pixel^2 I4``,
+``W_t = tau_t^2 diag(sigma_v^2 I3, sigma_w^2 I3)`` (:func:`visla_edu.motion.motion_noise`),
+the twist ``u_t = [v; w]`` of the step ``t -> t+1`` (:func:`visla_edu.motion.select_twists`)
+and a robust loss ``rho``. Gauss-Newton / Levenberg-Marquardt with the right perturbation
+``T <- T exp(delta^)``, ``m <- m + dm``; the landmarks are eliminated by the Schur
+complement and the reduced pose system is solved by a block envelope Cholesky factor, which
+also gives the marginal covariances.
+
+* :func:`smooth` -- the batch smoother over the whole drive, started from a trajectory
+  (the EKF's, or dead reckoning) and optionally a map; rounds of outlier rejection.
+* :func:`smooth_window` -- the fixed-lag sliding window (the last ``window_size`` frames),
+  frame by frame, the real-time middle ground between the filter and the batch.
+
+Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
+history, rejection counts, per-observation status, timing); :class:`SmootherConfig` holds
+every setting and validates it.
+
+    >>> from visla_edu import data, run, smoother
+    >>> ds = data.load("sim-tiny")
+    >>> ekf = run.run_filter(ds, "slam", progress=False)
+    >>> result = smoother.smooth(ds, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam)
+    >>> result.world_T_imu.shape == (ds.num_frames, 4, 4)
+    True
+
+Modules (private; the public names are re-exported here): ``_config``
+(:class:`SmootherConfig`), ``_se3`` (the SE(3) right Jacobian and its inverse), ``_factors``
+(residuals, Jacobians, robust losses), ``_problem`` (observations and structure),
+``_envelope`` (the block envelope Cholesky, solve and selected inverse), ``_normal``
+(linearisation, the Schur step, marginals), ``_result`` (:class:`SmootherResult`),
+``_batch`` (:func:`smooth`), ``_window`` (:func:`smooth_window`).
+"""
+
+from visla_edu.smoother._batch import smooth
+from visla_edu.smoother._config import LOSSES, WINDOW_MODES, SmootherConfig
+from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
+from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
+from visla_edu.smoother._result import HISTORY_FIELDS, SmootherResult
+from visla_edu.smoother._se3 import se3_right_jacobian, se3_right_jacobian_inv
+from visla_edu.smoother._window import smooth_window
+
+__all__ = [
+    "SmootherConfig",
+    "SmootherResult",
+    "LOSSES",
+    "WINDOW_MODES",
+    "STATUS_NAMES",
+    "HISTORY_FIELDS",
+    "smooth",
+    "smooth_window",
+    "triangulate_landmarks",
+    "motion_residuals",
+    "reprojection",
+    "robust_loss",
+    "se3_right_jacobian",
+    "se3_right_jacobian_inv",
+]

@@ -1,0 +1,168 @@
+"""Settings of the batch and sliding-window smoothers: :class:`SmootherConfig`."""
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES"]
+
+#: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
+LOSSES = ("cauchy", "huber", "none")
+#: What the sliding window does with the states that leave it.
+WINDOW_MODES = ("fix", "marginalize")
+
+
+@dataclass
+class SmootherConfig:
+    """Noise model, robust loss, stopping rules and window settings of the smoothers.
+
+    The noise settings mean what they mean in :class:`visla_edu.ekf.FilterConfig` and have
+    the same defaults, so the smoother and the filter solve for the same model.
+
+    Attributes
+    ----------
+    sigma_pixel : float
+        Standard deviation of each stereo pixel coordinate (px): ``V = sigma_pixel^2 I4``.
+    sigma_linear_velocity, sigma_angular_velocity : float or (float, float, float)
+        Noise on each velocity sample (m/s, rad/s), one value or one per body axis:
+        ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` (:func:`visla_edu.motion.motion_noise`).
+        :meth:`from_filter_config` takes the filter's values, measured from the data when the
+        filter's are ``"auto"``.
+    imu_lag : int
+        The step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
+    loss : {"cauchy", "huber", "none"}
+        Robust loss ``rho(s)`` of the squared whitened reprojection error ``s = |r|^2 / sigma^2``:
+        Cauchy ``k^2 log(1 + s / k^2)``, Huber ``s`` up to ``k^2`` then ``2 k sqrt(s) - k^2``.
+    loss_scale : float
+        ``k``, in units of the whitened error norm ``sqrt(s)`` (4 dof: inliers are below 3.1
+        with 95% probability).
+    max_iterations : int
+        Levenberg-Marquardt iterations of the final round (accepted or not); a rough round
+        before a rejection gets half.
+    function_tolerance : float
+        Stop when an accepted step lowers the cost by less than this fraction.
+    step_tolerance : float
+        Stop when the step norm is below ``step_tolerance * (1 + |state|)`` (state: the
+        pose translations and landmark positions, in metres).
+    initial_damping : float
+        First Levenberg-Marquardt damping ``lambda`` (``H + lambda diag(H)``).
+    rejection_probability : float
+        After each round, observations whose squared whitened error exceeds the chi-square
+        (4 dof) quantile at this probability are dropped (1.0 disables rejection).
+    rejection_rounds : int
+        Rounds of "solve roughly, reject" before the final solve (0: solve once, reject
+        nothing).
+    min_observations : int
+        Landmarks with fewer usable observations are dropped from the problem.
+    min_depth : float
+        Landmarks predicted closer than this (m, camera z) in any observation are dropped.
+    min_disparity : float
+        Landmarks never seen with at least this disparity ``uL - uR`` (px) are left out, and
+        an estimate that drifts beyond twice that range (largest predicted disparity below
+        ``min_disparity / 2``) is dropped after a round. Their depth, beyond
+        ``fsu b / min_disparity``, is so poorly observed that Gauss-Newton on xyz landmarks
+        sends them off along their viewing rays (on dataset 03, landmarks at 300 m ran to
+        minus a million metres in six iterations), which stalls Levenberg-Marquardt. The same
+        3 px as :attr:`visla_edu.ekf.FilterConfig.min_init_disparity`.
+    skip_repeated_frames : bool
+        Ignore the observations of frames that exactly repeat the previous frame's.
+    pose_covariance, landmark_covariance : bool
+        Compute the marginal covariances at the solution.
+    window_size : int
+        Frames N in the sliding window (20: see :mod:`visla_edu.smoother._window` for the
+        measurements behind the window defaults).
+    window_iterations : int
+        Gauss-Newton iterations per new frame in the sliding window.
+    window_mode : {"fix", "marginalize"}
+        What happens to a pose leaving the window, see :func:`smooth_window`.
+    """
+
+    sigma_pixel: float = 1.5
+    sigma_linear_velocity: float = 0.5
+    sigma_angular_velocity: float = 0.05
+    imu_lag: int = 0
+    loss: str = "cauchy"
+    loss_scale: float = 3.0
+    max_iterations: int = 10
+    function_tolerance: float = 1e-6
+    step_tolerance: float = 1e-9
+    initial_damping: float = 1e-4
+    rejection_probability: float = 0.999
+    rejection_rounds: int = 1
+    min_observations: int = 2
+    min_depth: float = 0.5
+    min_disparity: float = 3.0
+    skip_repeated_frames: bool = True
+    pose_covariance: bool = True
+    landmark_covariance: bool = True
+    window_size: int = 20
+    window_iterations: int = 1
+    window_mode: str = "fix"
+
+    def __post_init__(self):
+        for name in ("sigma_pixel", "loss_scale", "function_tolerance", "step_tolerance", "initial_damping"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
+                raise ValueError(f"SmootherConfig.{name} must be a positive number, got {value!r}")
+        for name in ("sigma_linear_velocity", "sigma_angular_velocity"):
+            setattr(self, name, _positive_per_axis(name, getattr(self, name)))
+        for name, unit in (("min_depth", "m"), ("min_disparity", "px")):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.number)) or not 0 <= value < np.inf:
+                raise ValueError(f"SmootherConfig.{name} must be a number >= 0 ({unit}), got {value!r}")
+        if not 0 < self.rejection_probability <= 1:
+            raise ValueError(f"SmootherConfig.rejection_probability must be in (0, 1], got "
+                             f"{self.rejection_probability!r}")
+        for name, low in (("imu_lag", None), ("max_iterations", 1), ("rejection_rounds", 0),
+                          ("min_observations", 2), ("window_size", 2), ("window_iterations", 1)):
+            _check_int(name, getattr(self, name), low)
+        if self.loss not in LOSSES:
+            raise ValueError(f"SmootherConfig.loss must be one of {LOSSES}, got {self.loss!r}")
+        if self.window_mode not in WINDOW_MODES:
+            raise ValueError(f"SmootherConfig.window_mode must be one of {WINDOW_MODES}, got {self.window_mode!r}")
+
+    @property
+    def velocity_sigmas(self):
+        """``[sigma_v (3); sigma_w (3)]`` per body axis, shape (6,)."""
+        return np.concatenate([np.broadcast_to(self.sigma_linear_velocity, (3,)),
+                               np.broadcast_to(self.sigma_angular_velocity, (3,))]).astype(float)
+
+    @classmethod
+    def from_filter_config(cls, filter_config, **overrides):
+        """The smoother's model from a filter's resolved settings (noise, lag, far points).
+
+        Parameters
+        ----------
+        filter_config : visla_edu.filters.FilterConfig
+            Resolved (no ``"auto"`` noise or lag: :func:`visla_edu.run.resolve_config`).
+        **overrides
+            Further :class:`SmootherConfig` fields.
+        """
+        if not filter_config.resolved:
+            raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
+                             "(visla_edu.run.resolve_config(dataset, config))")
+        model = dict(sigma_pixel=filter_config.sigma_pixel, sigma_linear_velocity=filter_config.sigma_linear_velocity,
+                     sigma_angular_velocity=filter_config.sigma_angular_velocity, imu_lag=filter_config.imu_lag,
+                     min_disparity=filter_config.min_init_disparity,
+                     skip_repeated_frames=filter_config.skip_repeated_frames)
+        return cls(**{**model, **overrides})
+
+    def to_dict(self):
+        """Plain dict of the settings (for saving with results)."""
+        return asdict(self)
+
+
+def _check_int(name, value, low):
+    """Raise ValueError unless ``value`` is an integer (bools are not) and at least ``low``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"SmootherConfig.{name} must be an integer, got {value!r}")
+    if low is not None and value < low:
+        raise ValueError(f"SmootherConfig.{name} must be >= {low}, got {value!r}")
+
+
+def _positive_per_axis(name, value):
+    """A velocity noise: a positive number or three (one per body axis), as a float or a tuple."""
+    sigma = np.asarray(value, dtype=float) if not isinstance(value, str) else np.full(2, np.nan)
+    if sigma.shape not in ((), (3,)) or not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
+        raise ValueError(f"SmootherConfig.{name} must be a positive number or three of them (x, y, z), got {value!r}")
+    return float(sigma) if sigma.ndim == 0 else tuple(float(x) for x in sigma)

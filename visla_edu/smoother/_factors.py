@@ -1,0 +1,148 @@
+"""The smoother's two residuals and their analytic Jacobians, vectorised over factors.
+
+Reprojection (one per stereo observation of landmark ``m`` from pose ``T``)::
+
+    r = h(T, m) - z,       h(T, m) = Ks pi(cam_T_imu T^{-1} m)
+
+with the Jacobians of :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians` (right
+perturbation ``T <- T exp(delta^)``), here for a different pose per observation.
+
+Motion (one per step ``t -> t+1`` with twist ``u_t`` over ``tau_t``)::
+
+    E_t = exp(-tau_t u_t^) T_t^{-1} T_{t+1},      e_t = log(E_t)
+
+Perturbing ``T_t <- T_t exp(a^)`` and ``T_{t+1} <- T_{t+1} exp(b^)`` gives
+``E_t <- E_t exp((b - Ad(T_{t+1}^{-1} T_t) a)^)`` to first order, hence::
+
+    J_e_next = J_r(e_t)^{-1},      J_e_prev = -J_r(e_t)^{-1} Ad(T_{t+1}^{-1} T_t)
+
+with the SE(3) right Jacobian of :mod:`visla_edu.smoother._se3`.
+"""
+
+import numpy as np
+
+from visla_edu import camera, lie
+from visla_edu.smoother._se3 import se3_right_jacobian_inv
+
+__all__ = ["motion_steps", "motion_residuals", "reprojection", "robust_loss"]
+
+
+def motion_steps(time_stamps, twists, lag):
+    """The inverse IMU increments ``exp(-tau_t u_t^)`` and the steps ``tau_t``.
+
+    Parameters
+    ----------
+    time_stamps : ndarray, shape (T,)
+    twists : ndarray, shape (T, 6)
+        ``[v; w]`` samples.
+    lag : int
+        See :func:`visla_edu.motion.select_twists`.
+
+    Returns
+    -------
+    step_inv : ndarray, shape (T - 1, 4, 4)
+    tau : ndarray, shape (T - 1,)
+    """
+    from visla_edu.motion import select_twists
+
+    tau = np.diff(np.asarray(time_stamps, dtype=float))
+    return lie.se3_exp(-tau[:, None] * select_twists(twists, lag)), tau
+
+
+def motion_residuals(world_T_imu, step_inv, jacobians=True):
+    """Motion residuals ``e_t = log(exp(-tau u^) T_t^{-1} T_{t+1})`` and their Jacobians.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (K + 1, 4, 4)
+        Consecutive poses ``T_0 .. T_K``.
+    step_inv : ndarray, shape (K, 4, 4)
+        ``exp(-tau_t u_t^)`` for each step.
+    jacobians : bool
+        Also return the Jacobians.
+
+    Returns
+    -------
+    e : ndarray, shape (K, 6)
+    J_e_prev, J_e_next : ndarray, shape (K, 6, 6)
+        With respect to the right perturbations of ``T_t`` and ``T_{t+1}`` (only if asked).
+    """
+    next_T_prev = lie.se3_inv(world_T_imu[1:]) @ world_T_imu[:-1]
+    E = step_inv @ lie.se3_inv(next_T_prev)
+    e = lie.se3_log(E)
+    if not jacobians:
+        return e
+    J_e_next = se3_right_jacobian_inv(e)
+    J_e_prev = -J_e_next @ lie.adjoint(next_T_prev)
+    return e, J_e_prev, J_e_next
+
+
+def reprojection(Ks, cam_T_imu, world_T_imu, p_world, jacobians=True):
+    """Predicted stereo pixels of landmarks, each from its own pose, and the Jacobians.
+
+    ``q = cam_T_imu T^{-1} m``, ``z = Ks pi(q)``; as in
+    :meth:`~visla_edu.camera.StereoCamera.predict_with_jacobians`,
+    ``J_z_landmark = Ks dpi/dq(q) cam_T_imu T^{-1} P^T`` and
+    ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(T^{-1} m)``.
+
+    Parameters
+    ----------
+    Ks : ndarray, shape (4, 4)
+    cam_T_imu : ndarray, shape (4, 4)
+    world_T_imu : ndarray, shape (N, 4, 4)
+        The pose of each observation.
+    p_world : ndarray, shape (N, 3)
+        The landmark of each observation.
+    jacobians : bool
+
+    Returns
+    -------
+    z : ndarray, shape (N, 4)
+    depth : ndarray, shape (N,)
+        ``q3``, the landmark's depth in the left camera.
+    J_z_landmark : ndarray, shape (N, 4, 3)
+    J_z_pose : ndarray, shape (N, 4, 6)
+        (the Jacobians only if asked)
+    """
+    R = world_T_imu[:, :3, :3]
+    p_imu = np.einsum("nji,nj->ni", R, p_world - world_T_imu[:, :3, 3])
+    q = p_imu @ cam_T_imu[:3, :3].T + cam_T_imu[:3, 3]
+    q = np.concatenate([q, np.ones((len(q), 1))], axis=1)
+    z = camera.projection(q) @ Ks.T
+    if not jacobians:
+        return z, q[:, 2]
+    J_z_q3 = (Ks @ camera.projection_jacobian(q))[:, :, :3] @ cam_T_imu[:3, :3]
+    J_z_landmark = J_z_q3 @ np.swapaxes(R, 1, 2)
+    J_z_pose = np.concatenate([-J_z_q3, J_z_q3 @ lie.hat(p_imu)], axis=-1)
+    return z, q[:, 2], J_z_landmark, J_z_pose
+
+
+def robust_loss(s, loss, scale):
+    """Robust loss ``rho(s)`` of squared whitened errors and its IRLS weight ``rho'(s)``.
+
+    Cauchy: ``rho = k^2 log(1 + s / k^2)``, ``rho' = 1 / (1 + s / k^2)``.
+    Huber: ``rho = s`` for ``s <= k^2``, else ``2 k sqrt(s) - k^2``; ``rho' = min(1, k / sqrt(s))``.
+    None: ``rho = s``, ``rho' = 1``.
+
+    Parameters
+    ----------
+    s : ndarray, shape (N,)
+        ``|r|^2 / sigma^2``.
+    loss : {"cauchy", "huber", "none"}
+    scale : float
+        ``k`` (units of ``sqrt(s)``).
+
+    Returns
+    -------
+    rho, weight : ndarray, shape (N,)
+    """
+    k2 = scale**2
+    if loss == "cauchy":
+        return k2 * np.log1p(s / k2), 1.0 / (1.0 + s / k2)
+    if loss == "huber":
+        root = np.sqrt(s)
+        inlier = root <= scale
+        return np.where(inlier, s, 2 * scale * root - k2), np.where(inlier, 1.0, scale / np.maximum(root, scale))
+    if loss == "none":
+        return s, np.ones_like(s)
+    raise ValueError(f"robust_loss: loss must be 'cauchy', 'huber' or 'none', got {loss!r}")

@@ -1,0 +1,276 @@
+"""The least-squares problem a smoother solves: observations, landmarks, pose variables, priors.
+
+A :class:`Problem` covers the frames ``first_frame .. last_frame``; the poses of
+``first_var .. last_frame`` are variables (block rows ``0 .. n - 1`` of the reduced system),
+the earlier ones are held at their current values. The batch smoother has
+``first_frame = 0, first_var = 1`` (the first pose defines the world frame); the sliding
+window has its window as variables and, in ``"fix"`` mode, older frames held.
+
+Observations are stored landmark-major (sorted by landmark, then frame), so the
+observations of one landmark are consecutive, and each landmark's variable frames form one
+run of block rows ``span_lo .. span_hi``; ``slot`` places each observation in that run
+(frames inside the run without an observation get zero slots). Observations and landmarks
+leave the problem by clearing ``active`` / ``landmark_active``; the structure is kept.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+
+from visla_edu.camera import StereoCamera
+from visla_edu.dataset import repeated_frames
+
+__all__ = ["PosePrior", "Problem", "build_problem", "STATUS_NAMES", "observation_status",
+           "far_landmarks", "triangulate_landmarks", "rig_camera"]
+
+#: Status of each dataset observation in a smoother result (``SmootherResult.obs_status``).
+STATUS_NAMES = ("used", "nonpositive_disparity", "repeated_frame", "landmark_dropped", "rejected")
+USED, NONPOSITIVE, REPEATED, DROPPED, REJECTED = range(len(STATUS_NAMES))
+
+
+@dataclass
+class PosePrior:
+    """A Gaussian prior on one pose: ``log(mean^{-1} T) ~ N(0, (U^T U)^{-1})``.
+
+    Attributes
+    ----------
+    frame : int
+    mean : ndarray, shape (4, 4)
+    sqrt_information : ndarray, shape (6, 6)
+        ``U``; the whitened residual is ``U log(mean^{-1} T)``.
+    """
+
+    frame: int
+    mean: np.ndarray
+    sqrt_information: np.ndarray
+
+
+@dataclass
+class Problem:
+    """Data and structure of one least-squares problem (see the module docstring).
+
+    Attributes
+    ----------
+    Ks, cam_T_imu : ndarray, shape (4, 4)
+        Stereo matrix and ``inv(imu_T_cam)``.
+    sigma_pixel, loss, loss_scale, min_depth, min_disparity
+        From :class:`~visla_edu.smoother.SmootherConfig`.
+    first_frame, first_var, last_frame : int
+        Frames in the problem; variables from ``first_var`` on.
+    motion_from : int
+        Motion factors are the steps ``motion_from .. last_frame - 1``.
+    step_inv : ndarray, shape (K, 4, 4)
+        ``exp(-tau_t u_t^)`` of those steps.
+    motion_sqrt_information : ndarray, shape (K, 6)
+        ``1 / (tau_t sigma)``: the diagonal of ``W_t^{-1/2}``.
+    obs_frame, obs_landmark : ndarray of int, shape (N,)
+        Frame and local landmark index (``0 .. L-1``) of each observation (landmark-major).
+    obs_z : ndarray, shape (N, 4)
+    obs_source : ndarray of int, shape (N,)
+        Index of each observation in the dataset's sparse arrays.
+    landmark_ids : ndarray of int, shape (L,)
+        Dataset id of each local landmark.
+    landmark_start : ndarray of int, shape (L + 1,)
+        Landmark ``j`` owns observations ``landmark_start[j] : landmark_start[j + 1]``.
+    active : ndarray of bool, shape (N,)
+    landmark_active : ndarray of bool, shape (L,)
+    prior : PosePrior or None
+    landmark_prior : (ndarray, ndarray) or None
+        Quadratic landmark priors ``m^T Lambda m - 2 m^T eta`` per landmark: ``Lambda``
+        (L, 3, 3) and ``eta`` (L, 3) (observations from held poses, folded in).
+    slot : ndarray of int, shape (N,)
+        Row of each observation in the Schur correction rows (-1 at held frames).
+    span_lo, span_hi, span_start : ndarray of int, shape (L,)
+        Each landmark's run of block rows and its first slot (``span_hi < span_lo``: none).
+    num_slots : int
+    frame_sum : scipy.sparse.csr_matrix, shape (n, N)
+        Sums per-observation pose terms into their block rows.
+    dropped_in_steps : int
+        Landmarks the solver dropped because a step would bring them behind a camera.
+    """
+
+    Ks: np.ndarray
+    cam_T_imu: np.ndarray
+    sigma_pixel: float
+    loss: str
+    loss_scale: float
+    min_depth: float
+    min_disparity: float
+    first_frame: int
+    first_var: int
+    last_frame: int
+    motion_from: int
+    step_inv: np.ndarray
+    motion_sqrt_information: np.ndarray
+    obs_frame: np.ndarray
+    obs_landmark: np.ndarray
+    obs_z: np.ndarray
+    obs_source: np.ndarray
+    landmark_ids: np.ndarray
+    landmark_start: np.ndarray
+    active: np.ndarray
+    landmark_active: np.ndarray
+    prior: PosePrior = None
+    landmark_prior: tuple = None
+    slot: np.ndarray = None
+    span_lo: np.ndarray = None
+    span_hi: np.ndarray = None
+    span_start: np.ndarray = None
+    num_slots: int = 0
+    frame_sum: object = None
+    dropped_in_steps: int = 0
+
+    @property
+    def num_vars(self):
+        """n, the number of pose variables."""
+        return self.last_frame - self.first_var + 1
+
+    @property
+    def num_landmarks(self):
+        """L, the number of local landmarks (active or not)."""
+        return len(self.landmark_ids)
+
+    def obs_var(self):
+        """Block row of each observation's pose, -1 at held frames, shape (N,)."""
+        var = self.obs_frame - self.first_var
+        return np.where(var >= 0, var, -1)
+
+
+def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, config, frames, motion,
+                  prior=None, landmark_prior=None):
+    """Assemble a :class:`Problem` and its structure from observations in any order.
+
+    Parameters
+    ----------
+    obs_frame, obs_landmark_ids : array_like of int, shape (N,)
+        Frame and dataset landmark id of each observation (each pair once).
+    obs_z : array_like, shape (N, 4)
+    obs_source : array_like of int, shape (N,)
+    camera : StereoCamera
+    config : SmootherConfig
+    frames : (int, int, int)
+        ``(first_frame, first_var, last_frame)``.
+    motion : (int, ndarray, ndarray)
+        ``(motion_from, step_inv, motion_sqrt_information)`` for the steps
+        ``motion_from .. last_frame - 1``.
+    prior : PosePrior, optional
+    landmark_prior : (ndarray, ndarray), optional
+        ``Lambda`` (M, 3, 3) and ``eta`` (M, 3) indexed by dataset landmark id.
+
+    Returns
+    -------
+    Problem
+    """
+    obs_frame, obs_landmark_ids = np.asarray(obs_frame, np.int64), np.asarray(obs_landmark_ids, np.int64)
+    order = np.lexsort((obs_frame, obs_landmark_ids))
+    landmark_ids, obs_landmark = np.unique(obs_landmark_ids[order], return_inverse=True)
+    first_frame, first_var, last_frame = frames
+    motion_from, step_inv, sqrt_info = motion
+    problem = Problem(
+        Ks=camera.Ks, cam_T_imu=camera.cam_T_imu, sigma_pixel=float(config.sigma_pixel), loss=config.loss,
+        loss_scale=float(config.loss_scale), min_depth=float(config.min_depth),
+        min_disparity=float(config.min_disparity), first_frame=first_frame,
+        first_var=first_var, last_frame=last_frame, motion_from=motion_from, step_inv=step_inv,
+        motion_sqrt_information=sqrt_info, obs_frame=obs_frame[order], obs_landmark=obs_landmark,
+        obs_z=np.asarray(obs_z, dtype=float)[order], obs_source=np.asarray(obs_source)[order],
+        landmark_ids=landmark_ids,
+        landmark_start=np.searchsorted(obs_landmark, np.arange(len(landmark_ids) + 1)),
+        active=np.ones(len(order), dtype=bool), landmark_active=np.ones(len(landmark_ids), dtype=bool),
+        prior=prior,
+    )
+    if landmark_prior is not None:
+        problem.landmark_prior = (landmark_prior[0][landmark_ids], landmark_prior[1][landmark_ids])
+    _build_structure(problem)
+    return problem
+
+
+def _build_structure(problem):
+    """Slots of the Schur correction rows and the frame-sum matrix (see :class:`Problem`)."""
+    var = problem.obs_var()
+    first, last = problem.landmark_start[:-1], problem.landmark_start[1:] - 1
+    lo = np.maximum(problem.obs_frame[first] - problem.first_var, 0)
+    hi = var[last]  # -1 when the landmark's last observation is at a held frame
+    count = np.maximum(hi - lo + 1, 0)
+    problem.span_lo, problem.span_hi = lo, lo + count - 1
+    problem.span_start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
+    problem.num_slots = int(count.sum())
+    on_var = var >= 0
+    problem.slot = np.where(on_var, problem.span_start[problem.obs_landmark] + var - lo[problem.obs_landmark], -1)
+    cols = np.flatnonzero(on_var)
+    problem.frame_sum = sparse.csr_matrix((np.ones(len(cols)), (var[cols], cols)),
+                                          shape=(problem.num_vars, len(var)))
+
+
+def observation_status(dataset, config, frames=None):
+    """Which dataset observations a smoother may use, and why the others are left out.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : SmootherConfig
+    frames : ndarray of int, optional
+        Frame of each observation (``dataset.observation_frames()``).
+
+    Returns
+    -------
+    ndarray of int8, shape (N,)
+        :data:`STATUS_NAMES` codes: non-positive disparity (no depth), observations of a
+        repeated frame (``config.skip_repeated_frames``), else ``used``.
+    """
+    frames = dataset.observation_frames() if frames is None else frames
+    status = np.full(dataset.num_observations, USED, dtype=np.int8)
+    status[dataset.obs_z[:, 0] - dataset.obs_z[:, 2] <= 0] = NONPOSITIVE
+    if config.skip_repeated_frames:
+        status[np.isin(frames, repeated_frames(dataset))] = REPEATED
+    return status
+
+
+def far_landmarks(dataset, usable, min_disparity):
+    """Landmarks whose usable observations all have a disparity below ``min_disparity`` px, (M,) bool."""
+    disparity = np.where(usable, dataset.obs_z[:, 0] - dataset.obs_z[:, 2], -np.inf)
+    best = np.full(dataset.num_landmarks, -np.inf)
+    np.maximum.at(best, dataset.obs_ids, disparity)
+    return np.isfinite(best) & (best < min_disparity)
+
+
+def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):
+    """Initial landmark positions: the given ones where finite, else from the best observation.
+
+    The best observation of a landmark is its usable one with the largest disparity
+    (the best-conditioned depth), triangulated at that frame's pose.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    camera : StereoCamera
+    world_T_imu : ndarray, shape (T, 4, 4)
+    usable : ndarray of bool, shape (N,)
+        Observations that may be used (positive disparity).
+    landmarks : ndarray, shape (M, 3), optional
+        E.g. the EKF's map, NaN where it never initialised a landmark.
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        NaN for landmarks with neither a given position nor a usable observation.
+    """
+    M = dataset.num_landmarks
+    out = np.full((M, 3), np.nan) if landmarks is None else np.array(landmarks, dtype=float, copy=True)
+    if out.shape != (M, 3):
+        raise ValueError(f"initial landmarks must have shape ({M}, 3) for {dataset.name}, got {out.shape}")
+    disparity = np.where(usable, dataset.obs_z[:, 0] - dataset.obs_z[:, 2], -np.inf)
+    order = np.lexsort((-disparity, dataset.obs_ids))  # per landmark, largest disparity first
+    first = order[np.r_[True, dataset.obs_ids[order][1:] != dataset.obs_ids[order][:-1]]]
+    first = first[np.isfinite(disparity[first])]
+    need = first[~np.all(np.isfinite(out[dataset.obs_ids[first]]), axis=1)]
+    if len(need):
+        p_cam = camera.triangulate(dataset.obs_z[need])
+        world_T_cam = world_T_imu[dataset.observation_frames()[need]] @ camera.imu_T_cam
+        out[dataset.obs_ids[need]] = np.einsum("nij,nj->ni", world_T_cam[:, :3, :3], p_cam) + world_T_cam[:, :3, 3]
+    return out
+
+
+def rig_camera(dataset, imu_T_cam=None):
+    """The dataset's stereo rig, with ``imu_T_cam`` replaced if given (e.g. a corrected one)."""
+    return StereoCamera(dataset.K, dataset.b, dataset.imu_T_cam if imu_T_cam is None else imu_T_cam)

@@ -1,0 +1,131 @@
+"""What a smoother returns: :class:`SmootherResult`, and the shared input checks."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from visla_edu.smoother._problem import STATUS_NAMES
+
+__all__ = ["SmootherResult", "check_trajectory", "check_landmarks", "HISTORY_FIELDS"]
+
+#: Per-iteration records in :attr:`SmootherResult.history`.
+HISTORY_FIELDS = ("round", "cost", "step_norm", "accepted", "damping")
+
+
+@dataclass
+class SmootherResult:
+    """Everything a smoother run produced.
+
+    Attributes
+    ----------
+    name : str
+        Dataset name.
+    mode : {"smooth", "window"}
+    time_stamps : ndarray, shape (T,)
+    world_T_imu : ndarray, shape (T, 4, 4)
+        ``world`` is the IMU frame at the first time stamp.
+    landmarks : ndarray, shape (M, 3)
+        NaN where a landmark was not estimated (dropped, or never usable).
+    pose_cov : ndarray, shape (T, 6, 6)
+        Marginal covariance of each pose's right perturbation (zeros for a held pose, NaN
+        when not computed).
+    landmark_cov : ndarray, shape (M, 3, 3)
+        Marginal covariances of the landmarks (NaN where not estimated or not computed).
+    history : dict of ndarray
+        One entry per iteration for each of :data:`HISTORY_FIELDS`: the rejection round, the
+        cost after the iteration, the step norm, whether the step was accepted, the damping.
+    rejected : dict of int
+        ``outliers`` (observations rejected by the chi-square test), ``nonpositive_disparity``
+        and ``repeated_frame`` (observations never used), ``landmarks_no_position``,
+        ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far`` (landmarks
+        dropped, see :class:`~visla_edu.smoother.SmootherConfig`).
+    obs_status : ndarray of int8, shape (N,)
+        Status of each dataset observation, a code of :data:`STATUS_NAMES`.
+    timing : dict of float
+        Seconds spent: ``setup``, ``solve``, ``covariance``, ``total``.
+    config : dict
+    imu_T_cam : ndarray, shape (4, 4)
+        The calibration used.
+    frame_seconds : ndarray, shape (T,)
+        Sliding window only: the time spent on each new frame (empty for the batch).
+    online_world_T_imu : ndarray, shape (T, 4, 4)
+        Sliding window only: each pose as estimated when its frame was the newest (the
+        real-time estimate; ``world_T_imu`` is the estimate when it left the window).
+    """
+
+    name: str
+    mode: str
+    time_stamps: np.ndarray
+    world_T_imu: np.ndarray
+    landmarks: np.ndarray
+    pose_cov: np.ndarray
+    landmark_cov: np.ndarray
+    history: dict
+    rejected: dict
+    obs_status: np.ndarray
+    timing: dict
+    config: dict = field(default_factory=dict)
+    imu_T_cam: np.ndarray = None
+    frame_seconds: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    online_world_T_imu: np.ndarray = None
+
+    def status_totals(self):
+        """Observations by status name, e.g. ``{"used": ..., "rejected": ...}``."""
+        counts = np.bincount(self.obs_status, minlength=len(STATUS_NAMES))
+        return dict(zip(STATUS_NAMES, counts.tolist()))
+
+    def summary(self):
+        """A few lines a student can read: mode, map, rejections, iterations, time."""
+        kept = int(np.isfinite(self.landmarks[:, 0]).sum())
+        totals = self.status_totals()
+        lines = [
+            f"{self.name}: mode {self.mode}, {len(self.time_stamps)} frames, "
+            f"{kept} of {len(self.landmarks)} landmarks estimated",
+            "observations: " + ", ".join(f"{k} {v}" for k, v in totals.items() if v),
+            "dropped landmarks: " + ", ".join(
+                f"{k[len('landmarks_'):]} {v}" for k, v in self.rejected.items() if k.startswith("landmarks_")),
+        ]
+        h = self.history
+        if len(h["cost"]):
+            lines.append(f"{len(h['cost'])} iterations ({int(np.sum(h['accepted']))} accepted), "
+                         f"final cost {h['cost'][-1]:.6g}")
+        lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in self.timing.items()))
+        if len(self.frame_seconds):
+            lines.append(f"per frame: median {1e3 * np.median(self.frame_seconds):.2f} ms, "
+                         f"max {1e3 * np.max(self.frame_seconds):.2f} ms")
+        return "\n".join(lines)
+
+
+def check_trajectory(world_T_imu, num_frames, name):
+    """``world_T_imu`` as a finite float array of shape (T, 4, 4), or a ValueError naming the problem."""
+    world_T_imu = np.asarray(world_T_imu, dtype=float)
+    if world_T_imu.shape != (num_frames, 4, 4):
+        raise ValueError(f"{name}: initial world_T_imu must have shape ({num_frames}, 4, 4) "
+                         f"(one pose per frame of the dataset), got {world_T_imu.shape}")
+    bad = np.flatnonzero(~np.all(np.isfinite(world_T_imu), axis=(1, 2)))
+    if len(bad):
+        raise ValueError(f"{name}: initial world_T_imu has non-finite entries at frame {bad[0]} "
+                         f"({len(bad)} frames); start from a finite trajectory (e.g. dead reckoning)")
+    return world_T_imu
+
+
+def check_landmarks(landmarks, num_landmarks, name):
+    """``landmarks`` as a float array of shape (M, 3) (NaN rows allowed), or None."""
+    if landmarks is None:
+        return None
+    landmarks = np.asarray(landmarks, dtype=float)
+    if landmarks.shape != (num_landmarks, 3):
+        raise ValueError(f"{name}: initial landmarks must have shape ({num_landmarks}, 3) "
+                         f"(NaN rows for unknown ones), got {landmarks.shape}")
+    return landmarks
+
+
+def empty_history():
+    """A history dict with no iterations."""
+    return {k: [] for k in HISTORY_FIELDS}
+
+
+def finish_history(history):
+    """The history lists as arrays (int round, float cost/step/damping, bool accepted)."""
+    types = {"round": np.int64, "accepted": bool}
+    return {k: np.asarray(v, dtype=types.get(k, float)) for k, v in history.items()}

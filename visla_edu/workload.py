@@ -1,0 +1,201 @@
+"""How much work a run will be, and what to say when one fails.
+
+:func:`estimate_work` predicts the memory and time of a filter run before it starts (the
+command line refuses one past :data:`WORK_LIMIT_BYTES` or :data:`WORK_LIMIT_SECONDS` unless
+given ``--force``); :func:`divergence_hint` names the likely cause of a failed run.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from visla_edu import data, motion
+from visla_edu._files import format_bytes
+from visla_edu.codes import SLAM, SMOOTHER_MODES, VIO
+from visla_edu.filters import FilterConfig
+
+__all__ = ["WorkEstimate", "estimate_work", "divergence_hint", "WORK_LIMIT_BYTES", "WORK_LIMIT_SECONDS"]
+
+
+#: Cost model of the filter's updates, fitted on the 2-core development machine with one BLAS
+#: thread (``benchmarks/bench_work_estimate.py`` prints estimates against measurements). A joint
+#: update with a D-dimensional state and m observation rows costs ``D^2 (a + b m)`` seconds (the
+#: covariance update ``Sigma -= A^T A`` streams the D x D covariance and multiplies (D, m) by
+#: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``; every
+#: frame some milliseconds more. Estimated/measured time on 40-frame runs (a loaded 2-core
+#: machine): 0.7 to 2.5 for dense SLAM (strides 2 to 8, simulated and dataset 03), 0.8 for
+#: active-set SLAM and 2.8 for VIO with about 700 landmarks in view; dense SLAM on every
+#: landmark of dataset 03 (D = 15321) measured 2.2 s a frame against 3.3 s estimated.
+SECONDS_PER_ENTRY = 1e-8  # a
+SECONDS_PER_ENTRY_ROW = 2e-11  # b
+SECONDS_PER_ROW_CUBED = 4e-11  # c
+SECONDS_PER_ROW_SQUARED = 2e-8  # d
+SECONDS_PER_FRAME = 5e-3  # the rest of a step (prediction, gating, bookkeeping)
+#: The smoothers' time as a multiple of the joint EKF's (batch on dataset 03: about 3 times),
+#: and their memory per observation (dataset 03: 270 MB for 66,000 observations).
+SMOOTHER_FACTOR = 5
+SMOOTHER_BYTES_PER_OBSERVATION = 4096
+#: ``visla-edu run`` refuses a run estimated past these limits unless given ``--force``.
+WORK_LIMIT_BYTES = 2 * 2**30
+WORK_LIMIT_SECONDS = 15 * 60
+
+
+@dataclass
+class WorkEstimate:
+    """What a run will cost, estimated from the observations before it starts (:func:`estimate_work`).
+
+    Attributes
+    ----------
+    mode : str
+    dense : bool
+    state_dim : int
+        Largest state: ``6 + 3 n`` with n the landmarks in the joint state (SLAM), else 6.
+    frames : int
+    max_rows : int
+        Most observation rows of one update (3 per observation in SLAM, 4 in VIO).
+    peak_bytes : int
+        The largest matrices at once: in SLAM the covariance and the same-size product of its
+        update (``2 D^2 8`` bytes) and the (D, m) and (m, m) blocks of the update, in VIO the
+        innovation covariance and its factor.
+    seconds : float
+        See :data:`SECONDS_PER_ENTRY`.
+    """
+
+    mode: str
+    dense: bool
+    state_dim: int
+    frames: int
+    max_rows: int
+    peak_bytes: int
+    seconds: float
+
+    def over_limits(self, max_bytes=None, max_seconds=None):
+        """What exceeds the limits (default :data:`WORK_LIMIT_BYTES`, :data:`WORK_LIMIT_SECONDS`), as phrases.
+
+        Empty when the run is within them.
+        """
+        max_bytes = WORK_LIMIT_BYTES if max_bytes is None else max_bytes
+        max_seconds = WORK_LIMIT_SECONDS if max_seconds is None else max_seconds
+        over = []
+        if self.peak_bytes > max_bytes:
+            over.append(f"{format_bytes(self.peak_bytes)} of memory (limit {format_bytes(max_bytes)})")
+        if self.seconds > max_seconds:
+            over.append(f"about {_duration(self.seconds)} (limit {_duration(max_seconds)})")
+        return over
+
+    def summary(self):
+        """One line: the largest state and update, memory and time."""
+        what = f"{self.mode}{' (dense)' if self.dense else ''}"
+        return (f"{what}: states up to {self.state_dim} dimensions, updates up to {self.max_rows} rows: about "
+                f"{format_bytes(self.peak_bytes)} of memory and {_duration(self.seconds)} for {self.frames} frames "
+                "(estimate)")
+
+
+def estimate_work(dataset, mode=SLAM, config=None, dense=False):
+    """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
+
+    The dense filter carries every (strided) landmark; the active set those whose track
+    spans the frame; both update with 3 rows per observation. VIO solves one 4-row block
+    per observation; mapping and dead reckoning work in 3x3 and 6x6 blocks (cheap).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    mode : str
+    config : visla_edu.filters.FilterConfig, optional
+        Its ``landmark_stride`` decides the landmarks used.
+    dense : bool
+
+    Returns
+    -------
+    WorkEstimate
+    """
+    config = config or FilterConfig()
+    if mode in SMOOTHER_MODES:  # the smoothers start from the joint EKF and cost a few times as much
+        estimate = estimate_work(dataset, SLAM, config, False)
+        return WorkEstimate(mode=mode, dense=False, state_dim=estimate.state_dim, frames=estimate.frames,
+                            max_rows=estimate.max_rows,
+                            peak_bytes=estimate.peak_bytes + SMOOTHER_BYTES_PER_OBSERVATION * dataset.num_observations,
+                            seconds=SMOOTHER_FACTOR * estimate.seconds)
+    T = max(1, dataset.num_frames)
+    in_stride = dataset.obs_ids % config.landmark_stride == 0
+    per_frame = np.bincount(dataset.observation_frames()[in_stride], minlength=T).astype(float)
+    if mode == SLAM:
+        landmarks = _landmarks_in_state(dataset, config.landmark_stride, dense)
+        D, m = 6 + 3 * landmarks, 3 * per_frame
+        seconds = np.sum(D * D * (SECONDS_PER_ENTRY + SECONDS_PER_ENTRY_ROW * m) + SECONDS_PER_ROW_CUBED * m**3)
+        peak = 16 * float(D.max()) ** 2 + 24 * float(np.max(D * m)) + 24 * float(m.max()) ** 2
+    elif mode == VIO:
+        D, m = np.full(T, 6.0), 4 * per_frame
+        seconds = np.sum(SECONDS_PER_ROW_CUBED * m**3 + SECONDS_PER_ROW_SQUARED * m**2)
+        peak = 24 * float(m.max()) ** 2
+    else:
+        D, m = np.full(T, 6.0), 3 * per_frame
+        seconds, peak = float(np.sum(SECONDS_PER_ROW_SQUARED * m)), 8 * 64 * float(m.max())
+    return WorkEstimate(mode=mode, dense=dense, state_dim=int(D.max()), frames=T, max_rows=int(m.max()),
+                        peak_bytes=int(peak), seconds=float(seconds) + SECONDS_PER_FRAME * T)
+
+
+def _landmarks_in_state(dataset, stride, dense):
+    """Landmarks in the joint state at each frame (T,): every strided one (dense), else those being tracked."""
+    T = max(1, dataset.num_frames)
+    if dense:
+        return np.full(T, float(len(range(0, dataset.num_landmarks, stride))))
+    spans = dataset.track_spans()[::stride]
+    spans = spans[spans[:, 0] >= 0]
+    change = np.zeros(T + 1)
+    np.add.at(change, spans[:, 0], 1)
+    np.add.at(change, spans[:, 1] + 1, -1)
+    return np.cumsum(change[:T])
+
+
+def divergence_hint(dataset, config, frame=None):
+    """The likely cause of a filter failure at ``frame``, as one sentence.
+
+    Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`:
+    calibration, time stamps, velocities), else the step into ``frame`` and the settings.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig
+    frame : int, optional
+
+    Returns
+    -------
+    str
+    """
+    problems = data.dataset_problems(dataset)
+    if problems:
+        return "likely cause: " + problems[0]
+    calibration = dataset.extra.get("calibration")  # what the run resolved "auto" with, if it got that far
+    if calibration is not None and not config.resolved:
+        config = config.resolve(calibration)
+    where = ""
+    if frame is not None and 0 < frame < dataset.num_frames:
+        lag = config.imu_lag if isinstance(config.imu_lag, int) else 0
+        twist = motion.select_twists(dataset.twists, lag)[frame - 1]
+        speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
+        where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
+                 f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
+    return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
+            f"velocity noise {_setting_text(config.sigma_linear_velocity)} m/s and "
+            f"{_setting_text(config.sigma_angular_velocity)} rad/s) "
+            "and the calibration (visla-edu info shows the diagnostics)")
+
+
+def _setting_text(value):
+    """A setting for a message: ``0.5``, ``[0.05 0.006 0.014]`` or ``auto``."""
+    if isinstance(value, str):
+        return value
+    if np.ndim(value):
+        return np.array2string(np.asarray(value, dtype=float), precision=3)
+    return f"{value:g}"
+
+
+def _duration(seconds):
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
