@@ -211,3 +211,36 @@ def kalman_update_1d(mean, variance, z, noise_variance):
 def kalman_predict(x, P, F, Q):
     F = np.asarray(F, dtype=float)
     return F @ np.asarray(x, dtype=float), F @ np.asarray(P, dtype=float) @ F.T + np.asarray(Q, dtype=float)
+
+
+# --------------------------------------------------------------------------- 08 smoothing
+
+
+def motion_residual(world_T_prev, world_T_next, step_inv):
+    from visla_edu import lie, smoother
+
+    e = lie.se3_log(step_inv @ np.linalg.inv(world_T_prev) @ world_T_next)
+    J_next = smoother.se3_right_jacobian_inv(e)
+    J_prev = -J_next @ lie.adjoint(np.linalg.inv(world_T_next) @ world_T_prev)
+    return e, J_prev, J_next
+
+
+def schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
+    S, b = H_pp.copy(), g_p.copy()
+    for j, block in enumerate(H_mm):  # H_mm is block diagonal: one 3x3 solve per landmark
+        H_pj = H_pm[:, 3 * j:3 * j + 3]
+        S -= H_pj @ np.linalg.solve(block, H_pj.T)
+        b -= H_pj @ np.linalg.solve(block, g_m[3 * j:3 * j + 3])
+    return S, b
+
+
+def gauss_newton_step(world_T_body, p_body, q_world):
+    from scipy.linalg import expm
+
+    R, t = world_T_body[:3, :3], world_T_body[:3, 3]
+    r = (p_body @ R.T + t - q_world).ravel()
+    J = np.concatenate([np.hstack([R, -R @ hat(p)]) for p in p_body])
+    delta = -np.linalg.solve(J.T @ J, J.T @ r)
+    xi = np.zeros((4, 4))
+    xi[:3, :3], xi[:3, 3] = hat(delta[3:]), delta[:3]
+    return world_T_body @ expm(xi)

@@ -410,6 +410,55 @@ def test_consistency_checks(capsys):
            lambda dof, n, p=0.95: tuple(stats.chi2.ppf([(1 - p) / 2, (1 + p) / 2], dof)), "n * dof")
 
 
+# --------------------------------------------------------------------------- 08 smoothing
+
+
+def _motion_parts(T_prev, T_next, step_inv, e=None, J_prev=None, J_next=None):
+    """The correct motion factor with one part replaced (a deliberate mistake)."""
+    right = A.motion_residual(T_prev, T_next, step_inv)
+    return tuple(right[i] if part is None else part(right) for i, part in enumerate((e, J_prev, J_next)))
+
+
+def _schur_added(H_pp, H_pm, H_mm, g_p, g_m):
+    S, b = A.schur_reduce(H_pp, H_pm, H_mm, g_p, g_m)
+    return 2 * H_pp - S, b
+
+
+def test_smoothing_checks(capsys):
+    from visla_edu import smoother
+
+    _passes(checks.check_motion_residual, A.motion_residual, capsys)
+    _passes(checks.check_schur_reduce, A.schur_reduce, capsys)
+    _passes(checks.check_gauss_newton_step, A.gauss_newton_step, capsys)
+
+    mr = checks.check_motion_residual
+    _fails(mr, lambda *a: _motion_parts(*a, e=lambda r: -r[0]), "wrong sign")
+    _fails(mr, lambda T0, T1, s: _motion_parts(T0, T1, s, e=lambda r: lie.se3_log(np.linalg.inv(T0) @ T1)),
+           "increment exp(-tau u^) is missing")
+    _fails(mr, lambda *a: _motion_parts(*a, J_next=lambda r: np.eye(6)), "missing J_r(e)^-1")
+    _fails(mr, lambda *a: _motion_parts(*a, J_next=lambda r: smoother.se3_right_jacobian(r[0])), "not its inverse")
+    _fails(mr, lambda *a: _motion_parts(*a, J_prev=lambda r: -r[2]), "missing the adjoint")
+    _fails(mr, lambda *a: _motion_parts(*a, J_prev=lambda r: -r[1]), "J_prev has the wrong sign")
+    _fails(mr, lambda *a: A.motion_residual(*a)[:2], "return the tuple")
+
+    _fails(checks.check_schur_reduce, _schur_added, "added the correction")
+    _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: (A.schur_reduce(
+        H_pp, H_pm, H_mm, g_p, g_m)[0], g_p), "same reduction")
+    _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: A.schur_reduce(
+        H_pp, H_pm, np.linalg.inv(H_mm), g_p, g_m), "inverse of H_mm")
+    _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: (H_pp, g_p), "dropped, not eliminated")
+
+    def step_plus(T, p_body, q_world):  # the step of -r: twice the distance the other way
+        return A.gauss_newton_step(T, p_body, 2 * (p_body @ T[:3, :3].T + T[:3, 3]) - q_world)
+
+    def step_left(T, p_body, q_world):  # exp(delta^) T for the right step's delta
+        return np.linalg.inv(T) @ A.gauss_newton_step(T, p_body, q_world) @ T
+
+    _fails(checks.check_gauss_newton_step, step_plus, "wrong sign")
+    _fails(checks.check_gauss_newton_step, step_left, "on the right")
+    _fails(checks.check_gauss_newton_step, lambda T, p, q: T, "wrong values")
+
+
 # --------------------------------------------------------------------------- shared behaviour
 
 

@@ -155,6 +155,24 @@ def test_normal_equations_are_jtwj_of_the_checked_jacobians(tiny):
     assert rel(H.toarray(), H_ref) < 1e-12 and rel(g, g_ref) < 1e-12
 
 
+def test_public_normal_equations_are_the_batch_problems(tiny):
+    """smoother.normal_equations builds the problem smooth() solves and returns its full system."""
+    T = tiny.ground_truth.world_T_imu
+    config = smoother.SmootherConfig()
+    problem, m = _problem_at(tiny, T, config)
+    H_ref, g_ref = _normal.normal_equations(problem, _normal.linearize(problem, T, m))
+    system = smoother.normal_equations(tiny, T, config=config)
+    n, L = tiny.num_frames - 1, problem.num_landmarks
+    assert system.num_poses == n and system.H.shape == (6 * n + 3 * L,) * 2
+    assert (system.H != H_ref).nnz == 0 and np.array_equal(system.g, g_ref)
+    assert np.array_equal(system.landmark_ids, problem.landmark_ids)
+    assert np.array_equal(system.landmark_active, problem.landmark_active)
+    assert system.cost == pytest.approx(_normal.evaluate(problem, T, m), rel=1e-12)
+    assert abs(system.H - system.H.T).max() <= 1e-12 * abs(system.H).max()  # symmetric to round-off
+    with pytest.raises(ValueError, match=r"initial world_T_imu must have shape \(60, 4, 4\)"):
+        smoother.normal_equations(tiny, T[:10])
+
+
 def test_gradient_matches_finite_differences_of_the_robust_cost(tiny):
     ekf = run.run_filter(tiny, "slam", progress=False)
     problem, m = _problem_at(tiny, ekf.world_T_imu, smoother.SmootherConfig(), ekf.landmarks)

@@ -38,7 +38,7 @@ import sys as _sys
 
 #: Submodules in dependency order; a reload of this package reloads them all.
 _SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_primer", "_kinematics", "_camera", "_jacobians", "_filters",
-               "_consistency")
+               "_consistency", "_smoothing")
 
 
 def _load_submodules():
@@ -67,6 +67,8 @@ from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerica
 from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat,  # noqa: E402
                                           check_pose_transition, check_se3_exp, check_so3_exp)
 from visla_edu.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
+from visla_edu.checks._smoothing import (check_gauss_newton_step, check_motion_residual,  # noqa: E402
+                                         check_schur_reduce)
 
 __all__ = [
     "student_or_reference",
@@ -108,4 +110,8 @@ __all__ = [
     "check_motion_noise",
     "check_nees",
     "check_average_nees_bounds",
+    # 08 from filtering to smoothing
+    "check_motion_residual",
+    "check_schur_reduce",
+    "check_gauss_newton_step",
 ]

@@ -21,7 +21,9 @@ also gives the marginal covariances.
 
 Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
 history, rejection counts, per-observation status, timing); :class:`SmootherConfig` holds
-every setting and validates it.
+every setting and validates it. :func:`normal_equations` gives the full sparse Gauss-Newton
+system of the batch problem at a state (for teaching: notebook 08's spy plot and Schur
+complement; the smoothers never form it).
 
     >>> from visla_edu import data, run, smoother
     >>> ds = data.load("sim-tiny")
@@ -35,10 +37,10 @@ Modules (private; the public names are re-exported here): ``_config``
 (residuals, Jacobians, robust losses), ``_problem`` (observations and structure),
 ``_envelope`` (the block envelope Cholesky, solve and selected inverse), ``_normal``
 (linearisation, the Schur step, marginals), ``_result`` (:class:`SmootherResult`),
-``_batch`` (:func:`smooth`), ``_window`` (:func:`smooth_window`).
+``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window`` (:func:`smooth_window`).
 """
 
-from visla_edu.smoother._batch import smooth
+from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
 from visla_edu.smoother._config import LOSSES, WINDOW_MODES, SmootherConfig
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
@@ -55,6 +57,8 @@ __all__ = [
     "HISTORY_FIELDS",
     "smooth",
     "smooth_window",
+    "NormalEquations",
+    "normal_equations",
     "triangulate_landmarks",
     "motion_residuals",
     "reprojection",

@@ -18,8 +18,10 @@ dataset 03's time (its 20 s whole-process budget).
 """
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from visla_edu.smoother import _normal
 from visla_edu._blas import limit_blas_threads
@@ -31,7 +33,8 @@ from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATE
 from visla_edu.smoother._result import (SmootherResult, check_landmarks, check_trajectory, empty_history,
                                         finish_history)
 
-__all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information"]
+__all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information",
+           "NormalEquations", "normal_equations"]
 
 #: Damping beyond which a round gives up (no step lowers the cost).
 MAX_DAMPING = 1e12
@@ -264,6 +267,67 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
     status[problem.obs_source[~problem.active]] = DROPPED
     status[problem.obs_source[outlier]] = REJECTED
     return _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start)
+
+
+@dataclass
+class NormalEquations:
+    """The batch smoother's Gauss-Newton system ``H [dp; dm] = -g`` at one state.
+
+    Attributes
+    ----------
+    H : scipy.sparse.csr_matrix, shape (6 n + 3 L, 6 n + 3 L)
+        ``J^T W J``: the pose variables first (frames ``1 .. n``, 6 columns each, right
+        perturbations ``T <- T exp(delta^)``; frame 0 is held), then the landmarks (3 columns
+        each, in the order of :attr:`landmark_ids`). A landmark left out of the problem
+        (:attr:`landmark_active` False) has an identity block and no coupling.
+    g : ndarray, shape (6 n + 3 L,)
+        ``J^T W r``.
+    num_poses : int
+        ``n``, the pose variables (``T - 1``).
+    landmark_ids : ndarray of int, shape (L,)
+        Dataset id of each landmark block.
+    landmark_active : ndarray of bool, shape (L,)
+    cost : float
+        The robust cost at the state.
+    """
+
+    H: sparse.csr_matrix
+    g: np.ndarray
+    num_poses: int
+    landmark_ids: np.ndarray
+    landmark_active: np.ndarray
+    cost: float
+
+
+def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
+    """The full sparse normal equations of the batch problem at a state, for teaching and checks.
+
+    The problem is the one :func:`smooth` builds (the same observations, landmarks and
+    checks) linearised at ``world_T_imu`` and ``landmarks``, with the robust loss's IRLS
+    weights at that state. :func:`smooth` itself never forms this matrix: it eliminates the
+    landmarks block by block (the Schur complement).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    world_T_imu : array_like, shape (T, 4, 4)
+        The state's poses (e.g. the EKF's trajectory, or the ground truth).
+    landmarks, imu_T_cam, config
+        As in :func:`smooth` (missing landmarks are triangulated).
+
+    Returns
+    -------
+    NormalEquations
+    """
+    config = config or SmootherConfig()
+    world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)
+    landmarks = check_landmarks(landmarks, dataset.num_landmarks, dataset.name)
+    problem, m, _, _ = _setup(dataset, world_T_imu, landmarks, rig_camera(dataset, imu_T_cam), config)
+    drop_landmarks(problem, world_T_imu, m, config.min_observations)
+    lin = _normal.linearize(problem, world_T_imu, m)
+    H, g = _normal.normal_equations(problem, lin)
+    return NormalEquations(H, g, problem.num_vars, problem.landmark_ids.copy(), problem.landmark_active.copy(),
+                           lin.cost)
 
 
 def _drop_counts(too_few, behind, too_far):
