@@ -95,13 +95,9 @@ def _exercises_only(nb):
 
 
 def _points(name):
-    """Grade id -> points of one solution notebook's graded and task cells (from its metadata).
-
-    Task cells (the check-your-understanding answers, 0 points) get a grade of their own in
-    nbgrader's gradebook, so they are listed too.
-    """
+    """Check grade id -> points of one solution notebook (from its metadata)."""
     return {_meta(c)["grade_id"]: _meta(c)["points"] for c in _read(SOLUTIONS / f"{name}.ipynb").cells
-            if _meta(c).get("grade") or _meta(c).get("task")}
+            if _meta(c).get("grade")}
 
 
 def _gamed_notebook(name, answers):

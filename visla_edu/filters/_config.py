@@ -24,31 +24,33 @@ class FilterConfig:
     ``slam``; see :data:`visla_edu.codes.MODES`). How the driver runs (BLAS threads, progress
     bar) is not a setting: those are arguments of :func:`visla_edu.run.run_filter`.
 
-    The defaults work without per-dataset tuning on the simulated drives, datasets 03 and
-    0022 and the dataset-10 stand-in. They were chosen from evidence, not guessed (notebook 07
-    recomputes each figure):
+    The defaults are one setting for every drive: what can be measured is measured from each
+    drive's own data (``"auto"``), the rest rests on evidence that notebooks 00 and 07 and
+    ``benchmarks/bench_accuracy.py`` recompute (they print the figures; none is typed here):
 
-    * ``visla-edu info`` measures the IMU noise from second differences of the velocities:
-      up to 0.5 m/s and 0.05 rad/s (dataset 0022, the noisiest file), so those are the
-      velocity noise settings. With 0.02 rad/s instead, 03 and 0022 gate about twice as many
-      observations (15.7% and 14.9%, against 8.0% and 4.5%), and the 03 trajectory ends 36 m
-      below its start height after 1.3 km (4 m with 0.05 rad/s).
-    * The gated share grows with a track's age (tracker drift: roughly 10% after ten frames
-      on 03), and the distances are heavy-tailed (about 1% of them above 100 for a
-      chi-square(4) variable), so gating stays on.
-    * ``sigma_pixel`` 1.5 gives accepted observations a NIS per degree of freedom of 0.9 on
-      03 (1.5 at 1 px): slightly conservative, as it should be with drifting tracks.
+    * Velocity noise (``"auto"``, per body axis): :func:`visla_edu.diagnostics.calibrate`
+      measures the samples' white noise (second differences) and how much the velocity changes
+      within a step, which the motion model holds constant (first differences), with floors. A
+      fixed noise fits no drive: the KITTI drives' velocities are nearly clean, the 2020
+      release's carry about 0.5 m/s and 0.05 rad/s, and a filter told the wrong level trusts
+      far landmarks over an accurate IMU, or an IMU over the camera.
+    * ``imu_lag`` (``"auto"``): the velocity sample that moves frame t to t+1, from the
+      track-reprojection evidence; a lag other than 0 is chosen only when it beats lag 0 with
+      95% confidence (a block bootstrap), so a drive without enough evidence keeps ``u[t]``.
+    * ``extrinsic_correction`` (``"auto"``): the same evidence finds dataset 03's flipped
+      ``imu_T_cam`` axes, and visual odometry checks the verdict.
+    * Gating stays on: track reprojection errors are heavy-tailed, and the gated share grows
+      with a track's age (tracker drift). ``reinit_gated_landmarks`` places a landmark again
+      when its next observation is gated before any update used it (it was born from an
+      outlier).
+    * ``sigma_pixel`` 1.5 px: slightly conservative NIS on the course drives, as it should be
+      with drifting tracks (notebook 07 shows the NIS for other values).
     * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
-      far landmark triangulated from a 2 px disparity is a poor Gaussian in x, y, z that makes
-      joint SLAM overconfident and less accurate, while fixed far landmarks help VIO hold its
-      orientation. Against 2 px, SLAM's error on the dataset-10 stand-in drops from 24 m to
-      15 m and the NEES on 300-frame drives falls by a third; 5 px helps SLAM a little more
-      but makes VIO worse than dead reckoning on some simulated drives. 03 and 0022 gate
-      8.0% and 4.5% of their observations (7.5% and 4.4% at 2 px).
-    * The extrinsic check finds dataset 03's ``imu_T_cam`` axes flipped (rotation slope -0.78,
-      +0.83 after the ``flip_yz`` correction), hence ``extrinsic_correction="auto"``.
-    * The time-alignment check prefers ``imu_lag=+1`` by only 0.2% (03) and 1% (0022) of
-      the rotation residual: too weak to leave the course's convention ``u[t]`` for ``t->t+1``.
+      far landmark triangulated from a smaller disparity is a poor Gaussian in x, y, z that
+      makes joint SLAM overconfident and less accurate.
+    * ``slam_error="invariant"``: the joint filter's error in the world frame, whose
+      unobservable directions do not depend on the estimate, so it stays consistent where the
+      right perturbation (notebooks 05-06) becomes overconfident (notebook 07).
 
     Each field declares what it accepts next to its default (:func:`visla_edu.filters._settings.setting`:
     kind, plausible range and why, words such as ``"auto"``, None or not); the same
