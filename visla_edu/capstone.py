@@ -28,12 +28,12 @@ from typing import Callable
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import diagnostics, ekf, lie, motion
+from visla_edu import diagnostics, ekf, lie, motion, run
 from visla_edu.camera import StereoCamera
 from visla_edu.codes import OBS_FAR, OBS_GATED, OBS_NEW, OBS_USED
 from visla_edu.filters._base import _Filter
 
-__all__ = ["Parts", "Steps", "library_parts", "CapstoneFilter", "POSE_DIM"]
+__all__ = ["Parts", "Steps", "library_parts", "CapstoneFilter", "run_capstone", "POSE_DIM"]
 
 #: Dimension of the pose perturbation ``[v; w]``.
 POSE_DIM = 6
@@ -95,20 +95,25 @@ def _project(Ks, cam_T_imu, world_T_imu, p_world):
     return cam.projection(q) @ Ks.T
 
 
+def _in_imu(world_T_imu, m):
+    """Homogeneous coordinates (4,) of the world point ``m`` in the IMU frame (no general inverse)."""
+    R = world_T_imu[:3, :3]
+    return np.concatenate((R.T @ (np.asarray(m, dtype=float) - world_T_imu[:3, 3]), [1.0]))
+
+
 def _pose_jacobian(Ks, cam_T_imu, mu, m):
-    s = lie.se3_inv(mu) @ np.r_[m, 1.0]
+    s = _in_imu(mu, m)
     return -Ks @ cam.projection_jacobian(cam_T_imu @ s) @ cam_T_imu @ lie.odot(s)
 
 
 def _landmark_jacobian(Ks, cam_T_imu, world_T_imu, m):
-    imu_T_world = lie.se3_inv(world_T_imu)
-    q = cam_T_imu @ imu_T_world @ np.r_[m, 1.0]
-    return Ks @ cam.projection_jacobian(q) @ cam_T_imu @ imu_T_world[:, :3]
+    q = cam_T_imu @ _in_imu(world_T_imu, m)
+    return Ks @ cam.projection_jacobian(q) @ cam_T_imu[:, :3] @ world_T_imu[:3, :3].T
 
 
 def _init_landmark(z, K, b, imu_T_cam, world_T_imu):
     p_cam = cam.triangulate_disparity(np.asarray(z, dtype=float)[None], K, b)[0]
-    return (world_T_imu @ imu_T_cam @ np.r_[p_cam, 1.0])[:3]
+    return (world_T_imu @ imu_T_cam @ np.concatenate((p_cam, [1.0])))[:3]
 
 
 def _pose_update(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var):
@@ -329,3 +334,31 @@ class CapstoneFilter(_Filter):
         if self.joint and len(self.slots):
             cov[self.slots] = self._marginals(self.slots)
         return self.landmarks.copy(), cov
+
+
+def run_capstone(dataset, config, parts, steps, joint=True):
+    """Run :class:`CapstoneFilter` over the whole drive (one BLAS thread, as the library's driver).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    config : visla_edu.filters.FilterConfig
+        Resolved (:func:`visla_edu.run.resolve_config`).
+    parts : Parts
+    steps : Steps
+    joint : bool
+        True: joint SLAM; False: VIO.
+
+    Returns
+    -------
+    world_T_imu : ndarray, shape (T, 4, 4)
+    pose_cov : ndarray, shape (T, 6, 6)
+    landmarks : ndarray, shape (M, 3)
+        Final landmark means, NaN where never placed.
+    """
+    flt = CapstoneFilter(dataset, config, parts, steps, joint=joint)
+    flt.record_landmarks = False  # a whole run keeps no per-frame landmarks
+    with run.limit_blas_threads(1):
+        records = [flt.step() for _ in range(dataset.num_frames)]
+    return (np.array([r.world_T_imu for r in records]), np.array([r.pose_cov for r in records]),
+            flt.landmark_estimates()[0])

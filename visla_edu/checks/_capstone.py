@@ -110,18 +110,19 @@ class _Spy:
 
 
 def _drive(hidden):
-    """The fixed simulated drive of the loop checks (hidden: another seed) and its resolved config."""
+    """The fixed simulated drive of the loop checks (hidden: another seed) and its resolved config.
+
+    The hidden drive uses the settings measured on the visible one (same simulator, same noise).
+    """
     from visla_edu import data, simulate
 
-    ds = simulate.simulate_drive("tiny", seed=_hidden_seed() % 1000 + 1) if hidden else data.load("sim-tiny")
-    return ds, run.resolve_config(ds, FilterConfig(slam_error="right"))
+    visible = data.load("sim-tiny")
+    config = run.resolve_config(visible, FilterConfig(slam_error="right"))
+    return (simulate.simulate_drive("tiny", seed=_hidden_seed() % 1000 + 1) if hidden else visible), config
 
 
 def _run_loop(ds, config, steps, joint):
-    flt = capstone.CapstoneFilter(ds, config, capstone.library_parts(), steps, joint=joint)
-    with run.limit_blas_threads(1):
-        records = [flt.step() for _ in range(ds.num_frames)]
-    return np.array([r.world_T_imu for r in records]), np.array([r.pose_cov for r in records])
+    return capstone.run_capstone(ds, config, capstone.library_parts(), steps, joint=joint)[:2]
 
 
 def _compare_loops(name, got, reference, what):
