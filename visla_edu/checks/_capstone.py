@@ -154,7 +154,8 @@ def _predict_variants(parts, T, Sigma, u, tau, W):
         ("the mean moves on the right: world_T_imu @ se3_exp(tau u)", lambda: (step @ T, None)),
         ("the step is se3_exp(tau u): multiply the twist by tau", lambda: (T @ parts.se3_exp(u), None)),
     ], [
-        ("the motion noise W is missing from the pose block", lambda: _reference_predict(parts, T, Sigma, u, tau, 0 * W)[1]),
+        ("the motion noise W is missing from the pose block",
+         lambda: _reference_predict(parts, T, Sigma, u, tau, 0 * W)[1]),
         ("the cross-covariance must move too: Sigma_pl <- F Sigma_pl\n(the landmark columns of the pose "
          "rows, and their transpose)", lambda: pose_only),
         ("F is on the wrong side: Sigma_pp <- F Sigma_pp F^T + W", lambda: transposed),
@@ -353,6 +354,7 @@ def capstone_steps(predict, add_landmarks, slam_update):
                          for a, b in zip(out, reference(*probes[fn_name]), strict=True))
         except Exception:  # noqa: BLE001 - a stub raises NotImplementedError, broken code anything
             agrees = False
-        print(f"using your {fn_name}" if agrees else f"using the reference {fn_name} (yours is not finished or disagrees)")
+        print(f"using your {fn_name}" if agrees
+              else f"using the reference {fn_name} (yours is not finished or disagrees)")
         chosen[fn_name] = fn if agrees else reference
     return capstone.Steps(**chosen)

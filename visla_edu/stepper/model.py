@@ -466,7 +466,8 @@ class Stepper:
         flt = self.filter_factory(ds, run.resolve_config(ds, self._config))
         missing = [name for name in ("step", "config") if not hasattr(flt, name)]
         if missing or not callable(flt.step):
-            raise TypeError(f"Stepper: the filter_factory's {type(flt).__name__} lacks {missing or ['a callable step']} "
+            lacks = missing or ["a callable step"]
+            raise TypeError(f"Stepper: the filter_factory's {type(flt).__name__} lacks {lacks} "
                             "of the step interface (see visla_edu.stepper.SteppableFilter)")
         if not isinstance(flt.config, FilterConfig):
             raise TypeError(f"Stepper: {type(flt).__name__}.config must be a FilterConfig, "
