@@ -198,3 +198,16 @@ def track_spans(features):
         if len(frames):
             out[i] = frames[0], frames[-1]
     return out
+
+
+# --------------------------------------------------------------------------- 00b Kalman primer
+
+
+def kalman_update_1d(mean, variance, z, noise_variance):
+    gain = variance / (variance + noise_variance)
+    return mean + gain * (z - mean), (1 - gain) * variance
+
+
+def kalman_predict(x, P, F, Q):
+    F = np.asarray(F, dtype=float)
+    return F @ np.asarray(x, dtype=float), F @ np.asarray(P, dtype=float) @ F.T + np.asarray(Q, dtype=float)

@@ -81,6 +81,46 @@ def test_data_checks(capsys):
     _fails(checks.check_track_spans, lambda f: A.track_spans(f)[:, ::-1], "swapped")
 
 
+# --------------------------------------------------------------------------- 00b Kalman primer
+
+
+def _update_1d_with_gain(gain_of, mean_sign=1.0, variance_of=None):
+    """A scalar update with a (wrong) gain, innovation sign or variance formula."""
+    def update(m, var, z, r):
+        gain = gain_of(var, r)
+        new_var = (1 - gain) * var if variance_of is None else variance_of(var, gain)
+        return m + mean_sign * gain * (z - m), new_var
+    return update
+
+
+def test_primer_checks(capsys):
+    _passes(checks.check_kalman_update_1d, A.kalman_update_1d, capsys)
+    _passes(checks.check_kalman_predict, A.kalman_predict, capsys)
+    right_gain = lambda var, r: var / (var + r)  # noqa: E731
+
+    _fails(checks.check_kalman_update_1d, lambda m, var, z, r: (A.kalman_update_1d(m, var, z, r)[0], var),
+           "variance must shrink")
+    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(lambda var, r: r / (var + r)), "swapped")
+    _fails(checks.check_kalman_update_1d,
+           _update_1d_with_gain(lambda var, r: np.sqrt(var) / (np.sqrt(var) + np.sqrt(r))), "standard deviations")
+    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(right_gain, mean_sign=-1.0), "z - mean")
+    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(lambda var, r: var / r), "not variance / r")
+    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(right_gain, variance_of=lambda var, k: var - k),
+           "not variance - K")
+    _fails(checks.check_kalman_update_1d, lambda *a: A.kalman_update_1d(*a)[::-1], "in this order")
+    _fails(checks.check_kalman_update_1d, lambda *a: A.kalman_update_1d(*a)[0], "return the pair")
+    _fails(checks.check_kalman_update_1d, lambda m, var, z, r: (m + 0.5 * (z - m), var / 2), "no known mistake")
+
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F.T), "process noise Q")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F.T @ P @ F + Q), "transposed")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P + Q), "F.T on the right")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F + Q), "second F")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ (P + Q) @ F.T), "after propagating")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (x, F @ P @ F.T + Q), "mean moves")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F.T @ x, F @ P @ F.T + Q), "not F.T @ x")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, (F @ P @ F.T + Q).ravel()), "wrong shape")
+
+
 # --------------------------------------------------------------------------- 01 kinematics
 
 

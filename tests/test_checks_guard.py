@@ -18,7 +18,7 @@ import pytest
 import answers as A  # tests/answers.py
 import visla_edu.checks
 from visla_edu import camera as cam
-from visla_edu import checks, ekf, lie, metrics, motion
+from visla_edu import checks, ekf, kalman, lie, metrics, motion
 from visla_edu.checks import _hiding
 from visla_edu.simulate import default_rig
 
@@ -91,6 +91,10 @@ def test_library_hat_is_hidden_under_every_name(how):
     (checks.check_average_nees_bounds, lambda d, n, p=0.95: np.array(metrics.chi2_bounds(d * n, p)) / n,
      "metrics.chi2_bounds"),
     (checks.check_nees, lambda e, P: float(metrics.nees(e[None], P[None])[0]), "metrics.nees"),
+    (checks.check_kalman_update_1d, lambda m, v, z, r: kalman.update_1d(m, v, z, r), "kalman.update_1d"),
+    (checks.check_kalman_update_1d, lambda m, v, z, r: tuple(
+        np.ravel(a)[0] for a in kalman.update([m], [[v]], [z - m], [[1.0]], [[r]])), "kalman.update"),
+    (checks.check_kalman_predict, lambda x, P, F, Q: kalman.predict(x, P, F, Q), "kalman.predict"),
 ])
 def test_library_versions_are_hidden(check, answer, hidden_name):
     err = _failure(check, answer)

@@ -143,6 +143,7 @@ def test_student_notebook_has_stubs_and_no_solutions(name):
     nb = _read(STUDENT / name)
     text = "\n".join(c.source for c in nb.cells)
     assert release.BEGIN_SOLUTION not in text and release.BEGIN_HIDDEN not in text
+    assert release.BEGIN_ANSWERS not in text, f"{name}: answers to the questions left in the student notebook"
     stubs = [c for c in nb.cells if _is_stub(c)]
     assert stubs, f"{name}: no exercise stubs"
     for cell in stubs:
@@ -205,6 +206,18 @@ def test_markdown_stub_and_hidden_tests():
         "Why?\nYOUR ANSWER HERE"
     source = "check(f)\n### BEGIN HIDDEN TESTS\nassert f(1) == 2\n### END HIDDEN TESTS\n"
     assert release.strip_hidden_tests(source) == "check(f)"
+
+
+def test_answers_to_questions_are_replaced_in_markdown_only():
+    nb = nbformat.v4.new_notebook()
+    answers = f"**Answers**\n{release.BEGIN_ANSWERS}\n1. Because.\n{release.END_ANSWERS}\nEnd."
+    nb.cells = [nbformat.v4.new_markdown_cell(answers), nbformat.v4.new_code_cell(f"# {release.BEGIN_ANSWERS}")]
+    out = release.student_notebook(nb)
+    assert out.cells[0].source == "**Answers**\nYOUR ANSWER HERE\nEnd."
+    assert out.cells[1].source == nb.cells[1].source
+    nb.cells[0].source = f"{release.BEGIN_ANSWERS}\n1. Because."
+    with pytest.raises(ValueError, match="never closed"):
+        release.student_notebook(nb, "demo.ipynb")
 
 
 @pytest.mark.parametrize("source", [

@@ -126,28 +126,27 @@ def _add_run_parser(sub, common):
                           "(TUM: t x y z qx qy qz qw)")
 
 
+def _integer_in(text, low, high, expected):
+    """``int(text)`` if it lies in ``[low, high]``, else argparse's error naming ``expected``."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = low - 1
+    if not low <= n <= high:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    return n
+
+
 def _blas_threads(text):
     """``--blas-threads`` value: a positive integer or ``none``."""
     if text.strip().lower() == "none":
         return None
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if not 1 <= n <= 4096:
-        raise argparse.ArgumentTypeError(f"expected a positive integer or 'none', got {text!r}")
-    return n
+    return _integer_in(text, 1, 4096, "a positive integer or 'none'")
 
 
 def _port(text):
     """``--port`` value: a TCP port, 1 to 65535."""
-    try:
-        port = int(text)
-    except ValueError:
-        port = 0
-    if not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a TCP port number from 1 to 65535, got {text!r}")
-    return port
+    return _integer_in(text, 1, 65535, "a TCP port number from 1 to 65535")
 
 
 def _setting(text):

@@ -9,7 +9,6 @@ KITTI drift) in a :class:`TrajectoryEvaluation`.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from visla_edu import lie
 
@@ -129,6 +128,29 @@ def nees(errors, covariances, skip_singular=True):
     return out
 
 
+def chi2_quantile(probability, dof):
+    """Quantile of the chi-square distribution: ``x`` with ``P(chi2_dof <= x) = probability``.
+
+    scipy.stats is imported here, on first use, not when the package is imported (it is the
+    slowest import of the package's dependencies).
+
+    Parameters
+    ----------
+    probability : float or array_like
+        Lower-tail probability in (0, 1).
+    dof : int or array_like of int
+        Degrees of freedom.
+
+    Returns
+    -------
+    float or ndarray
+        ``scipy.stats.chi2.ppf(probability, dof)``.
+    """
+    from scipy import stats
+
+    return stats.chi2.ppf(probability, dof)
+
+
 def chi2_bounds(dof, probability=0.95):
     """Two-sided ``probability`` interval of a chi-square value with ``dof`` degrees of freedom.
 
@@ -148,7 +170,7 @@ def chi2_bounds(dof, probability=0.95):
     """
     tail = (1 - probability) / 2
     dof = np.asarray(dof, dtype=float)
-    lower, upper = stats.chi2.ppf(tail, dof), stats.chi2.ppf(1 - tail, dof)
+    lower, upper = chi2_quantile(tail, dof), chi2_quantile(1 - tail, dof)
     if dof.ndim == 0:
         return float(lower), float(upper)
     return lower, upper

@@ -33,9 +33,9 @@ NaN. The result is deterministic for a given ``seed``.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from visla_edu import lie
+from visla_edu.metrics import chi2_quantile
 from visla_edu.camera import stereo_matrix, triangulate_disparity, triangulation_jacobian
 
 __all__ = ["VisualOdometry", "visual_odometry", "align_triples", "transfer_pixels", "camera_motion", "motion_errors"]
@@ -269,7 +269,7 @@ class _Settings:
     @property
     def threshold(self):
         """Inlier bound on a point's ``r^T W r`` (px^2): ``pixel_sigma^2 chi2_4(probability)``."""
-        return self.pixel_sigma**2 * float(stats.chi2.ppf(self.probability, _RESIDUAL_DOF))
+        return self.pixel_sigma**2 * float(chi2_quantile(self.probability, _RESIDUAL_DOF))
 
 
 def _settings(pixel_sigma, probability, hypotheses, min_inliers, seed):

@@ -2,6 +2,13 @@
 
 All functions draw into a given ``Axes`` (or a new figure) and return it; nothing is shown
 or saved unless asked, so notebooks, the CLI and the widgets share them.
+
+Colours come from one colour-blind-safe palette, :data:`PALETTE` (Okabe and Ito's eight
+colours and a neutral grey), and every role has one style, :data:`STYLES` (estimate, dead
+reckoning, ground truth, smoother, window, landmarks...): trajectories differ in colour *and*
+line style, so they stay apart in greyscale and for every kind of colour blindness.
+:func:`course_style` makes matplotlib's own colour cycle (``"C0"``, ``"C1"``...) follow the
+palette, with a different line style per series, for the notebooks' own plots.
 """
 
 from pathlib import Path
@@ -11,7 +18,8 @@ import numpy as np
 from visla_edu._files import atomic_write
 from visla_edu.codes import DEADRECKON, OBS_GATED
 
-__all__ = ["GROUND_TRUTH_STYLE", "covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
+__all__ = ["PALETTE", "STYLES", "SERIES_COLORS", "SERIES_LINESTYLES", "series_style", "course_style",
+           "GROUND_TRUTH_STYLE", "covariance_ellipse", "plot_trajectory_map", "plot_result", "plot_image_plane",
            "covariance_ellipses", "plot_nis", "figure_suffixes", "save_figure"]
 
 
@@ -38,9 +46,74 @@ def save_figure(fig, path, dpi=120):
         fig.savefig(f, dpi=dpi, format=path.suffix.lstrip(".").lower() or "png")
     return path.resolve()
 
-#: How the true trajectory is drawn in every view (these plots and the stepper's map): green
-#: dash-dot, unlike the estimate (blue, solid), dead reckoning (red, dashed) and landmarks (grey dots).
-GROUND_TRUTH_STYLE = {"color": "C2", "linestyle": "-.", "linewidth": 2.2, "alpha": 0.9}
+#: The colour-blind-safe palette: the eight colours of Okabe and Ito (2008), "Color universal
+#: design", and a neutral grey (for landmarks and reference lines).
+PALETTE = {
+    "black": "#000000",
+    "orange": "#e69f00",
+    "sky_blue": "#56b4e9",
+    "bluish_green": "#009e73",
+    "yellow": "#f0e442",
+    "blue": "#0072b2",
+    "vermillion": "#d55e00",
+    "reddish_purple": "#cc79a7",
+    "grey": "#8c8c8c",
+}
+
+_ESTIMATE = {"color": PALETTE["blue"], "linestyle": "-", "linewidth": 1.6}
+
+#: One style per role (keyword arguments of ``Axes.plot``): each trajectory has its own colour
+#: and its own line style; landmarks are grey dots, unlike the ground truth (bluish green,
+#: dash-dot). ``"ekf"`` is the estimate's style under the name used beside a smoother.
+STYLES = {
+    "estimate": _ESTIMATE,
+    "ekf": _ESTIMATE,
+    "dead_reckoning": {"color": PALETTE["vermillion"], "linestyle": "--", "linewidth": 1.5},
+    "ground_truth": {"color": PALETTE["bluish_green"], "linestyle": "-.", "linewidth": 2.2, "alpha": 0.9},
+    "smoother": {"color": PALETTE["reddish_purple"], "linestyle": ":", "linewidth": 2.2},
+    "window": {"color": PALETTE["orange"], "linestyle": (0, (6, 2, 1, 2, 1, 2)), "linewidth": 1.6},
+    "landmarks": {"color": PALETTE["grey"], "linestyle": "None", "marker": ".", "markersize": 2},
+    "start": {"color": PALETTE["black"], "linestyle": "None", "marker": "o", "markersize": 5},
+}
+
+#: How the true trajectory is drawn in every view (these plots and the stepper's map).
+GROUND_TRUTH_STYLE = STYLES["ground_truth"]
+
+#: Colours of the notebooks' series, in order (all eight Okabe-Ito colours, yellow last: it is
+#: the hardest to see on white).
+SERIES_COLORS = tuple(PALETTE[name] for name in ("blue", "vermillion", "bluish_green", "reddish_purple", "orange",
+                                                 "sky_blue", "black", "yellow"))
+#: Line styles of the series, one per colour, so that series differ without colour too.
+SERIES_LINESTYLES = ("-", "--", "-.", ":", (0, (8, 3)), (0, (3, 1, 1, 1, 1, 1)), (0, (1, 3)), (0, (8, 3, 2, 3)))
+
+
+def series_style(index):
+    """Colour and line style of the ``index``-th series of a plot (cycling after eight).
+
+    Parameters
+    ----------
+    index : int
+
+    Returns
+    -------
+    dict
+        ``{"color": ..., "linestyle": ...}``, keyword arguments of ``Axes.plot``.
+    """
+    k = int(index) % len(SERIES_COLORS)
+    return {"color": SERIES_COLORS[k], "linestyle": SERIES_LINESTYLES[k]}
+
+
+def course_style():
+    """Make matplotlib's colour cycle follow the course palette, with a line style per series.
+
+    After this call ``"C0"``, ``"C1"``... are :data:`SERIES_COLORS` and successive ``plot``
+    calls on one Axes differ in colour and line style. It changes ``matplotlib.rcParams``
+    (call it once, at the top of a notebook); nothing happens at import.
+    """
+    import matplotlib
+    from cycler import cycler
+
+    matplotlib.rcParams["axes.prop_cycle"] = cycler(color=list(SERIES_COLORS), linestyle=list(SERIES_LINESTYLES))
 
 
 def _axes(ax, figsize=(8, 7)):
@@ -71,8 +144,8 @@ def covariance_ellipse(mean_xy, cov_xy, n_sigma=2.0, n_points=60):
     return np.asarray(mean_xy) + n_sigma * (circle * np.sqrt(np.clip(vals, 0, None))) @ vecs.T
 
 
-def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", color="C0",
-                        landmark_color="0.55", reference=None, reference_label="dead reckoning",
+def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", color=None,
+                        landmark_color=None, reference=None, reference_label="dead reckoning",
                         ground_truth=None):
     """Top-down (x-y) view of a trajectory and a landmark map.
 
@@ -82,11 +155,16 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     landmarks : ndarray, shape (M, 3), optional
         NaN rows are skipped.
     ax : matplotlib Axes, optional
+    label : str
+    color : matplotlib colour, optional
+        Of the estimate (default: ``STYLES["estimate"]``).
+    landmark_color : matplotlib colour, optional
+        Default: ``STYLES["landmarks"]`` (grey).
     reference : ndarray, shape (T, 4, 4), optional
-        A second trajectory (e.g. dead reckoning), drawn dashed.
+        A second trajectory (e.g. dead reckoning), drawn in ``STYLES["dead_reckoning"]``.
     ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
-        True trajectory, drawn in :data:`GROUND_TRUTH_STYLE` (green, dash-dot) with a legend
-        entry; it may cover fewer frames than the estimate.
+        True trajectory, drawn in :data:`GROUND_TRUTH_STYLE` (bluish green, dash-dot) with a
+        legend entry; it may cover fewer frames than the estimate.
 
     Returns
     -------
@@ -95,8 +173,8 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     ax = _axes(ax)
     if landmarks is not None:
         ok = np.isfinite(landmarks[:, 0])
-        ax.scatter(landmarks[ok, 0], landmarks[ok, 1], s=2, c=landmark_color, label=f"landmarks ({ok.sum()})",
-                   zorder=1)
+        ax.scatter(landmarks[ok, 0], landmarks[ok, 1], s=2, c=landmark_color or STYLES["landmarks"]["color"],
+                   label=f"landmarks ({ok.sum()})", zorder=1)
     paths = []
     if ground_truth is not None:
         p = _truth_poses(ground_truth)[:, :3, 3]
@@ -104,11 +182,11 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
         paths.append(p)
     if reference is not None:
         p = reference[:, :3, 3]
-        ax.plot(p[:, 0], p[:, 1], "--", color="C3", lw=1.5, label=reference_label, zorder=3)
+        ax.plot(p[:, 0], p[:, 1], label=reference_label, zorder=3, **STYLES["dead_reckoning"])
         paths.append(p)
     p = world_T_imu[:, :3, 3]
-    ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
-    ax.plot(p[0, 0], p[0, 1], "o", color="k", ms=5, zorder=5)
+    ax.plot(p[:, 0], p[:, 1], label=label, zorder=4, **{**STYLES["estimate"], **({"color": color} if color else {})})
+    ax.plot(p[0, 0], p[0, 1], zorder=5, **STYLES["start"])
     ax.set_xlabel("x (m, world = first IMU frame)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal", adjustable="box")
@@ -186,14 +264,14 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     """
     ax = _axes(ax, figsize=(10, 4))
     gated = np.zeros(len(z), dtype=bool) if status is None else status == OBS_GATED
-    ax.scatter(z[~gated, 0], z[~gated, 1], s=14, facecolors="none", edgecolors="C0", label="observed")
+    ax.scatter(z[~gated, 0], z[~gated, 1], s=14, facecolors="none", edgecolors=PALETTE["blue"], label="observed")
     if np.any(gated):
-        ax.scatter(z[gated, 0], z[gated, 1], s=30, marker="x", c="C3", label="gated (outlier)")
+        ax.scatter(z[gated, 0], z[gated, 1], s=30, marker="x", c=PALETTE["vermillion"], label="gated (outlier)")
     if z_pred is not None:
         ok = np.isfinite(z_pred[:, 0])
-        ax.scatter(z_pred[ok, 0], z_pred[ok, 1], s=6, c="C1", label="predicted")
+        ax.scatter(z_pred[ok, 0], z_pred[ok, 1], s=6, c=PALETTE["orange"], label="predicted")
         for (u0, v0), (u1, v1) in zip(z_pred[ok, :2], z[ok, :2]):
-            ax.plot([u0, u1], [v0, v1], "-", color="C1", lw=0.8)
+            ax.plot([u0, u1], [v0, v1], "-", color=PALETTE["orange"], lw=0.8)
     ax.set_xlim(0, image_size[0])
     ax.set_ylim(image_size[1], 0)
     ax.set_xlabel("u (px, left image)")
@@ -261,8 +339,8 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     ratio = np.full(len(nis), np.nan)
     ratio[ok] = nis[ok] / dof[ok]
     lo, hi = nis_band(dof, probability)
-    ax.fill_between(x, lo, hi, color="C2", alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
-    ax.plot(x, ratio, ".-", color="C0", ms=3, lw=0.8, label="NIS / dof")
+    ax.fill_between(x, lo, hi, color=PALETTE["bluish_green"], alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
+    ax.plot(x, ratio, ".-", color=PALETTE["blue"], ms=3, lw=0.8, label="NIS / dof")
     ax.axhline(1.0, color="0.4", lw=0.8, ls=":")
     if np.any(ok):
         inside = np.mean((ratio[ok] >= lo[ok]) & (ratio[ok] <= hi[ok]))

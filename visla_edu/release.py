@@ -10,6 +10,11 @@ between nbgrader's markers, and graded check cells. This module turns them into
   docstring above the marker stay;
 * the lines between ``### BEGIN HIDDEN TESTS`` and ``### END HIDDEN TESTS`` (markers
   included) are removed, so only the teacher's copy runs them;
+* in markdown cells, the lines between ``<!-- BEGIN ANSWERS -->`` and ``<!-- END ANSWERS -->``
+  (the answers to the check-your-understanding questions) are replaced by ``YOUR ANSWER HERE``.
+  These cells carry no nbgrader metadata: nbgrader accepts a markdown solution cell only as a
+  manually graded one, and the questions are ungraded. (nbgrader's own ``generate_assignment``
+  does not know this marker and keeps the answers: hand out ``notebooks/``);
 * outputs, execution counts and per-run metadata (``execution``, ``collapsed``...) are
   removed; notebook and nbgrader cell metadata are kept, so nbgrader can grade the result.
 
@@ -39,6 +44,8 @@ __all__ = [
     "END_SOLUTION",
     "BEGIN_HIDDEN",
     "END_HIDDEN",
+    "BEGIN_ANSWERS",
+    "END_ANSWERS",
     "stub_source",
     "strip_hidden_tests",
     "clean_notebook",
@@ -58,6 +65,10 @@ BEGIN_SOLUTION = "### BEGIN SOLUTION"
 END_SOLUTION = "### END SOLUTION"
 BEGIN_HIDDEN = "### BEGIN HIDDEN TESTS"
 END_HIDDEN = "### END HIDDEN TESTS"
+#: Markers of the answers to the ungraded questions, in markdown cells (HTML comments: invisible
+#: when the teacher's notebook is rendered).
+BEGIN_ANSWERS = "<!-- BEGIN ANSWERS -->"
+END_ANSWERS = "<!-- END ANSWERS -->"
 
 #: Cell metadata keys that describe one execution, not the notebook.
 _RUN_METADATA = ("execution", "collapsed", "scrolled", "ExecuteTime")
@@ -97,7 +108,7 @@ def _marker_regions(lines, begin, end, where):
         raise ValueError(f"{where}: {begin!r} on line {start + 1} is never closed by {end!r}")
 
 
-def stub_source(source, cell_type="code", what="exercise", where="cell"):
+def stub_source(source, cell_type="code", what="exercise", where="cell", markers=(BEGIN_SOLUTION, END_SOLUTION)):
     """Replace every solution region of ``source`` by a stub.
 
     Parameters
@@ -109,13 +120,15 @@ def stub_source(source, cell_type="code", what="exercise", where="cell"):
         Named in the stub's message (e.g. the exercise's grade id).
     where : str
         Named in error messages about unbalanced markers.
+    markers : (str, str)
+        The region's first and last line (default: nbgrader's solution markers).
 
     Returns
     -------
     str
     """
     lines = source.split("\n")
-    regions = list(_marker_regions(lines, BEGIN_SOLUTION, END_SOLUTION, where))
+    regions = list(_marker_regions(lines, *markers, where))
     if not regions:
         return source
     out, prev = [], 0
@@ -186,6 +199,8 @@ def student_notebook(nb, name="notebook"):
             source = stub_source(source, cell.cell_type, what=what, where=where)
         elif _is_solution_cell(cell) and cell.cell_type == "markdown":
             source = _MARKDOWN_STUB
+        if cell.cell_type == "markdown" and BEGIN_ANSWERS in source:
+            source = stub_source(source, "markdown", where=where, markers=(BEGIN_ANSWERS, END_ANSWERS))
         if BEGIN_HIDDEN in source:
             source = strip_hidden_tests(source, where=where)
         cell.source = source

@@ -37,7 +37,7 @@ import importlib as _importlib
 import sys as _sys
 
 #: Submodules in dependency order; a reload of this package reloads them all.
-_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_kinematics", "_camera", "_jacobians", "_filters",
+_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_primer", "_kinematics", "_camera", "_jacobians", "_filters",
                "_consistency", "_capstone")
 
 
@@ -68,6 +68,7 @@ from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerica
                                          reference_numerical_jacobian)
 from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat,  # noqa: E402
                                           check_pose_transition, check_se3_exp, check_so3_exp)
+from visla_edu.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
 
 __all__ = [
     "student_or_reference",
@@ -76,6 +77,9 @@ __all__ = [
     # 00 know your data
     "check_observations_at",
     "check_track_spans",
+    # 00b Kalman-filter primer
+    "check_kalman_update_1d",
+    "check_kalman_predict",
     # 01 SE(3) kinematics
     "check_hat",
     "check_so3_exp",

@@ -20,10 +20,10 @@ dataset 03's time (its 20 s whole-process budget).
 import time
 
 import numpy as np
-from scipy import stats
 
 from visla_edu.smoother import _normal
 from visla_edu._blas import limit_blas_threads
+from visla_edu.metrics import chi2_quantile
 from visla_edu.smoother._config import SmootherConfig
 from visla_edu.smoother._factors import motion_steps
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
@@ -142,7 +142,7 @@ def reject_outliers(problem, world_T_imu, landmarks, probability):
     bad = np.zeros(len(problem.active), dtype=bool)
     if probability < 1:
         s, _ = _normal.observation_errors(problem, world_T_imu, landmarks)
-        bad = problem.active & (s > stats.chi2.ppf(probability, 4))
+        bad = problem.active & (s > chi2_quantile(probability, 4))
         problem.active[bad] = False
     return bad
 
@@ -217,7 +217,7 @@ def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None, bl
         default the dataset's.
     config : SmootherConfig, optional
     blas_threads : int or None
-        BLAS threads while it runs (:func:`visla_edu.run.limit_blas_threads`): its dense blocks
+        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`): its dense blocks
         are small (6x6 to a few hundred rows), where a second thread costs far more in
         synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
         12 s with two on a busy 2-core machine); None leaves numpy's setting alone.

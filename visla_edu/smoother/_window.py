@@ -39,12 +39,12 @@ one iteration 0.11/0.13/0.14 m at 14 ms; 30 frames 0.10/0.11/0.10 m at 19 ms. Th
 import time
 
 import numpy as np
-from scipy import stats
 
 from visla_edu import lie
 from visla_edu.smoother import _envelope, _normal
 from visla_edu.smoother._batch import levenberg_marquardt, motion_information
 from visla_edu._blas import limit_blas_threads
+from visla_edu.metrics import chi2_quantile
 from visla_edu.smoother._config import SmootherConfig
 from visla_edu.smoother._factors import motion_steps, reprojection, robust_loss
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, PosePrior,
@@ -80,7 +80,7 @@ class _WindowState:
         self.pose_cov = np.full((T, 6, 6), np.nan)
         self.pose_cov[0] = 0.0
         self.prior = None
-        self.threshold = stats.chi2.ppf(config.rejection_probability, 4) if config.rejection_probability < 1 \
+        self.threshold = chi2_quantile(config.rejection_probability, 4) if config.rejection_probability < 1 \
             else np.inf
         self.dropped = {"landmarks_too_few": 0, "landmarks_behind_camera": 0}
 
@@ -238,7 +238,7 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_
         Calibration to use (e.g. after the extrinsic correction); default the dataset's.
     config : SmootherConfig, optional
     blas_threads : int or None
-        BLAS threads while it runs (:func:`visla_edu.run.limit_blas_threads`): its dense blocks
+        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`): its dense blocks
         are small (6x6 to a few hundred rows), where a second thread costs far more in
         synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
         12 s with two on a busy 2-core machine); None leaves numpy's setting alone.

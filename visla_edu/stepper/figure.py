@@ -19,17 +19,17 @@ from visla_edu.codes import (
     OBS_USED,
     STATUS_NAMES,
 )
-from visla_edu.plotting import GROUND_TRUTH_STYLE
+from visla_edu.plotting import GROUND_TRUTH_STYLE, PALETTE, STYLES
 from visla_edu.stepper.model import MODE_LABELS, world_position_covariance
 
 __all__ = ["StepperFigure"]
 
 _STATUS_STYLE = {  # status -> (marker, colour, label)
-    OBS_USED: ("o", "C0", "used"),
-    OBS_NEW: ("s", "C2", "new landmark"),
-    OBS_GATED: ("x", "C3", "gated (outlier)"),
-    OBS_NO_DEPTH: ("v", "m", "no depth"),
-    OBS_FAR: (".", "0.5", "too far / unused"),
+    OBS_USED: ("o", PALETTE["blue"], "used"),
+    OBS_NEW: ("s", PALETTE["bluish_green"], "new landmark"),
+    OBS_GATED: ("x", PALETTE["vermillion"], "gated (outlier)"),
+    OBS_NO_DEPTH: ("v", PALETTE["reddish_purple"], "no depth"),
+    OBS_FAR: (".", PALETTE["grey"], "too far / unused"),
 }
 
 
@@ -125,17 +125,17 @@ class StepperFigure:
         self.gt_line, = ax.plot([], [], label="ground truth", zorder=2, **GROUND_TRUTH_STYLE)
         self.gt_points = ax.scatter(np.zeros(0), np.zeros(0), s=2, c="0.8", zorder=1, label="true landmarks")
         self.gt_pose, = ax.plot([], [], "o", color=GROUND_TRUTH_STYLE["color"], ms=7, mfc="none", mew=1.5, zorder=7)
-        self.dr_line, = ax.plot([], [], "--", color="C3", lw=1.2, label="dead reckoning", zorder=3)
+        self.dr_line, = ax.plot([], [], label="dead reckoning", zorder=3, **{**STYLES["dead_reckoning"], "linewidth": 1.2})
         self.map_points = ax.scatter(np.zeros(0), np.zeros(0), s=3, c="0.45", zorder=2, label="map so far")
-        self.active_ellipses = LineCollection([], colors="C1", linewidths=0.7, alpha=0.7, zorder=4)
+        self.active_ellipses = LineCollection([], colors=PALETTE["orange"], linewidths=0.7, alpha=0.7, zorder=4)
         ax.add_collection(self.active_ellipses)
-        self.active_points = ax.scatter(np.zeros(0), np.zeros(0), s=10, c="C1", zorder=5,
+        self.active_points = ax.scatter(np.zeros(0), np.zeros(0), s=10, c=PALETTE["orange"], zorder=5,
                                         label=f"active landmarks ({self.n_sigma:g}σ)")
-        self.est_line, = ax.plot([], [], "-", color="C0", lw=2, label="estimate", zorder=6)
-        self.pose_ellipse, = ax.plot([], [], "-", color="C0", lw=1.5, zorder=8,
+        self.est_line, = ax.plot([], [], label="estimate", zorder=6, **{**STYLES["estimate"], "linewidth": 2})
+        self.pose_ellipse, = ax.plot([], [], "-", color=STYLES["estimate"]["color"], lw=1.5, zorder=8,
                                      label=f"pose {self.n_sigma:g}σ (x-y)")
-        self.heading, = ax.plot([], [], "-", color="C0", lw=2.5, zorder=8)
-        self.pose_marker, = ax.plot([], [], "o", color="C0", ms=6, zorder=9)
+        self.heading, = ax.plot([], [], "-", color=STYLES["estimate"]["color"], lw=2.5, zorder=8)
+        self.pose_marker, = ax.plot([], [], "o", color=STYLES["estimate"]["color"], ms=6, zorder=9)
         for a in (self.gt_pose, self.dr_line, self.map_points, self.active_ellipses, self.active_points,
                   self.est_line, self.pose_ellipse, self.heading, self.pose_marker):
             self._dyn(a)
@@ -148,7 +148,7 @@ class StepperFigure:
     def _build_image(self, ax, side):
         from matplotlib.collections import LineCollection
 
-        arts = {"innov": self._dyn(LineCollection([], colors="C1", linewidths=1.0, zorder=2))}
+        arts = {"innov": self._dyn(LineCollection([], colors=PALETTE["orange"], linewidths=1.0, zorder=2))}
         ax.add_collection(arts["innov"])
         for code, (marker, color, label) in _STATUS_STYLE.items():
             if marker in ("x", "."):
@@ -157,7 +157,7 @@ class StepperFigure:
                 style = dict(facecolors="none", edgecolors=color)
             arts[code] = self._dyn(ax.scatter(np.zeros(0), np.zeros(0), s=18 if marker != "." else 8,
                                               marker=marker, linewidths=1.0, label=label, zorder=3, **style))
-        arts["pred"] = self._dyn(ax.scatter(np.zeros(0), np.zeros(0), s=5, c="C1", label="predicted", zorder=4))
+        arts["pred"] = self._dyn(ax.scatter(np.zeros(0), np.zeros(0), s=5, c=PALETTE["orange"], label="predicted", zorder=4))
         ax.set_ylabel(f"v (px, {side})", fontsize="small")
         ax.tick_params(labelsize="small")
         if side == "left":
@@ -171,10 +171,10 @@ class StepperFigure:
         from matplotlib.patches import Polygon
 
         ax = self.ax_nis
-        self.nis_band = self._dyn(Polygon(np.zeros((0, 2)), closed=True, fc="C2", alpha=0.3, ec="none",
+        self.nis_band = self._dyn(Polygon(np.zeros((0, 2)), closed=True, fc=PALETTE["bluish_green"], alpha=0.3, ec="none",
                                           label="95% band of χ²(dof)/dof"))
         ax.add_patch(self.nis_band)
-        self.nis_line, = ax.plot([], [], ".-", color="C0", ms=2.5, lw=0.7, label="NIS / dof")
+        self.nis_line, = ax.plot([], [], ".-", color=PALETTE["blue"], ms=2.5, lw=0.7, label="NIS / dof")
         self.nis_now = ax.axvline(0, color="k", lw=0.8, alpha=0.6)
         self._dyn(self.nis_line)
         self._dyn(self.nis_now)

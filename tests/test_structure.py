@@ -1,0 +1,132 @@
+"""The package's shape, as the maintainers' rules state it (README, "For maintainers").
+
+No import cycle between the package's modules, no module over 600 lines, no function over 60
+lines of code, and the slow scipy.stats import kept out of the drivers' import path.
+"""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "visla_edu"
+MAX_MODULE_LINES = 600
+MAX_FUNCTION_CODE_LINES = 60
+
+
+def _module_name(path):
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules():
+    return {_module_name(path): path for path in sorted(PACKAGE.rglob("*.py"))}
+
+
+def _targets(node, here, modules):
+    """Package modules a top-level import statement loads (a submodule, not its package, when named)."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names if alias.name in modules]
+    base = node.module or ""
+    if node.level:
+        package = here if modules[here].name == "__init__.py" else here.rpartition(".")[0]
+        for _ in range(node.level - 1):
+            package = package.rpartition(".")[0]
+        base = f"{package}.{base}" if base else package
+    found = [f"{base}.{alias.name}" for alias in node.names if f"{base}.{alias.name}" in modules]
+    return found or ([base] if base in modules else [])
+
+
+def import_graph():
+    """``{module: set of package modules it imports at module level}``."""
+    modules = _modules()
+    graph = {}
+    for name, path in modules.items():
+        tree = ast.parse(path.read_text(), filename=str(path))
+        edges = set()
+        for node in tree.body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                edges.update(_targets(node, name, modules))
+        graph[name] = edges - {name}
+    return graph
+
+
+def find_cycle(graph):
+    """One import cycle as a list of module names, or ``None``."""
+    state, stack = {}, []
+
+    def visit(node):
+        state[node] = "open"
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == "open":
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                cycle = visit(nxt)
+                if cycle:
+                    return cycle
+        stack.pop()
+        state[node] = "done"
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            cycle = visit(node)
+            if cycle:
+                return cycle
+    return None
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_graph_sees_the_package_imports():
+    graph = import_graph()
+    assert "visla_edu.lie" in graph["visla_edu.motion"]
+    assert "visla_edu.smoother._normal" in graph["visla_edu.smoother._batch"]
+
+
+def test_no_import_cycle():
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+@pytest.mark.parametrize("name, path", sorted(_modules().items()))
+def test_module_is_at_most_600_lines(name, path):
+    lines = len(path.read_text().splitlines())
+    assert lines <= MAX_MODULE_LINES, f"{name} has {lines} lines; split it by concept"
+
+
+def _code_lines(function, source_lines):
+    body = function.body
+    first = body[0]
+    if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+        start = first.end_lineno
+    else:
+        start = first.lineno - 1
+    lines = source_lines[start:function.end_lineno]
+    return sum(1 for line in lines if line.strip() and not line.strip().startswith("#"))
+
+
+def test_no_function_over_60_lines_of_code():
+    long = []
+    for name, path in _modules().items():
+        source = path.read_text()
+        lines = source.splitlines()
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                count = _code_lines(node, lines)
+                if count > MAX_FUNCTION_CODE_LINES:
+                    long.append(f"{name}.{node.name} ({count})")
+    assert not long, "functions over 60 lines of code: " + ", ".join(long)
+
+
+def test_drivers_do_not_import_scipy_stats():
+    code = ("import sys, visla_edu.run, visla_edu.diagnostics, visla_edu.smoother, visla_edu.cli; "
+            "print('scipy.stats' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", "scipy.stats is imported at package import; import it where it is used"
