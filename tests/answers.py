@@ -7,6 +7,7 @@ function, so these answers never call it: each is written out, like the solution
 
 import numpy as np
 from scipy import stats
+from scipy.linalg import block_diag
 
 
 def hat(w):
@@ -244,3 +245,36 @@ def gauss_newton_step(world_T_body, p_body, q_world):
     xi = np.zeros((4, 4))
     xi[:3, :3], xi[:3, 3] = hat(delta[3:]), delta[:3]
     return world_T_body @ expm(xi)
+# --------------------------------------------------------------------------- 09 capstone
+
+
+def capstone_predict(parts, world_T_imu, Sigma, u, tau, W):
+    F = parts.pose_transition(u, tau)
+    out = np.array(Sigma, dtype=float)
+    out[:6] = F @ out[:6]
+    out[:, :6] = out[:, :6] @ F.T
+    out[:6, :6] += W
+    return world_T_imu @ parts.se3_exp(tau * np.asarray(u)), out
+
+
+def capstone_landmarks(parts, world_T_imu, Sigma, z, K, b, imu_T_cam, C_pixels):
+    p_new = np.array([parts.init_landmark(z_i, K, b, imu_T_cam, world_T_imu) for z_i in z])
+    G = np.concatenate([(world_T_imu @ parts.odot(se3_inv(world_T_imu) @ np.r_[m, 1.0]))[:3] for m in p_new])
+    D, k = len(Sigma), len(z)
+    out = np.zeros((D + 3 * k, D + 3 * k))
+    out[:D, :D] = Sigma
+    out[D:, :D] = G @ Sigma[:6]
+    out[:D, D:] = out[D:, :D].T
+    out[D:, D:] = G @ Sigma[:6, :6] @ G.T + block_diag(*C_pixels)
+    return p_new, out
+
+
+def capstone_slam(parts, world_T_imu, Sigma, p_active, slots, z, Ks, cam_T_imu, noise_var):
+    m = p_active[slots]
+    J_pose = np.array([parts.pose_jacobian(Ks, cam_T_imu, world_T_imu, m_i) for m_i in m])
+    J_lm = np.array([parts.landmark_jacobian(Ks, cam_T_imu, world_T_imu, m_i) for m_i in m])
+    H = parts.slam_jacobian(J_pose, J_lm, slots, len(p_active))
+    gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(len(H)))
+    delta = gain @ (z - parts.project(Ks, cam_T_imu, world_T_imu, m)).ravel()
+    return (world_T_imu @ parts.se3_exp(delta[:6]), (np.eye(len(Sigma)) - gain @ H) @ Sigma,
+            p_active + delta[6:].reshape(-1, 3))

@@ -38,7 +38,7 @@ import sys as _sys
 
 #: Submodules in dependency order; a reload of this package reloads them all.
 _SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_primer", "_kinematics", "_camera", "_jacobians", "_filters",
-               "_consistency", "_smoothing")
+               "_consistency", "_smoothing", "_capstone")
 
 
 def _load_submodules():
@@ -55,6 +55,8 @@ _load_submodules()
 
 from visla_edu.checks._camera import (check_init_landmark, check_project, check_stereo_matrix,  # noqa: E402
                                       check_triangulate)
+from visla_edu.checks._capstone import (capstone_steps, check_capstone_landmarks,  # noqa: E402
+                                        check_capstone_predict, check_capstone_slam)
 from visla_edu.checks._consistency import check_average_nees_bounds, check_motion_noise, check_nees  # noqa: E402
 from visla_edu.checks._core import student_or_reference  # noqa: E402
 from visla_edu.checks._data import check_observations_at, check_track_spans  # noqa: E402
@@ -114,4 +116,9 @@ __all__ = [
     "check_motion_residual",
     "check_schur_reduce",
     "check_gauss_newton_step",
+    # 09 capstone
+    "check_capstone_predict",
+    "check_capstone_landmarks",
+    "check_capstone_slam",
+    "capstone_steps",
 ]

@@ -16,6 +16,8 @@ name::
     StepperWidget("sim")
 """
 
-from visla_edu.stepper.model import MODE_LABELS, NOISE_FIELDS, Stepper, dataset_choices, world_position_covariance
+from visla_edu.stepper.model import (MODE_LABELS, NOISE_FIELDS, SteppableFilter, Stepper, dataset_choices,
+                                     world_position_covariance)
 
-__all__ = ["MODE_LABELS", "NOISE_FIELDS", "Stepper", "dataset_choices", "world_position_covariance"]
+__all__ = ["MODE_LABELS", "NOISE_FIELDS", "SteppableFilter", "Stepper", "dataset_choices",
+           "world_position_covariance"]

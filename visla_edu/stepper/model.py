@@ -23,21 +23,28 @@ be scripted and tested on its own::
     (13, 4, 4)
     >>> s.goto(3) is s.records[3]  # stepping back reads the history
     True
+
+The filter need not be the library's: ``Stepper(dataset, mode, config, filter_factory=f)``
+steps ``f(dataset, config)`` instead (``config`` with its ``"auto"`` settings measured), any
+object with the small interface :class:`SteppableFilter` describes -- a student's own filter,
+for instance (notebook 09).
 """
 
 import time
 from dataclasses import fields, replace
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from visla_edu import metrics, motion, run
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
-from visla_edu.filters import FilterConfig
+from visla_edu.filters import FilterConfig, StepRecord
 
 __all__ = [
     "MODE_LABELS",
     "NOISE_FIELDS",
+    "SteppableFilter",
     "Stepper",
     "dataset_choices",
     "world_position_covariance",
@@ -112,6 +119,37 @@ def world_position_covariance(world_T_imu, pose_cov):
     return R @ np.asarray(pose_cov)[:3, :3] @ R.T
 
 
+@runtime_checkable
+class SteppableFilter(Protocol):
+    """The minimal interface of a filter the :class:`Stepper` can step (a filter factory's product).
+
+    The library's filters (:func:`visla_edu.run.make_filter`) have it; so can a student's own.
+
+    Attributes
+    ----------
+    config : visla_edu.filters.FilterConfig
+        The settings in use, resolved (no ``"auto"`` left): the stepper's noise sliders show
+        them and the dead-reckoning reference uses its ``imu_lag``. The factory receives this
+        config; keeping it as the attribute is enough.
+
+    Methods
+    -------
+    step() -> visla_edu.filters.StepRecord
+        Process the next frame and return its record: frames ``0, 1, 2, ...`` in order, one
+        per call (``record.t`` is the frame), the pose in ``record.world_T_imu`` (4, 4) with
+        its covariance ``record.pose_cov`` (6, 6, right perturbation ``[v; w]``), the frame's
+        observations with their status codes, and the active landmarks the map view draws
+        (empty arrays are fine). The stepper calls it only while frames remain.
+
+    Raises from ``step()`` propagate: the stepper stays at the last good frame.
+    """
+
+    config: FilterConfig
+
+    def step(self) -> StepRecord:
+        """Process the next frame; return its record."""
+
+
 class Stepper:
     """A filter run you can step through: the filter, its history, and the current time.
 
@@ -127,13 +165,19 @@ class Stepper:
         Folder of the course files when ``dataset`` is a name.
     blas_threads : int or None
         BLAS threads while the filter steps (see :func:`visla_edu.run.limit_blas_threads`).
+    filter_factory : callable, optional
+        ``filter_factory(dataset, config) -> filter`` builds the filter to step instead of
+        :func:`visla_edu.run.make_filter` (``config`` is resolved: no ``"auto"`` left); the
+        filter needs only the :class:`SteppableFilter` interface. It is called again at every
+        reset (a new dataset or new noise settings). ``mode`` then only labels the views.
 
     Attributes
     ----------
     records : list of StepRecord
         ``records[k]`` is frame ``k``'s snapshot, for ``k = 0 .. frontier``.
-    filter : visla_edu.filters.DeadReckoning, LandmarkMapping, VisualInertialOdometry or JointSlam
-        The filter object; its state is at the frontier.
+    filter : SteppableFilter
+        The filter object (a library mode, or the factory's product); its state is at the frontier.
+    filter_factory : callable or None
     steps_computed : int
         Filter steps run since the last reset (each frame is computed once).
     last_update_seconds : float
@@ -144,7 +188,12 @@ class Stepper:
         The BLAS thread limit :meth:`goto` applies while it steps the filter.
     """
 
-    def __init__(self, dataset="sim-tiny", mode=SLAM, config=None, data_dir=None, blas_threads=1):
+    def __init__(self, dataset="sim-tiny", mode=SLAM, config=None, data_dir=None, blas_threads=1,
+                 filter_factory=None):
+        if filter_factory is not None and not callable(filter_factory):
+            raise TypeError("Stepper: filter_factory must be a callable (dataset, config) -> filter, "
+                            f"got {type(filter_factory).__name__}")
+        self.filter_factory = filter_factory
         self.data_dir = data_dir
         self.blas_threads = blas_threads
         self._cache = {}
@@ -167,8 +216,13 @@ class Stepper:
 
     @property
     def config(self):
-        """The :class:`~visla_edu.filters.FilterConfig` in use (replace it via :meth:`configure`)."""
+        """The :class:`~visla_edu.filters.FilterConfig` asked for (replace it via :meth:`configure`)."""
         return self._config
+
+    @property
+    def config_in_use(self):
+        """The filter's resolved :class:`~visla_edu.filters.FilterConfig` (``"auto"`` settings measured)."""
+        return self.filter.config
 
     def configure(self, dataset=None, mode=None, config=None, **settings):
         """Change the dataset, mode or noise settings; the filter restarts at frame 0.
@@ -207,7 +261,7 @@ class Stepper:
         """Build a fresh filter and forget the history; the time goes back to frame 0."""
         ds = self._dataset
         T = ds.num_frames
-        self.filter = run.make_filter(ds, self._mode, self._config)
+        self.filter = self._make_filter(ds)
         self.generation = getattr(self, "generation", -1) + 1
         self.records = []
         self.steps_computed = 0
@@ -294,6 +348,9 @@ class Stepper:
         return self.step(-int(n))
 
     def _append(self, rec, seconds):
+        if not isinstance(rec, StepRecord):
+            raise TypeError(f"Stepper: the filter's step() must return a visla_edu.filters.StepRecord, "
+                            f"got {type(rec).__name__}")
         self.steps_computed += 1
         t = rec.t
         if t != len(self.records):
@@ -368,7 +425,7 @@ class Stepper:
         """IMU-only trajectory of the whole run, shape (T, 4, 4) (computed once per reset)."""
         if self._dead_reckoning is None:
             ds = self._dataset
-            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self.filter.config.imu_lag)
+            self._dead_reckoning = motion.dead_reckon(ds.time_stamps, ds.twists, lag=self.config_in_use.imu_lag)
         return self._dead_reckoning
 
     def position_covariance(self):
@@ -402,6 +459,21 @@ class Stepper:
                 f"{len(rec.active_ids)} active landmarks")
 
     # ------------------------------------------------------------------ helpers
+    def _make_filter(self, ds):
+        """The library's filter for the mode, or the factory's (checked for the step interface)."""
+        if self.filter_factory is None:
+            return run.make_filter(ds, self._mode, self._config)
+        flt = self.filter_factory(ds, run.resolve_config(ds, self._config))
+        missing = [name for name in ("step", "config") if not hasattr(flt, name)]
+        if missing or not callable(flt.step):
+            lacks = missing or ["a callable step"]
+            raise TypeError(f"Stepper: the filter_factory's {type(flt).__name__} lacks {lacks} "
+                            "of the step interface (see visla_edu.stepper.SteppableFilter)")
+        if not isinstance(flt.config, FilterConfig):
+            raise TypeError(f"Stepper: {type(flt).__name__}.config must be a FilterConfig, "
+                            f"got {type(flt.config).__name__}")
+        return flt
+
     @staticmethod
     def _readonly(view):
         view = view.view()

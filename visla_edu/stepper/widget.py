@@ -77,6 +77,12 @@ class StepperWidget(w.VBox):
     config : FilterConfig, optional
     data_dir : str or os.PathLike, optional
         Folder of the course files (default: ``VISLA_EDU_DATA``).
+    filter_factory : callable, optional
+        ``filter_factory(dataset, config) -> filter``: step your own filter instead of the
+        library's (see :class:`visla_edu.stepper.Stepper` and
+        :class:`visla_edu.stepper.SteppableFilter`). ``mode`` then labels it and the mode menu
+        is disabled; the dataset menu and the noise sliders rebuild it through the factory,
+        and any error its ``step()`` raises is shown under the figure.
     **figure_options
         Passed to :class:`~visla_edu.stepper.figure.StepperFigure` (``figsize``, ``dpi``, ``n_sigma``, ``follow``...).
 
@@ -104,13 +110,13 @@ class StepperWidget(w.VBox):
     last_redraw_seconds, last_update_seconds : float
     """
 
-    def __init__(self, dataset="sim", mode=SLAM, config=None, data_dir=None, **figure_options):
+    def __init__(self, dataset="sim", mode=SLAM, config=None, data_dir=None, filter_factory=None, **figure_options):
         self.data_dir = data_dir
         self._busy = _Busy()
         self.render_count = 0
         self.last_redraw_seconds = 0.0
         self.last_update_seconds = 0.0
-        self.stepper = Stepper(dataset, mode=mode, config=config, data_dir=data_dir)
+        self.stepper = Stepper(dataset, mode=mode, config=config, data_dir=data_dir, filter_factory=filter_factory)
         self.figure = StepperFigure(**figure_options)
         self.last_update_seconds = self.stepper.last_update_seconds
         self._header = self._build_header(dataset)
@@ -134,7 +140,8 @@ class StepperWidget(w.VBox):
         self.dataset_dropdown = w.Dropdown(options=choices, value=dataset, description="dataset",
                                            layout=w.Layout(width="auto", min_width="22em"))
         self.mode_dropdown = w.Dropdown(options=[(label, m) for m, label in MODE_LABELS.items()],
-                                        value=self.stepper.mode, description="mode", layout=w.Layout(width="auto"))
+                                        value=self.stepper.mode, description="mode", layout=w.Layout(width="auto"),
+                                        disabled=self.stepper.filter_factory is not None)
         self.view_toggle = w.ToggleButtons(options=[("follow", True), ("whole drive", False)],
                                            value=self.figure.follow, description="map view",
                                            style={"button_width": "8em", "description_width": "5em"})
@@ -165,7 +172,7 @@ class StepperWidget(w.VBox):
 
     def _build_noise_box(self):
         """One slider per noise setting and a defaults button, in a closed accordion."""
-        in_use = self.stepper.filter.config  # resolved: "auto" settings carry the measured values
+        in_use = self.stepper.config_in_use  # resolved: "auto" settings carry the measured values
         self.noise_sliders = {}
         for name in NOISE_FIELDS:
             value = _slider_value(getattr(in_use, name))
@@ -195,9 +202,11 @@ class StepperWidget(w.VBox):
         error = None
         if int(t) - self.stepper.frontier > 50:
             self._show_status(f"<i>running the filter from frame {self.stepper.frontier} to {int(t)}...</i>")
+        # A student's filter may fail in any way: show it instead of losing it in a callback.
+        caught = FilterDivergedError if self.stepper.filter_factory is None else Exception
         try:
             self.stepper.goto(int(t))
-        except FilterDivergedError as err:
+        except caught as err:
             error = err
         self.last_update_seconds = self.stepper.last_update_seconds
         if self.time_slider.value != self.stepper.t:
@@ -228,7 +237,7 @@ class StepperWidget(w.VBox):
     def _on_defaults(self, _):
         defaults = FilterConfig()
         self._reconfigure({name: getattr(defaults, name) for name in self.noise_sliders}, keep_time=True)
-        in_use = self.stepper.filter.config
+        in_use = self.stepper.config_in_use
         with self._busy():
             for name, slider in self.noise_sliders.items():
                 slider.value = _slider_value(getattr(in_use, name))

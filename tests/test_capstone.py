@@ -1,0 +1,117 @@
+"""The capstone's loop skeleton (visla_edu.capstone) and its checks (notebook 09)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from visla_edu import capstone, checks, data, lie, run
+from visla_edu.filters import FilterConfig, StepRecord
+from visla_edu.stepper import Stepper
+
+from answers import capstone_landmarks as add_landmarks  # tests/answers.py
+from answers import capstone_predict as predict
+from answers import capstone_slam as slam_update
+
+STEPS = capstone.Steps(predict, add_landmarks, slam_update)
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    ds = data.load("sim-tiny")
+    return ds, run.resolve_config(ds, FilterConfig(slam_error="right"))
+
+
+def test_the_skeleton_with_correct_steps_is_the_library_right_perturbation_filter(tiny):
+    ds, config = tiny
+    poses, covs, landmarks = capstone.run_capstone(ds, config, capstone.library_parts(), STEPS)
+    library = run.run_filter(ds, "slam", config, progress=False)
+    assert np.abs(poses - library.world_T_imu).max() < 1e-8
+    assert np.abs(covs - library.pose_cov).max() < 1e-10
+    placed = np.isfinite(library.landmarks[:, 0])
+    np.testing.assert_array_equal(np.isfinite(landmarks[:, 0]), placed)
+    assert np.abs(landmarks[placed] - library.landmarks[placed]).max() < 1e-7
+
+
+def test_vio_skeleton_steps_and_records(tiny):
+    ds, config = tiny
+    flt = capstone.CapstoneFilter(ds, config, capstone.library_parts(), STEPS, joint=False)
+    records = [flt.step() for _ in range(20)]
+    assert all(isinstance(r, StepRecord) for r in records) and records[-1].t == 19
+    assert flt.Sigma.shape == (6, 6) and np.isfinite(records[-1].nis)
+    assert len(records[-1].active_ids) and np.all(np.isfinite(records[-1].active_covs))
+    poses, covs, _ = capstone.run_capstone(ds, config, capstone.library_parts(), STEPS, joint=False)
+    np.testing.assert_allclose(poses[:20], [r.world_T_imu for r in records], atol=1e-9)
+    assert np.linalg.norm(poses[:, :3, 3] - ds.ground_truth.world_T_imu[:, :3, 3], axis=1).max() < 2.0
+
+
+def test_a_wrong_shape_names_the_function_and_frame(tiny):
+    ds, config = tiny
+    bad = replace(STEPS, predict=lambda parts, T, Sigma, u, tau, W: (T, Sigma[:6, :6]))
+    flt = capstone.CapstoneFilter(ds, config, capstone.library_parts(), bad)
+    with pytest.raises(ValueError, match=r"predict returned Sigma of shape \(6, 6\) at frame \d+, expected"):
+        for _ in range(10):
+            flt.step()
+    with pytest.raises(TypeError, match="capstone.Parts"):
+        capstone.CapstoneFilter(ds, config, {}, STEPS)
+
+
+def test_the_stepper_steps_the_capstone_filter(tiny):
+    ds, config = tiny
+    s = Stepper(ds, config=config, filter_factory=lambda d, c: capstone.CapstoneFilter(d, c, capstone.library_parts(),
+                                                                                       STEPS))
+    rec = s.goto(15)
+    assert isinstance(s.filter, capstone.CapstoneFilter) and rec.t == 15 and len(rec.active_ids)
+    library = Stepper(ds, config=config)
+    np.testing.assert_allclose(rec.world_T_imu, library.goto(15).world_T_imu, atol=1e-9)
+
+
+@pytest.mark.parametrize("check, answer", [(checks.check_capstone_predict, predict),
+                                           (checks.check_capstone_landmarks, add_landmarks),
+                                           (checks.check_capstone_slam, slam_update)])
+def test_correct_answers_pass(check, answer, capsys):
+    check(answer)
+    check(answer, hidden=True)
+    out = capsys.readouterr().out
+    assert out.count("\u2713") == 1
+
+
+def _cross_missing(parts, T, Sigma, *args):
+    p_new, out = add_landmarks(parts, T, Sigma, *args)
+    D = len(Sigma)
+    out[D:, :D] = 0
+    out[:D, D:] = 0
+    return p_new, out
+
+
+def _predict_without_parts(parts, T, Sigma, u, tau, W):
+    """Right numbers, but the mean through the library's se3_exp instead of parts.se3_exp."""
+    library_parts = replace(parts, se3_exp=lie.se3_exp)
+    return predict(library_parts, T, Sigma, u, tau, W)
+
+
+@pytest.mark.parametrize("check, wrong, hint", [
+    (checks.check_capstone_predict,
+     lambda parts, T, S, u, tau, W: (parts.se3_exp(tau * u) @ T, predict(parts, T, S, u, tau, W)[1]),
+     "the mean moves on the right"),
+    (checks.check_capstone_predict, lambda parts, T, S, u, tau, W: predict(parts, T, S, u, tau, 0 * W),
+     "the motion noise W is missing"),
+    (checks.check_capstone_predict, _predict_without_parts, "use parts.se3_exp"),
+    (checks.check_capstone_landmarks, _cross_missing, "cross-covariance G Sigma_px is missing"),
+    (checks.check_capstone_slam, lambda parts, T, S, p, *args: slam_update(parts, T, S, p, *args)[:2] + (p,),
+     "every landmark in the state moves"),
+])
+def test_mistakes_are_named(check, wrong, hint):
+    with pytest.raises(AssertionError, match=hint):
+        check(wrong)
+
+
+def test_capstone_steps_falls_back_on_unfinished_functions(capsys):
+    def stub(*args):
+        raise NotImplementedError
+
+    steps = checks.capstone_steps(predict, stub, lambda *args: (1, 2, 3))
+    out = capsys.readouterr().out
+    assert steps.predict is predict
+    assert steps.add_landmarks is not stub and steps.slam_update.__name__ == "_reference_slam_update"
+    assert "using your predict" in out and "using the reference add_landmarks" in out
