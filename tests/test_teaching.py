@@ -57,7 +57,6 @@ def test_every_notebook_is_in_the_pacing_table():
     pacing = text[text.index("## Pacing"):text.index("## Common mistakes")]
     for name in NAMES:
         assert f"| `{name}` |" in pacing, name
-    assert "to come" in pacing  # the places kept for the capstone and 08 smoothing
 
 
 def test_the_graded_cell_shown_is_the_notebooks_form():
