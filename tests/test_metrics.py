@@ -279,3 +279,14 @@ def test_evaluate_compares_the_frames_the_ground_truth_covers():
     est[7, 0, 0] = np.nan
     with pytest.raises(ValueError, match="estimate's pose of frame 7 is not finite"):
         metrics.evaluate(est, gt)
+
+
+def test_chi2_quantile_is_scipy_stats_chi2_ppf():
+    q = np.array([1e-9, 0.001, 0.025, 0.5, 0.975, 0.999, 1 - 1e-9])
+    for dof in (1, 2, 4, 6, 61, 6000):
+        np.testing.assert_allclose(metrics.chi2_quantile(q, dof), stats.chi2.ppf(q, dof), rtol=1e-12)
+    assert isinstance(metrics.chi2_quantile(0.95, 4), float)
+    assert metrics.chi2_quantile(0.95, 4) == pytest.approx(9.487729036781154, rel=1e-12)
+    edge = metrics.chi2_quantile(np.array([0.0, 1.0, 1.5]), 3)
+    assert edge[0] == 0 and np.isinf(edge[1]) and np.isnan(edge[2])
+    assert np.isnan(metrics.chi2_quantile(0.5, 0)) and np.isnan(metrics.chi2_quantile(0.5, -2))

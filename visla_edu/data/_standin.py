@@ -80,7 +80,7 @@ def _standin_as_course_file(directory):
     corrected extrinsic (the physical rig), and the dataset reports the file's uncorrected
     one, exactly as a user holding the real ``10.npz`` would see it.
     """
-    from visla_edu import diagnostics  # lazy: only the stand-in needs it (and metrics' scipy.stats)
+    from visla_edu import diagnostics  # lazy: only the stand-in needs it
 
     calibration = load_npz(directory / "03.npz")
     physical_imu_T_cam, _ = diagnostics.resolve_extrinsics(calibration, "auto")

@@ -5,6 +5,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from visla_edu.filters._settings import check_settings, setting
+from visla_edu.metrics import chi2_quantile
 
 __all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS"]
 
@@ -179,9 +180,7 @@ class FilterConfig:
         """Chi-square (4 dof) quantile at ``gate_probability``; ``inf`` when gating is off."""
         if self.gate_probability >= 1:
             return np.inf
-        from scipy.stats import chi2
-
-        return float(chi2.ppf(self.gate_probability, 4))
+        return float(chi2_quantile(self.gate_probability, 4))
 
     @property
     def resolved(self):
