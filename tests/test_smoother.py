@@ -282,6 +282,20 @@ def test_noise_free_drive_converges_to_the_truth():
     assert result.rejected["outliers"] == 0
 
 
+def test_batch_reports_why_each_round_stopped(tiny):
+    ekf = run.run_filter(tiny, "slam", progress=False)
+    converged = smoother.smooth(tiny, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam,
+                                smoother.SmootherConfig(max_iterations=50))
+    assert converged.stop_reasons[-1] == "converged"
+    assert len(converged.stop_reasons) == len(np.unique(converged.history["round"]))
+    assert "final round: converged" in converged.summary()
+    capped = smoother.smooth(tiny, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam,
+                             smoother.SmootherConfig(max_iterations=1, rejection_rounds=0))
+    assert capped.stop_reasons == ["iteration cap"] and len(capped.history["cost"]) == 1
+    assert "iteration cap, max_iterations=1 (not converged" in capped.summary()
+    assert set(capped.stop_reasons) <= set(smoother.STOP_REASONS)
+
+
 def test_batch_result_shapes_history_and_counts(tiny):
     ekf = run.run_filter(tiny, "slam", progress=False)
     result = smoother.smooth(tiny, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam)

@@ -40,7 +40,7 @@ Modules (private; the public names are re-exported here): ``_config``
 ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window`` (:func:`smooth_window`).
 """
 
-from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
+from visla_edu.smoother._batch import STOP_REASONS, NormalEquations, normal_equations, smooth
 from visla_edu.smoother._config import LOSSES, WINDOW_MODES, SmootherConfig
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
@@ -55,6 +55,7 @@ __all__ = [
     "WINDOW_MODES",
     "STATUS_NAMES",
     "HISTORY_FIELDS",
+    "STOP_REASONS",
     "smooth",
     "smooth_window",
     "NormalEquations",

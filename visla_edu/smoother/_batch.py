@@ -34,7 +34,7 @@ from visla_edu.smoother._result import (SmootherResult, check_landmarks, check_t
                                         finish_history)
 
 __all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information",
-           "NormalEquations", "normal_equations"]
+           "NormalEquations", "normal_equations", "STOP_REASONS"]
 
 #: Damping beyond which a round gives up (no step lowers the cost).
 MAX_DAMPING = 1e12
@@ -43,6 +43,9 @@ MAX_DAMPING = 1e12
 ROUGH = 100
 #: ... and get ``max_iterations // ROUGH_ITERATIONS`` iterations (the last round gets all).
 ROUGH_ITERATIONS = 2
+#: Why :func:`levenberg_marquardt` stopped: the cost (or the step) became small, the iteration
+#: budget ran out, or no damping found a step that lowers the cost.
+CONVERGED, ITERATION_CAP, NO_DESCENT = STOP_REASONS = ("converged", "iteration cap", "no descent")
 
 
 def motion_information(tau, config):
@@ -57,7 +60,7 @@ def _state_norm(problem, world_T_imu, landmarks):
 
 
 def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_index=0, max_iterations=None,
-                        function_tolerance=None, final_linearization=True):
+                        function_tolerance=None, final_linearization=True, stops=None):
     """Minimise the robust cost of ``problem`` from the given state.
 
     Parameters
@@ -78,6 +81,8 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
     final_linearization : bool
         Relinearise after a step accepted in the last allowed iteration (for covariances);
         without it the returned ``lin`` may be from the state before that step.
+    stops : list of str, optional
+        Appended to: why the iterations stopped, one of :data:`STOP_REASONS`.
 
     Returns
     -------
@@ -91,7 +96,7 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
     lin = _normal.linearize(problem, world_T_imu, landmarks)
     damping, nu = config.initial_damping, 2.0
     iterations = max_iterations or config.max_iterations
-    factor = None
+    factor, reason = None, ITERATION_CAP
     for iteration in range(iterations):
         try:
             step = _normal.solve_step(problem, lin, damping)
@@ -115,6 +120,7 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         if not accepted:
             damping, nu = damping * nu, nu * 2
             if small_step or damping > MAX_DAMPING:
+                reason = NO_DESCENT
                 break
             continue
         gain = (lin.cost - new_cost) / max(step.predicted, 1e-300)
@@ -124,7 +130,10 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         if final_linearization or iteration + 1 < iterations:
             lin = _normal.linearize(problem, world_T_imu, landmarks)
         if small_step or relative < (function_tolerance or config.function_tolerance):
+            reason = CONVERGED
             break
+    if stops is not None:
+        stops.append(reason)
     return world_T_imu, landmarks, lin, factor
 
 
@@ -244,14 +253,15 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
     dropped = drop_landmarks(problem, world_T_imu, m, config.min_observations)
     rejected.update({k: rejected.get(k, 0) + v for k, v in dropped.items()})
     outlier = np.zeros(len(problem.active), dtype=bool)
-    history = empty_history()
+    history, stops = empty_history(), []
     timing = {"setup": time.perf_counter() - start}
     round_index, final = 0, config.rejection_rounds == 0
     while True:
         tolerance = config.function_tolerance * (1 if final else ROUGH)
         iterations = config.max_iterations if final else max(1, config.max_iterations // ROUGH_ITERATIONS)
         world_T_imu, m, lin, _ = levenberg_marquardt(problem, world_T_imu, m, config, history, round_index,
-                                                     max_iterations=iterations, function_tolerance=tolerance)
+                                                     max_iterations=iterations, function_tolerance=tolerance,
+                                                     stops=stops)
         if final:
             break
         newly = reject_outliers(problem, world_T_imu, m, config.rejection_probability)
@@ -266,7 +276,9 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
     timing["solve"] = time.perf_counter() - start - timing["setup"]
     status[problem.obs_source[~problem.active]] = DROPPED
     status[problem.obs_source[outlier]] = REJECTED
-    return _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start)
+    result = _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start)
+    result.stop_reasons = stops
+    return result
 
 
 @dataclass

@@ -51,6 +51,9 @@ class SmootherResult:
     online_world_T_imu : ndarray, shape (T, 4, 4)
         Sliding window only: each pose as estimated when its frame was the newest (the
         real-time estimate; ``world_T_imu`` is the estimate when it left the window).
+    stop_reasons : list of str
+        Batch only: why each round's Levenberg-Marquardt stopped (``"converged"``,
+        ``"iteration cap"`` or ``"no descent"``), the final round last.
     """
 
     name: str
@@ -68,11 +71,22 @@ class SmootherResult:
     imu_T_cam: np.ndarray = None
     frame_seconds: np.ndarray = field(default_factory=lambda: np.zeros(0))
     online_world_T_imu: np.ndarray = None
+    stop_reasons: list = field(default_factory=list)
 
     def status_totals(self):
         """Observations by status name, e.g. ``{"used": ..., "rejected": ...}``."""
         counts = np.bincount(self.obs_status, minlength=len(STATUS_NAMES))
         return dict(zip(STATUS_NAMES, counts.tolist()))
+
+    def _stop_note(self):
+        """``"; final round: <reason>"``, with what the iteration cap means, or ``""``."""
+        if not self.stop_reasons:
+            return ""
+        last = self.stop_reasons[-1]
+        if last == "iteration cap":
+            return (f"; final round stopped at its iteration cap, max_iterations={self.config.get('max_iterations')} "
+                    "(not converged: see SmootherConfig.max_iterations)")
+        return f"; final round: {last}"
 
     def summary(self):
         """A few lines a student can read: mode, map, rejections, iterations, time."""
@@ -88,7 +102,7 @@ class SmootherResult:
         h = self.history
         if len(h["cost"]):
             lines.append(f"{len(h['cost'])} iterations ({int(np.sum(h['accepted']))} accepted), "
-                         f"final cost {h['cost'][-1]:.6g}")
+                         f"final cost {h['cost'][-1]:.6g}" + self._stop_note())
         lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in self.timing.items()))
         if len(self.frame_seconds):
             lines.append(f"per frame: median {1e3 * np.median(self.frame_seconds):.2f} ms, "
