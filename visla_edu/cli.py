@@ -83,7 +83,7 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True)
 
     info = sub.add_parser("info", parents=[common], help="summarise a dataset and diagnose its problems")
-    info.add_argument("dataset", help="03, 0022, 10, sim, sim-small, sim-tiny or a path to an .npz file")
+    info.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     info.add_argument("--no-diagnostics", action="store_true", help="skip the visual-odometry diagnostics")
 
     _add_run_parser(sub, common)
@@ -101,7 +101,7 @@ def build_parser():
 
 def _add_run_parser(sub, common):
     run = sub.add_parser("run", parents=[common], help="run a filter over a dataset")
-    run.add_argument("dataset", help="03, 0022, 10, sim, sim-small, sim-tiny or a path to an .npz file")
+    run.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     run.add_argument("--mode", default=SLAM, choices=RUN_MODES)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--force", action="store_true",
