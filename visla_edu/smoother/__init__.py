@@ -40,11 +40,11 @@ Modules (private; the public names are re-exported here): ``_config``
 ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window`` (:func:`smooth_window`).
 """
 
-from visla_edu.smoother._batch import STOP_REASONS, NormalEquations, normal_equations, smooth
+from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
 from visla_edu.smoother._config import LOSSES, WINDOW_MODES, SmootherConfig
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
-from visla_edu.smoother._result import HISTORY_FIELDS, SmootherResult
+from visla_edu.smoother._result import HISTORY_FIELDS, STOP_REASONS, SmootherResult
 from visla_edu.smoother._se3 import se3_right_jacobian, se3_right_jacobian_inv
 from visla_edu.smoother._window import smooth_window
 

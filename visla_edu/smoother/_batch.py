@@ -30,11 +30,11 @@ from visla_edu.smoother._config import SmootherConfig
 from visla_edu.smoother._factors import motion_steps
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
                                          far_landmarks, observation_status, rig_camera, triangulate_landmarks)
-from visla_edu.smoother._result import (SmootherResult, check_landmarks, check_trajectory, empty_history,
-                                        finish_history)
+from visla_edu.smoother._result import (CONVERGED, ITERATION_CAP, NO_DESCENT, SmootherResult,
+                                        check_landmarks, check_trajectory, empty_history, finish_history)
 
 __all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information",
-           "NormalEquations", "normal_equations", "STOP_REASONS"]
+           "NormalEquations", "normal_equations"]
 
 #: Damping beyond which a round gives up (no step lowers the cost).
 MAX_DAMPING = 1e12
@@ -43,9 +43,6 @@ MAX_DAMPING = 1e12
 ROUGH = 100
 #: ... and get ``max_iterations // ROUGH_ITERATIONS`` iterations (the last round gets all).
 ROUGH_ITERATIONS = 2
-#: Why :func:`levenberg_marquardt` stopped: the cost (or the step) became small, the iteration
-#: budget ran out, or no damping found a step that lowers the cost.
-CONVERGED, ITERATION_CAP, NO_DESCENT = STOP_REASONS = ("converged", "iteration cap", "no descent")
 
 
 def motion_information(tau, config):
@@ -82,7 +79,7 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
         Relinearise after a step accepted in the last allowed iteration (for covariances);
         without it the returned ``lin`` may be from the state before that step.
     stops : list of str, optional
-        Appended to: why the iterations stopped, one of :data:`STOP_REASONS`.
+        Appended to: why the iterations stopped, one of :data:`~._result.STOP_REASONS`.
 
     Returns
     -------

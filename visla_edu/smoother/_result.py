@@ -6,10 +6,13 @@ import numpy as np
 
 from visla_edu.smoother._problem import STATUS_NAMES
 
-__all__ = ["SmootherResult", "check_trajectory", "check_landmarks", "HISTORY_FIELDS"]
+__all__ = ["SmootherResult", "check_trajectory", "check_landmarks", "HISTORY_FIELDS", "STOP_REASONS"]
 
 #: Per-iteration records in :attr:`SmootherResult.history`.
 HISTORY_FIELDS = ("round", "cost", "step_norm", "accepted", "damping")
+#: Why Levenberg-Marquardt stopped (:attr:`SmootherResult.stop_reasons`): the cost (or the step)
+#: became small, the iteration budget ran out, or no damping found a step that lowers the cost.
+CONVERGED, ITERATION_CAP, NO_DESCENT = STOP_REASONS = ("converged", "iteration cap", "no descent")
 
 
 @dataclass
@@ -83,7 +86,7 @@ class SmootherResult:
         if not self.stop_reasons:
             return ""
         last = self.stop_reasons[-1]
-        if last == "iteration cap":
+        if last == ITERATION_CAP:
             return (f"; final round stopped at its iteration cap, max_iterations={self.config.get('max_iterations')} "
                     "(not converged: see SmootherConfig.max_iterations)")
         return f"; final round: {last}"
