@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 
 from visla_edu import lie
 from visla_edu.camera import StereoCamera
-from visla_edu.data import STANDIN_LABEL, standin_dataset10
+from visla_edu.data import STANDIN_LABEL, course_standin10, standin_dataset10
+from visla_edu.data import save as save_course_file
 from visla_edu.motion import dead_reckon, select_twists
 from visla_edu.simulate import (
     PRESETS,
@@ -512,6 +513,25 @@ def test_standin_pipeline_on_synthetic_files(tmp_path):
     np.testing.assert_allclose(d.ground_truth.world_T_imu, expected, atol=1e-12)
     assert 250 <= d.num_landmarks <= 300
     _assert_valid_store(d)
+
+
+def test_course_standin_takes_a_seed_and_harder_settings_and_keeps_the_file_calibration(tmp_path):
+    imu, _, drive = _fake_inputs(tmp_path)
+    imu.rename(tmp_path / "10_imu_only.npz")
+    save_course_file(drive, tmp_path / "03.npz")
+    d = course_standin10(tmp_path, seed=3, num_landmarks=300, outlier_share=0.05, imu_lag=1)
+    config = d.extra["config"]
+    assert (d.extra["seed"], config.outlier_share, config.imu_lag, d.label) == (3, 0.05, 1, STANDIN_LABEL)
+    np.testing.assert_array_equal(d.imu_T_cam, drive.imu_T_cam)
+    assert d.extra["simulated_imu_T_cam"].shape == (4, 4)
+    assert d.ground_truth.outlier.any()
+
+
+def test_course_standin_errors_name_the_missing_file_and_the_fixed_extrinsic(tmp_path):
+    with pytest.raises(FileNotFoundError, match="course_standin10: 10_imu_only.npz and 03.npz not in"):
+        course_standin10(tmp_path)
+    with pytest.raises(ValueError, match="imu_T_cam is the physical rig's"):
+        course_standin10(tmp_path, imu_T_cam=np.eye(4))
 
 
 def test_standin_input_errors(tmp_path):

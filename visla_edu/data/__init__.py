@@ -26,7 +26,8 @@ the dense array is streamed from the file in chunks of landmark rows (dataset 10
 is 1.3 GB), never held in memory as a whole.
 
 When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
-dataset 10's real IMU drive with simulated stereo tracks.
+dataset 10's real IMU drive with simulated stereo tracks. :func:`course_standin10` builds
+the same drive with another seed or harder settings (more outliers, an IMU lag).
 
 Ground truth of real drives
 ---------------------------
@@ -74,7 +75,7 @@ from visla_edu.data._load import input_files, load
 from visla_edu.data._plausible import calibration_problems, dataset_problems, magnitude
 from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir, ground_truth_files
 from visla_edu.data._save import save
-from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, standin_dataset10
+from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, course_standin10, standin_dataset10
 from visla_edu.data._summary import format_summary, summarize
 from visla_edu.dataset import repeated_frames
 
@@ -100,6 +101,7 @@ __all__ = [
     "available",
     "repeated_frames",
     "standin_dataset10",
+    "course_standin10",
     "summarize",
     "format_summary",
     "TIME_TOLERANCE",

@@ -23,9 +23,9 @@ from visla_edu.data._format import (
 )
 from visla_edu.data._npz import load_npz, read_arrays, time_major
 from visla_edu.data._plausible import check_calibration, check_time_stamps, check_velocities
-from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, has_standin_inputs
+from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, has_standin_inputs, resolve_dir
 
-__all__ = ["STANDIN_LABEL", "STANDIN_NUM_LANDMARKS", "standin_dataset10", "load_dataset10"]
+__all__ = ["STANDIN_LABEL", "STANDIN_NUM_LANDMARKS", "standin_dataset10", "course_standin10", "load_dataset10"]
 
 #: Label of the dataset-10 stand-in (shown wherever the dataset is named).
 STANDIN_LABEL = (
@@ -61,7 +61,7 @@ def load_dataset10(directory, how):
     if os.path.lexists(full):
         return load_npz(full)
     if has_standin_inputs(directory):
-        return _standin_as_course_file(directory)
+        return course_standin10(directory, seed=0)
     missing = [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
     raise FileNotFoundError(
         f"dataset 10: the course file 10.npz is not in {directory} (the data directory from {how}), "
@@ -71,20 +71,59 @@ def load_dataset10(directory, how):
     )
 
 
-def _standin_as_course_file(directory):
-    """The stand-in for dataset 10, with the same calibration quirk as the course files.
+def course_standin10(data_dir=None, seed=0, **overrides):
+    """The dataset-10 stand-in as ``load("10")`` builds it, with its seed and simulation changed.
+
+    ``load("10")`` (without ``10.npz``) returns ``course_standin10(seed=0)``. Other seeds and
+    :class:`~visla_edu.simulate.SimulationConfig` fields give harder or easier full-size
+    drives with the course file's calibration quirk, e.g. 5% gross outlier tracks and
+    dataset 3's IMU lag::
+
+        course_standin10(outlier_share=0.05, imu_lag=1)
 
     Dataset 3 comes from the same vehicle. Its file's ``imu_T_cam`` has axes that disagree
     with its IMU (found by :func:`visla_edu.diagnostics.check_extrinsics`), and the real
     ``10.npz`` carries the same calibration. So the stand-in's cameras are simulated with the
     corrected extrinsic (the physical rig), and the dataset reports the file's uncorrected
     one, exactly as a user holding the real ``10.npz`` would see it.
+
+    Parameters
+    ----------
+    data_dir : str or os.PathLike, optional
+        The folder with ``10_imu_only.npz`` and ``03.npz`` (see :func:`visla_edu.data.data_dir`).
+    seed : int
+    **overrides
+        :class:`~visla_edu.simulate.SimulationConfig` fields, as in :func:`standin_dataset10`
+        (``imu_T_cam`` is the physical rig's and cannot be overridden here).
+
+    Returns
+    -------
+    Dataset
+        As :func:`standin_dataset10`; ``extra["simulated_imu_T_cam"]`` is the extrinsic the
+        tracks were simulated with.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``10_imu_only.npz`` or ``03.npz`` is not in the data directory.
+    ValueError
+        A file is unreadable or wrong, or an override is unknown or out of range.
     """
     from visla_edu import diagnostics  # lazy: only the stand-in needs it
 
+    if "imu_T_cam" in overrides:
+        raise ValueError("course_standin10: imu_T_cam is the physical rig's (dataset 3's corrected extrinsic); "
+                         "call standin_dataset10 to simulate with another one")
+    directory, how = resolve_dir(data_dir)
+    missing = [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"course_standin10: {' and '.join(missing)} not in {directory} (the data directory from {how}); "
+            f"the stand-in needs {' and '.join(STANDIN_INPUTS)}. Set {ENV_VAR} to the folder with the course files.")
     calibration = load_npz(directory / "03.npz")
     physical_imu_T_cam, _ = diagnostics.resolve_extrinsics(calibration, "auto")
-    dataset = standin_dataset10(directory / "10_imu_only.npz", directory / "03.npz", imu_T_cam=physical_imu_T_cam)
+    dataset = standin_dataset10(directory / "10_imu_only.npz", directory / "03.npz", seed=seed,
+                                imu_T_cam=physical_imu_T_cam, **overrides)
     dataset.imu_T_cam = calibration.imu_T_cam.copy()
     dataset.extra["simulated_imu_T_cam"] = physical_imu_T_cam
     return dataset
