@@ -19,6 +19,7 @@ __all__ = [
     "resolve_dir",
     "available",
     "has_standin_inputs",
+    "missing_standin_inputs",
     "identify",
     "ground_truth_files",
 ]
@@ -133,9 +134,14 @@ def available(data_dir=None):
     return names + ["sim"]
 
 
+def missing_standin_inputs(directory):
+    """The :data:`STANDIN_INPUTS` that are not files in ``directory`` (a pathlib.Path), in order."""
+    return [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
+
+
 def has_standin_inputs(directory):
     """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path)."""
-    return all((directory / f).is_file() for f in STANDIN_INPUTS)
+    return not missing_standin_inputs(directory)
 
 
 def identify(path, sha, stored_name=None, stored_label=None):

@@ -23,7 +23,7 @@ from visla_edu.data._format import (
 )
 from visla_edu.data._npz import load_npz, read_arrays, time_major
 from visla_edu.data._plausible import check_calibration, check_time_stamps, check_velocities
-from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, has_standin_inputs, resolve_dir
+from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, missing_standin_inputs, resolve_dir
 
 __all__ = ["STANDIN_LABEL", "STANDIN_NUM_LANDMARKS", "standin_dataset10", "course_standin10", "load_dataset10"]
 
@@ -60,9 +60,9 @@ def load_dataset10(directory, how):
     full = directory / "10.npz"
     if os.path.lexists(full):
         return load_npz(full)
-    if has_standin_inputs(directory):
+    missing = missing_standin_inputs(directory)
+    if not missing:
         return course_standin10(directory, seed=0)
-    missing = [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
     raise FileNotFoundError(
         f"dataset 10: the course file 10.npz is not in {directory} (the data directory from {how}), "
         f"and the stand-in (simulated stereo tracks on dataset 10's real IMU drive) needs "
@@ -115,7 +115,7 @@ def course_standin10(data_dir=None, seed=0, **overrides):
         raise ValueError("course_standin10: imu_T_cam is the physical rig's (dataset 3's corrected extrinsic); "
                          "call standin_dataset10 to simulate with another one")
     directory, how = resolve_dir(data_dir)
-    missing = [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
+    missing = missing_standin_inputs(directory)
     if missing:
         raise FileNotFoundError(
             f"course_standin10: {' and '.join(missing)} not in {directory} (the data directory from {how}); "
