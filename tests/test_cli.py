@@ -52,6 +52,14 @@ def test_bad_blas_threads_names_the_option(value, capsys):
     assert "--blas-threads" in err and "positive integer or 'none'" in err
 
 
+@pytest.mark.parametrize("option", ["--out", "--plot", "--trajectory-out", "--ground-truth", "--data-dir"])
+def test_an_empty_path_is_refused_not_ignored(option, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["run", "sim-tiny", "--quiet", option, ""])
+    err = capsys.readouterr().err
+    assert f"argument {option}: empty path" in err and len(err.strip().splitlines()) == 1
+
+
 def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert cli.main(["info", "03", "--data-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -133,6 +141,22 @@ def test_ground_truth_and_trajectory_errors_come_before_the_run(real_like_drive,
     assert cli.main(["run", str(path), "--quiet", *extra]) == 2
     captured = capsys.readouterr()
     assert re.search(message, captured.err) and "mode slam" not in captured.out
+
+
+def test_a_registered_ground_truth_beside_a_renamed_drive_is_never_overwritten(real_like_drive, tmp_path, capsys):
+    """0020 copied as drive20.npz still reads kitti_odometry_06_poses.txt (it is known by its content)."""
+    import shutil
+
+    from visla_edu import data
+
+    path, poses, _, _ = real_like_drive
+    drive = shutil.copy(path, tmp_path / "drive20.npz")
+    truth = tmp_path / "kitti_odometry_06_poses.txt"
+    shutil.copy(poses, truth)
+    before = truth.read_bytes()
+    assert truth in data.input_files(str(drive))
+    assert cli.main(["run", str(drive), "--mode", "deadreckon", "--quiet", "--trajectory-out", str(truth)]) == 2
+    assert "is the input file" in capsys.readouterr().err and truth.read_bytes() == before
 
 
 @pytest.mark.data

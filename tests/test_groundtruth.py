@@ -111,6 +111,25 @@ def test_more_poses_than_frames_is_an_error(tmp_path, tiny):
         data.load_ground_truth(tiny, tmp_path / "long.txt")
 
 
+@pytest.mark.parametrize("rows", [1, 2])
+def test_too_few_poses_for_an_ate_is_an_error(tmp_path, tiny, rows):
+    np.savetxt(tmp_path / "short.txt", _kitti_rows(rows))
+    with pytest.raises(ValueError, match=rf"short.txt: {rows} pose\(s\); an ATE .* needs at least 3"):
+        data.load_ground_truth(tiny, tmp_path / "short.txt")
+
+
+@pytest.mark.parametrize("tolerance", [float("nan"), -1.0, float("inf")])
+def test_a_times_tolerance_that_checks_nothing_is_refused(tmp_path, tiny, tolerance):
+    poses, times = _write_kitti_truth(tmp_path, tiny)
+    with pytest.raises(ValueError, match="tolerance must be a finite number of seconds >= 0"):
+        data.load_ground_truth(tiny, poses, times, tolerance=tolerance)
+
+
+def test_check_times_with_more_times_than_frames_names_both_counts():
+    with pytest.raises(ValueError, match=r"x.txt: 70 times but the dataset has only 60 frames"):
+        data.check_times(np.zeros(70), np.arange(60) * 0.1, "x.txt")
+
+
 def test_times_are_checked_against_the_time_stamps(tmp_path, tiny):
     poses, times = _write_kitti_truth(tmp_path, tiny)
     relative = np.loadtxt(times)

@@ -70,6 +70,48 @@ def test_ate_rejects_mismatched_shapes():
         metrics.ate(np.zeros((5, 3, 4)), np.zeros((5, 3, 4)))
 
 
+def _straight_drive(T=8):
+    poses = np.repeat(np.eye(4)[None], T, axis=0)
+    poses[:, 0, 3] = np.arange(T)
+    return poses
+
+
+@pytest.mark.parametrize("metric", [lambda e, g: metrics.ate(e, g), lambda e, g: metrics.ate(e, g, align=False),
+                                    lambda e, g: metrics.rpe(e, g, 2), metrics.pose_errors, metrics.evaluate])
+def test_metrics_refuse_a_non_finite_or_non_rigid_pose_and_name_its_frame(metric):
+    gt = _straight_drive()
+    est = gt.copy()
+    est[5, 1, 1] = np.nan
+    with pytest.raises(ValueError, match="the estimate's pose of frame 5 is not finite"):
+        metric(est, gt)
+    est = gt.copy()
+    est[3, :3, :3] *= 2.0  # a scaled rotation
+    with pytest.raises(ValueError, match="the estimate's pose of frame 3 is not a rigid transform"):
+        metric(est, gt)
+    bad_gt = gt.copy()
+    bad_gt[4, 3, 0] = 1.0
+    with pytest.raises(ValueError, match="the ground truth's pose of frame 4 is not a rigid transform"):
+        metric(gt, bad_gt)
+
+
+def test_metrics_refuse_empty_trajectories():
+    with pytest.raises(ValueError, match=r"ate: the trajectories are empty \(T = 0\)"):
+        metrics.ate(np.zeros((0, 4, 4)), np.zeros((0, 4, 4)))
+
+
+def test_rpe_delta_must_be_a_whole_number_of_frames():
+    with pytest.raises(ValueError, match="rpe: delta must be a whole number of frames, got 2.5"):
+        metrics.rpe(_straight_drive(), _straight_drive(), delta=2.5)
+
+
+def test_nees_refuses_errors_and_covariances_that_do_not_match():
+    with pytest.raises(ValueError, match=r"nees: errors must have shape \(T, n\) and covariances \(T, n, n\), "
+                                         r"got \(60, 6\) and \(10, 6, 6\)"):
+        metrics.nees(np.zeros((60, 6)), np.repeat(np.eye(6)[None], 10, axis=0))
+    with pytest.raises(ValueError, match=r"got \(60, 6\) and \(60, 3, 3\)"):
+        metrics.nees(np.zeros((60, 6)), np.repeat(np.eye(3)[None], 60, axis=0))
+
+
 # ----------------------------------------------------------------------------- RPE
 
 

@@ -78,7 +78,7 @@ def build_parser():
     debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
     common = _Parser(add_help=False, parents=[debug])
-    common.add_argument("--data-dir", default=None,
+    common.add_argument("--data-dir", default=None, type=_path,
                         help="folder with the course files (default: $VISLA_EDU_DATA, else ./data)")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -93,8 +93,8 @@ def build_parser():
     stepper.add_argument("--open", action="store_true", help="open a browser")
 
     release = sub.add_parser("release", parents=[debug], help="generate the student notebooks from the solutions")
-    release.add_argument("--src", default=None, help="solutions folder (default: the project's solutions/)")
-    release.add_argument("--dst", default=None, help="student folder (default: the project's notebooks/)")
+    release.add_argument("--src", default=None, type=_path, help="solutions folder (default: the project's solutions/)")
+    release.add_argument("--dst", default=None, type=_path, help="student folder (default: the project's notebooks/)")
     release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
     return parser
 
@@ -110,18 +110,18 @@ def _add_run_parser(sub, common):
     run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
                      help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
                           "booleans are true/false, ranges are enforced")
-    run.add_argument("--out", default=None, help="save the result (.npz)")
-    run.add_argument("--plot", default=None, help="save a top-down figure of trajectory and map (.png, .pdf, .svg)")
+    run.add_argument("--out", default=None, type=_path, help="save the result (.npz)")
+    run.add_argument("--plot", default=None, type=_path, help="save a top-down figure of trajectory and map (.png, .pdf, .svg)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
                      help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
                           "'none' leaves numpy's setting alone)")
-    run.add_argument("--ground-truth", default=None, metavar="FILE",
+    run.add_argument("--ground-truth", default=None, type=_path, metavar="FILE",
                      help="KITTI odometry poses (poses/NN.txt: left-camera poses, row i = frame i) to report ATE and "
                           "drift against (automatic for a registered drive such as 0020)")
-    run.add_argument("--ground-truth-times", default=None, metavar="FILE",
+    run.add_argument("--ground-truth-times", default=None, type=_path, metavar="FILE",
                      help="KITTI times.txt of the ground truth, checked against the dataset's time stamps")
-    run.add_argument("--trajectory-out", default=None, metavar="FILE",
+    run.add_argument("--trajectory-out", default=None, type=_path, metavar="FILE",
                      help="write the estimated trajectory: .kitti or .txt (KITTI, 12 numbers per row) or .tum "
                           "(TUM: t x y z qx qy qz qw)")
 
@@ -142,6 +142,14 @@ def _blas_threads(text):
     if text.strip().lower() == "none":
         return None
     return _integer_in(text, 1, 4096, "a positive integer or 'none'")
+
+
+def _path(text):
+    """A file or folder option's value: any non-empty path (an empty one is usually an unset variable)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"empty path {text!r} (an unset shell variable?); give a file or folder "
+                                         "name, or leave the option out")
+    return text
 
 
 def _port(text):

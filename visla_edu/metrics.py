@@ -16,12 +16,36 @@ __all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "nis
            "DRIFT_LENGTHS", "DRIFT_STEP", "path_distances", "kitti_drift", "TrajectoryEvaluation", "evaluate"]
 
 
-def _check_trajectories(est, gt):
+#: Largest ``|R^T R - I|`` entry a pose's rotation may have (filters keep theirs far closer).
+RIGID_TOLERANCE = 1e-4
+
+
+def _check_trajectories(est, gt, caller="metrics"):
+    """Both as float arrays of the same shape (T, 4, 4), T >= 1, every pose finite and rigid."""
     est = np.asarray(est, dtype=float)
     gt = np.asarray(gt, dtype=float)
     if est.shape != gt.shape or est.ndim != 3 or est.shape[1:] != (4, 4):
-        raise ValueError(f"trajectories must both have shape (T, 4, 4), got {est.shape} and {gt.shape}")
+        raise ValueError(f"{caller}: trajectories must both have shape (T, 4, 4), got {est.shape} and {gt.shape}")
+    if not len(est):
+        raise ValueError(f"{caller}: the trajectories are empty (T = 0)")
+    for name, poses in (("estimate", est), ("ground truth", gt)):
+        _check_poses(poses, name, caller)
     return est, gt
+
+
+def _check_poses(poses, name, caller):
+    """Raise a ValueError naming the first frame whose pose is not finite or not a rigid transform."""
+    bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
+    if len(bad):
+        raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not finite")
+    R = poses[:, :3, :3]
+    orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
+    bottom = np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1)
+    bad = np.flatnonzero((orthogonality > RIGID_TOLERANCE) | (bottom > 0) | (np.linalg.det(R) < 0))
+    if len(bad):
+        raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not a rigid transform "
+                         f"(max |R^T R - I| = {orthogonality[bad[0]]:.2g}, last row {poses[bad[0], 3].tolist()}); "
+                         "poses are 4x4 [[R, p], [0, 0, 0, 1]] with R a rotation")
 
 
 def align_se3(p_est, p_gt):
@@ -62,7 +86,7 @@ def ate(est_world_T_imu, gt_world_T_imu, align=True):
     -------
     float
     """
-    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu)
+    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "ate")
     p_est, p_gt = est[:, :3, 3], gt[:, :3, 3]
     if align:
         T = align_se3(p_est, p_gt)
@@ -81,7 +105,9 @@ def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
     (float, float)
         Translation RMS and rotation RMS.
     """
-    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu)
+    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "rpe")
+    if isinstance(delta, bool) or not isinstance(delta, (int, np.integer)):
+        raise ValueError(f"rpe: delta must be a whole number of frames, got {delta!r}")
     if not 0 < delta < len(est):
         raise ValueError(f"rpe: delta must be in [1, {len(est) - 1}], got {delta}")
     rel_est = lie.se3_inv(est[:-delta]) @ est[delta:]
@@ -94,7 +120,7 @@ def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
 
 def pose_errors(est_world_T_imu, gt_world_T_imu):
     """Right-perturbation errors ``e_t = se3_log(inv(mu_t) T_t)``, shape (T, 6)."""
-    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu)
+    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "pose_errors")
     return lie.se3_log(lie.se3_inv(est) @ gt)
 
 
@@ -115,6 +141,9 @@ def nees(errors, covariances, skip_singular=True):
     """
     errors = np.asarray(errors, dtype=float)
     covariances = np.asarray(covariances, dtype=float)
+    if errors.ndim != 2 or covariances.shape != (*errors.shape, errors.shape[1]):
+        raise ValueError(f"nees: errors must have shape (T, n) and covariances (T, n, n), got {errors.shape} and "
+                         f"{covariances.shape}")
     out = np.full(len(errors), np.nan)
     for t, (e, P) in enumerate(zip(errors, covariances)):
         try:
@@ -259,7 +288,7 @@ def kitti_drift(est_world_T_imu, gt_world_T_imu, lengths=DRIFT_LENGTHS, step=DRI
     segments : int
         Number of segments averaged.
     """
-    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu)
+    est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "kitti_drift")
     dist = path_distances(gt)
     first = np.arange(0, len(gt), step)
     t_err, r_err = [], []
@@ -361,10 +390,7 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
     if len(gt) > len(est):
         raise ValueError(f"evaluate: the ground truth has {len(gt)} frames but the estimate only {len(est)}")
     n = len(gt)
-    for name, poses in (("estimate", est[:n]), ("ground truth", gt)):
-        bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
-        if len(bad):
-            raise ValueError(f"evaluate: the {name}'s pose of frame {bad[0]} is not finite")
+    _check_trajectories(est[:n], gt, "evaluate")
     translation, rotation, segments = kitti_drift(est[:n], gt)
     length = float(path_distances(gt)[-1])
     note = "" if segments else f"ground-truth path {length:.0f} m is shorter than {DRIFT_LENGTHS[0]:.0f} m"

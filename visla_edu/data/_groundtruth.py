@@ -36,6 +36,8 @@ __all__ = [
 
 #: Largest difference (s) allowed between a times file and the dataset's relative time stamps.
 TIME_TOLERANCE = 1e-3
+#: Fewest ground-truth poses accepted: the SE(3) alignment of the aligned ATE needs three.
+MIN_POSES = 3
 
 
 def read_kitti_times(path):
@@ -122,7 +124,14 @@ def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE):
     ValueError
         The first row whose time differs by more than ``tolerance``, with both values.
     """
-    relative = np.asarray(time_stamps, dtype=float)[: len(times)] - time_stamps[0]
+    times = np.asarray(times, dtype=float).ravel()
+    time_stamps = np.asarray(time_stamps, dtype=float).ravel()
+    if len(times) > len(time_stamps):
+        raise ValueError(f"{path}: {len(times)} times but the dataset has only {len(time_stamps)} frames "
+                         "(one time per frame: is this the ground truth of another drive?)")
+    if not (np.isfinite(tolerance) and tolerance >= 0):
+        raise ValueError(f"check_times: tolerance must be a finite number of seconds >= 0, got {tolerance!r}")
+    relative = time_stamps[: len(times)] - time_stamps[0]
     error = np.abs(np.asarray(times, dtype=float) - relative)
     bad = np.flatnonzero(error > tolerance)
     if len(bad):
@@ -136,6 +145,9 @@ def _read_checked_poses(dataset, poses_path, times_path, tolerance):
     """KITTI poses of ``dataset``'s first frames, their times checked: ``P`` (n, 4, 4)."""
     cam0_T_cam, inline_times = read_kitti(poses_path)
     n, T = len(cam0_T_cam), dataset.num_frames
+    if n < MIN_POSES:
+        raise ValueError(f"{poses_path}: {n} pose(s); an ATE against ground truth needs at least {MIN_POSES} "
+                         "(the SE(3) alignment is undetermined with fewer)")
     if n > T:
         raise ValueError(f"{poses_path}: {n} poses but dataset {dataset.name!r} has only {T} frames "
                          "(rows are frames: is this the ground truth of another drive?)")

@@ -6,7 +6,8 @@ from pathlib import Path
 from visla_edu._files import file_kind
 from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
-from visla_edu.data._registry import COURSE_NAMES, ENV_VAR, SIMULATED, STANDIN_INPUTS, ground_truth_files, resolve_dir
+from visla_edu.data._registry import (COURSE_NAMES, ENV_VAR, REGISTRY, SIMULATED, STANDIN_INPUTS, ground_truth_files,
+                                      resolve_dir)
 from visla_edu.data._standin import load_dataset10
 
 __all__ = ["load", "input_files"]
@@ -81,9 +82,22 @@ def input_files(name_or_path, data_dir=None):
     else:
         candidates = []
     files = [c for c in candidates if c.exists()]
-    for npz in list(files):  # a registered drive's ground truth is read too
-        files.extend(f for f in ground_truth_files(npz.stem, npz.parent) or () if f is not None)
+    for npz in list(files):
+        files.extend(_registered_ground_truth_beside(npz))
     return files
+
+
+def _registered_ground_truth_beside(npz):
+    """Every registered ground-truth file in the folder of ``npz``.
+
+    A registered drive is recognised by its content, not its name (``drive20.npz`` may be
+    ``0020``), and its ground truth is then read from the same folder: so every registered
+    ground-truth file found there counts as an input, whatever the npz is called.
+    """
+    found = []
+    for name in REGISTRY:
+        found.extend(f for f in ground_truth_files(name, npz.parent) or () if f is not None)
+    return found
 
 
 def _looks_like_path(value):
