@@ -424,6 +424,28 @@ def _schur_added(H_pp, H_pm, H_mm, g_p, g_m):
     return 2 * H_pp - S, b
 
 
+def _landmark_update_in_place(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var):
+    """Correct, but it updates the mean and the covariance it was given in place."""
+    m_new, Sigma_new = A.landmark_update(m.copy(), Sigma.copy(), z, world_T_imu, Ks, cam_T_imu, noise_var)
+    m += m_new - m
+    Sigma -= Sigma - Sigma_new
+    return m, Sigma
+
+
+def _schur_reduce_in_place(H_pp, H_pm, H_mm, g_p, g_m):
+    """Correct, but it subtracts from H_pp and g_p themselves."""
+    S, b = A.schur_reduce(H_pp, H_pm, H_mm, g_p, g_m)
+    H_pp -= H_pp - S
+    g_p -= g_p - b
+    return H_pp, g_p
+
+
+def test_correct_code_that_updates_its_inputs_in_place_passes(capsys):
+    """The check's reference is computed from the inputs after the student's call: they must be copies."""
+    _passes(checks.check_landmark_update, _landmark_update_in_place, capsys)
+    _passes(checks.check_schur_reduce, _schur_reduce_in_place, capsys)
+
+
 def test_smoothing_checks(capsys):
     from visla_edu import smoother
 

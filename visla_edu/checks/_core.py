@@ -166,8 +166,25 @@ class _Student:
                        f"when called as {self.name}({_shown(args)})") from err
 
     def __call__(self, *args, **kwargs):
+        args, kwargs = _private_copy(args), _private_copy(kwargs)
         with _hiding.guard(self.hide, self.name):
             return _materialize(self._run(args, kwargs), self.name)
+
+
+def _private_copy(value):
+    """``value`` with every array (also inside tuples, lists and dicts) copied.
+
+    The student's function gets its own copies: code that updates its inputs in place
+    (``m += K @ r``) is then judged by its result, and the check's reference, computed from the
+    same inputs afterwards, is not changed under it.
+    """
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, (tuple, list)):
+        return type(value)(_private_copy(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _private_copy(v) for k, v in value.items()}
+    return value
 
 
 def _shown(args):
