@@ -3,7 +3,7 @@
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import ekf, lie
+from visla_edu import ekf, kalman, lie
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, points_in_view, random_covariance, random_pose,
                                       rotation_transposed, stereo_camera, wrong_inverses)
@@ -71,7 +71,8 @@ def check_landmark_update(landmark_update, hidden=False):
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam
-    call = student(landmark_update, name, hide=[ekf.landmark_update, ekf.joint_update, ekf.cholesky_update])
+    call = student(landmark_update, name, hide=[ekf.landmark_update, ekf.joint_update, ekf.cholesky_update,
+                                                                 kalman.update])
     noise_var = 1.0 if hidden else 4.0
     for trial in range(6 if hidden else 4):
         T = random_pose(generator)
@@ -124,7 +125,8 @@ def check_pose_update(pose_update, hidden=False):
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam
-    call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update])
+    call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update,
+                                                         kalman.update])
     for trial in range(5 if hidden else 3):
         k = 1 if hidden and trial == 0 else 8
         T_true = random_pose(generator)

@@ -35,8 +35,13 @@ class LibraryFunctionHidden(RuntimeError):
 
 
 def label(fn):
-    """Short dotted name of a library function: ``lie.hat``, ``camera.StereoCamera.predict``."""
-    parts = [p for p in fn.__module__.split(".")[1:] if not p.startswith("_")]
+    """Short dotted name of a function: ``lie.hat``, ``camera.StereoCamera.predict``, ``scipy.linalg.expm``.
+
+    visla_edu's own functions drop the package name; others (scipy's) keep it. Private module
+    names are left out.
+    """
+    package, *rest = fn.__module__.split(".")
+    parts = ([] if package == "visla_edu" else [package]) + [p for p in rest if not p.startswith("_")]
     return ".".join(parts + [fn.__qualname__])
 
 
@@ -49,7 +54,7 @@ def hidden_message(exercise, fn):
         f"write your own {exercise}: {name} is hidden here",
         f"write your own {exercise}: the library's version is hidden here",
     ) if len(line) <= MAX_FIRST_LINE)
-    return (f"{first}\nThe check hides visla_edu's {name} while it runs your {exercise}, so that it "
+    return (f"{first}\nThe check hides {name} while it runs your {exercise}, so that it "
             "grades your code, not the library's. Use numpy/scipy and the functions the exercise "
             "text allows.")
 

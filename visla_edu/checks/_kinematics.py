@@ -102,6 +102,13 @@ def _check_tiny_rotation(name, R, w):
         raise _tiny_angle_failure(name, t, error)
 
 
+def _se3_jacobians():
+    """The smoother's SE(3) Jacobians: the left-Jacobian block of one is the V of ``se3_exp``."""
+    from visla_edu.smoother import _se3
+
+    return [_se3.se3_right_jacobian, _se3.se3_right_jacobian_inv]
+
+
 @exercise_check
 def check_so3_exp(so3_exp, hidden=False):
     """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
@@ -153,7 +160,8 @@ def check_se3_exp(se3_exp, hidden=False):
     """
     name = "se3_exp"
     generator = rng(hidden)
-    call = student(se3_exp, name, hide=[lie.se3_exp, lie._theta_minus_sin_over_theta3])
+    call = student(se3_exp, name, hide=[lie.se3_exp, lie._theta_minus_sin_over_theta3,
+                                         *_se3_jacobians()])
     for u in twists(generator, hidden):
         got = as_array(call(u), name, (4, 4))
         ref = lie.se3_exp(u)

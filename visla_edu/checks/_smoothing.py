@@ -6,7 +6,7 @@ Conventions: poses ``world_T_imu``, right perturbation ``T <- T exp(delta^)``, t
 
 import numpy as np
 
-from visla_edu import lie
+from visla_edu import lie, numdiff
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import random_pose, swap_twist
 from visla_edu.smoother import _factors, _se3
@@ -69,7 +69,8 @@ def _motion_variants(T_prev, T_next, step_inv):
 def check_motion_residual(motion_residual, hidden=False):
     """Exercise 08: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``."""
     name = "motion_residual"
-    call = student(motion_residual, name, hide=[_factors.motion_residuals, reference_motion_residual])
+    call = student(motion_residual, name, hide=[_factors.motion_residuals, reference_motion_residual,
+                                                             numdiff.central_jacobian])
     for T_prev, T_next, step_inv in _motion_cases(rng(hidden), hidden):
         out = call(T_prev, T_next, step_inv)
         if not isinstance(out, tuple) or len(out) != 3:
