@@ -259,6 +259,29 @@ def test_a_table_of_the_visible_answers_fails_the_hidden_cases(capsys):
     assert "hat" in _first_line(_failure(checks.check_hat, memorised, hidden=True))  # ...not the hidden ones
 
 
+@pytest.mark.parametrize("check", [checks.check_motion_noise, checks.check_average_nees_bounds,
+                                   checks.check_dense_covariance_bytes], ids=lambda c: c.__name__)
+def test_checks_with_fixed_cases_draw_more_hidden_cases_from_the_teachers_seed(check, monkeypatch, capsys):
+    """A table of every case the source shows (visible and default hidden) fails under a teacher's seed."""
+    from visla_edu.checks import _core
+
+    answer, table = ANSWERS[check], {}
+
+    def recording(*args):
+        table[args] = answer(*args)
+        return table[args]
+
+    monkeypatch.delenv(_core.HIDDEN_SEED_VARIABLE, raising=False)
+    check(recording)
+    check(recording, hidden=True)
+    memorised = lambda *args: table.get(args, answer(*args) * 2)  # noqa: E731
+    check(memorised, hidden=True)  # the table holds every case of the default seed...
+    monkeypatch.setenv(_core.HIDDEN_SEED_VARIABLE, "2718")
+    with pytest.raises(AssertionError):  # ...not the teacher's
+        check(memorised, hidden=True)
+    check(answer, hidden=True)
+
+
 def test_hidden_seed_comes_from_the_environment(monkeypatch, capsys):
     from visla_edu.checks import _core
 

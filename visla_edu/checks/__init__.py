@@ -61,7 +61,8 @@ from visla_edu.checks._consistency import check_average_nees_bounds, check_motio
 from visla_edu.checks._core import student_or_reference  # noqa: E402
 from visla_edu.checks._data import check_observations_at, check_track_spans  # noqa: E402
 from visla_edu.checks._filters import (check_dense_covariance_bytes, check_landmark_update,  # noqa: E402
-                                       check_marginalize, check_pose_update, check_slam_jacobian)
+                                       check_marginalize, check_pose_update, check_slam_jacobian,
+                                       reference_dense_covariance_bytes)
 from visla_edu.checks._hiding import LibraryFunctionHidden  # noqa: E402
 from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
                                          check_pose_jacobian, check_projection_jacobian,
@@ -70,11 +71,14 @@ from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, ch
                                           check_pose_transition, check_se3_exp, check_so3_exp)
 from visla_edu.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
 from visla_edu.checks._smoothing import (check_gauss_newton_step, check_motion_residual,  # noqa: E402
-                                         check_schur_reduce)
+                                         check_schur_reduce, reference_gauss_newton_step, reference_schur_reduce)
 
 __all__ = [
     "student_or_reference",
     "reference_numerical_jacobian",
+    "reference_dense_covariance_bytes",
+    "reference_schur_reduce",
+    "reference_gauss_newton_step",
     "LibraryFunctionHidden",
     # 00 know your data
     "check_observations_at",

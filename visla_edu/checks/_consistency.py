@@ -15,8 +15,11 @@ def check_motion_noise(motion_noise, hidden=False):
     """Exercise 07: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``."""
     name = "motion_noise"
     cases = [(0.1, 0.5, 0.02), (0.104, 1.0, 0.05), (0.5, 0.2, 0.3)]
-    if hidden:
-        cases = [(0.01, 2.0, 0.001), (1.0, 0.0, 0.1), (0.25, 0.3, 0.0), (0.1, 1e-3, 1e-4)]
+    if hidden:  # edge cases, then cases drawn from the teacher's seed
+        generator = rng(hidden)
+        cases = [(0.01, 2.0, 0.001), (1.0, 0.0, 0.1), (0.25, 0.3, 0.0), (0.1, 1e-3, 1e-4)] + [
+            (float(generator.uniform(0.01, 1.0)), float(generator.uniform(0.0, 2.0)), float(generator.uniform(0.0, 0.3)))
+            for _ in range(3)]
     call = student(motion_noise, name, hide=[motion.motion_noise])
     for tau, sv, sw in cases:
         got = as_array(call(tau, sv, sw), name, (6, 6))
@@ -59,8 +62,11 @@ def check_average_nees_bounds(average_nees_bounds, hidden=False):
     """Exercise 07: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES."""
     name = "average_nees_bounds"
     cases = [(6, 1, 0.95), (6, 50, 0.95), (4, 200, 0.99), (3, 10, 0.9)]
-    if hidden:
-        cases = [(6, 1000, 0.95), (1, 3, 0.5), (2, 25, 0.999)]
+    if hidden:  # edge cases, then cases drawn from the teacher's seed
+        generator = rng(hidden)
+        cases = [(6, 1000, 0.95), (1, 3, 0.5), (2, 25, 0.999)] + [
+            (int(generator.integers(1, 7)), int(generator.integers(1, 500)), float(generator.uniform(0.5, 0.999)))
+            for _ in range(3)]
     call = student(average_nees_bounds, name, hide=[metrics.average_nees_bounds, metrics.chi2_bounds])
     for dof, n, p in cases:
         got = as_array(call(dof, n, p), name, (2,), "bounds")
