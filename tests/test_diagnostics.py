@@ -216,3 +216,14 @@ def test_dataset_0022_needs_no_correction(require_data):
     check = diagnostics.check_extrinsics(ds)
     assert check.recommended == "none", check.report()
     assert check.rotation_slope["none"] > 0.5 and check.translation_slope["none"] > 0.5
+
+
+def test_an_inverted_extrinsic_is_named_in_a_warning():
+    """The odometry contradicts every axis correction of cam_T_imu stored as imu_T_cam: the run says so."""
+    ds = simulate.simulate_drive("small", seed=0)
+    assert diagnostics.resolve_extrinsics(ds, "auto")[1] == ""
+    inverted = dataclasses.replace(ds, imu_T_cam=np.linalg.inv(ds.imu_T_cam), extra={})
+    imu_T_cam, evidence = diagnostics.resolve_extrinsics(inverted, "auto")
+    assert evidence.startswith("warning: the visual odometry contradicts the file's imu_T_cam")
+    assert "stored inverted (cam_T_imu)" in evidence
+    np.testing.assert_array_equal(imu_T_cam, inverted.imu_T_cam)

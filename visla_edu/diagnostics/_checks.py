@@ -10,7 +10,7 @@ import numpy as np
 from visla_edu.diagnostics._calibration import calibrate
 from visla_edu.diagnostics._motion import gyro_bias
 from visla_edu.diagnostics._noise import imu_noise
-from visla_edu.diagnostics._vo import CORRECTIONS, LAGS, time_alignment
+from visla_edu.diagnostics._vo import CORRECTIONS, DISAGREES, LAGS, time_alignment
 
 __all__ = ["resolve_extrinsics", "check_time_alignment", "imu_noise_and_bias", "diagnose"]
 
@@ -32,7 +32,7 @@ def resolve_extrinsics(dataset, correction="auto"):
     if correction == "auto":
         calibration = calibrate(dataset)
         if calibration.extrinsic_correction == "none":
-            return dataset.imu_T_cam, ""
+            return dataset.imu_T_cam, _unexplained_extrinsic_warning(calibration)
         return calibration.imu_T_cam, (
             f"applied extrinsic correction {calibration.extrinsic_correction!r} (extrinsic_correction='auto'): "
             f"{calibration.reasons['extrinsic_correction']}")
@@ -41,6 +41,23 @@ def resolve_extrinsics(dataset, correction="auto"):
     if correction == "none":
         return dataset.imu_T_cam, ""
     return CORRECTIONS[correction] @ dataset.imu_T_cam, f"applied extrinsic correction {correction!r} as requested"
+
+
+def _unexplained_extrinsic_warning(calibration):
+    """A warning when the odometry contradicts the file's ``imu_T_cam`` and every axis correction of it.
+
+    That happens for an inverted extrinsic (``cam_T_imu`` stored as ``imu_T_cam``) or one in
+    another convention, never on the course files (one candidate agrees on each), and the
+    filters then produce garbage: the run goes on, but says so.
+    """
+    verdicts = calibration.vo.extrinsic_verdict if calibration.vo is not None else {}
+    if not verdicts or any(v != DISAGREES for v in verdicts.values()):
+        return ""
+    slope = calibration.vo.rotation_slope.get("none")
+    slope_text = f" (rotation slope {slope:.2f}, 1 expected)" if slope is not None else ""
+    return (f"warning: the visual odometry contradicts the file's imu_T_cam{slope_text} and every axis correction "
+            "of it: is it stored inverted (cam_T_imu), or in another convention? Expect a poor estimate; check the "
+            "extrinsic (visla-edu info shows the evidence)")
 
 
 def check_time_alignment(dataset, imu_T_cam=None, lags=LAGS):
