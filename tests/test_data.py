@@ -636,3 +636,12 @@ def test_calibration_at_the_edges_of_the_plausible_ranges_loads(tmp_path, key, v
         return
     arrays["imu_T_cam"][:3, 3] = [value, 0.0, 0.0]
     data.load(write(tmp_path, arrays))
+
+
+def test_swapped_left_and_right_columns_are_named(tmp_path):
+    arrays = course_dict()
+    swapped = dict(arrays, features=arrays["features"][[2, 3, 0, 1]].copy())
+    with pytest.raises(ValueError, match=r"key 'features': 100.0% of the .* observations have uL - uR <= 0 .* are the "
+                                         r"left and right columns swapped\? .* features\[\[2, 3, 0, 1\]\]"):
+        data.load(write(tmp_path, swapped))
+    assert data.load(write(tmp_path, arrays, "fine.npz")).num_observations > 0

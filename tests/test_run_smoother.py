@@ -59,3 +59,34 @@ def test_cli_smooth_prints_the_ekf_beside_the_smoother(capsys):
     assert "mode smooth" in text and "smooth estimate" in text and "slam (EKF) it started from" in text
     assert cli.main(["run", "sim-tiny", "--mode", "window", "--quiet"]) == 0
     assert "per frame: median" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("mode", ["slam", "vio", "mapping", "smooth", "window"])
+def test_a_drive_without_observations_is_refused_by_every_mode_that_needs_them(mode):
+    import dataclasses
+
+    ds = simulate.simulate_drive("tiny", seed=0)
+    empty = dataclasses.replace(ds, obs_ids=ds.obs_ids[:0], obs_z=ds.obs_z[:0],
+                                frame_ptr=np.zeros_like(ds.frame_ptr), extra={})
+    runner = run.run_smoother if mode in ("smooth", "window") else run.run_filter
+    with pytest.raises(ValueError, match=rf"mode {mode} needs stereo observations and 'sim-tiny' has none"):
+        runner(empty, mode, progress=False)
+    assert run.run_filter(empty, "deadreckon", progress=False).world_T_imu.shape == (60, 4, 4)
+
+
+def test_a_smoother_needs_two_frames():
+    import dataclasses
+
+    ds = simulate.simulate_drive("tiny", seed=0)
+    one = dataclasses.replace(ds, time_stamps=ds.time_stamps[:1], linear_velocity=ds.linear_velocity[:1],
+                              angular_velocity=ds.angular_velocity[:1], frame_ptr=ds.frame_ptr[:2],
+                              obs_ids=ds.obs_ids[:ds.frame_ptr[1]], obs_z=ds.obs_z[:ds.frame_ptr[1]],
+                              ground_truth=None, extra={})
+    with pytest.raises(ValueError, match="mode smooth needs at least 2 frames, 'sim-tiny' has 1"):
+        run.run_smoother(one, "smooth", progress=False)
+
+
+def test_a_landmark_stride_is_refused_by_the_smoothers_not_ignored():
+    ds = simulate.simulate_drive("tiny", seed=0)
+    with pytest.raises(ValueError, match="landmark_stride=10 thins the map of the filters .* mode window uses every"):
+        run.run_smoother(ds, "window", FilterConfig(landmark_stride=10), progress=False)

@@ -78,6 +78,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     problems = data.calibration_problems(dataset)
     if problems:
         raise ValueError(f"cannot run the filter: {problems[0]}")
+    _check_enough_data(dataset, mode)
     config = resolve_config(dataset, config or FilterConfig())
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
@@ -86,6 +87,18 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     if mode == SLAM:
         return filters.JointSlam(dataset, camera, config, dense=dense)
     return _MODE_CLASSES[mode](dataset, camera, config)
+
+
+def _check_enough_data(dataset, mode):
+    """Refuse a mode the dataset cannot feed: every mode but dead reckoning needs observations,
+    the smoothers at least two frames (one motion factor)."""
+    if mode == DEADRECKON:
+        return
+    if dataset.num_observations == 0:
+        raise ValueError(f"mode {mode} needs stereo observations and {dataset.name!r} has none (every feature is -1, "
+                         "not observed); use mode deadreckon")
+    if mode in SMOOTHER_MODES and dataset.num_frames < 2:
+        raise ValueError(f"mode {mode} needs at least 2 frames, {dataset.name!r} has {dataset.num_frames}")
 
 
 def resolve_config(dataset, config):
@@ -289,6 +302,10 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
 
     if mode not in SMOOTHER_MODES:
         raise ValueError(f"mode must be one of {SMOOTHER_MODES}, got {mode!r}")
+    _check_enough_data(dataset, mode)
+    if config is not None and config.landmark_stride != 1:
+        raise ValueError(f"landmark_stride={config.landmark_stride} thins the map of the filters (mapping, vio, slam); "
+                         f"mode {mode} uses every landmark: leave landmark_stride at 1")
     config = resolve_config(dataset, config or FilterConfig())
     start = None
     if mode == SMOOTH:

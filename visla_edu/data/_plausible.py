@@ -75,6 +75,9 @@ _MARKER_MIN_COUNT, _MARKER_SHARE = 10, 0.01
 #: The principal point must lie in the box of the observed left pixels, widened by this
 #: share of its size on every side, once a file has at least this many observations.
 _BOX_MARGIN, _BOX_MIN_OBSERVATIONS = 0.25, 50
+#: With at least this many observations, more than this share with ``uL - uR <= 0`` means the
+#: left and right columns are swapped (dataset 03 has about 1%: the quirk).
+_SWAP_MIN_OBSERVATIONS, _SWAP_SHARE = 20, 0.5
 #: A typical frame step (10 Hz), to choose between units that all give a plausible step.
 _TYPICAL_STEP = 0.1
 #: Units time stamps are sometimes stored in: factor to seconds, name, the fix.
@@ -185,6 +188,7 @@ def check_observations(K, obs_z, path):
     if len(obs_z) == 0:
         return
     _check_marker(obs_z, path)
+    _check_disparity_sign(obs_z, path)
     f = np.array([K[0, 0], K[1, 1]])
     c = np.array([K[0, 2], K[1, 2]])
     pixels = np.concatenate([obs_z[:, 0:2], obs_z[:, 2:4]])
@@ -225,6 +229,20 @@ def _check_marker(obs_z, path):
                 f"{path}: key 'features': {counts.max()} observations are [x, x, x, x] with x = "
                 f"{values[counts.argmax()]:.6g}, which looks like a marker for 'not observed' (a real stereo "
                 "observation has u != v); the course marks 'not observed' with -1 in all four")
+
+
+def _check_disparity_sign(obs_z, path):
+    """Refuse features whose disparity ``uL - uR`` is mostly <= 0: the left and right columns are swapped.
+
+    A few such observations are a known quirk (about 1% in dataset 03: no depth); most of them
+    mean the file stores ``[uR, vR, uL, vL]``.
+    """
+    nonpositive = np.count_nonzero(obs_z[:, 0] - obs_z[:, 2] <= 0)
+    if len(obs_z) >= _SWAP_MIN_OBSERVATIONS and nonpositive > _SWAP_SHARE * len(obs_z):
+        raise ValueError(
+            f"{path}: key 'features': {100 * nonpositive / len(obs_z):.1f}% of the {len(obs_z)} observations have "
+            "uL - uR <= 0 (no depth; a few are a known quirk): are the left and right columns swapped? The course "
+            "stores [uL, vL, uR, vR]; fix with features[[2, 3, 0, 1]]")
 
 
 def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
