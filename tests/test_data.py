@@ -645,3 +645,16 @@ def test_swapped_left_and_right_columns_are_named(tmp_path):
                                          r"left and right columns swapped\? .* features\[\[2, 3, 0, 1\]\]"):
         data.load(write(tmp_path, swapped))
     assert data.load(write(tmp_path, arrays, "fine.npz")).num_observations > 0
+
+
+def test_nan_as_the_missing_marker_and_rounded_extrinsics_get_a_fix(tmp_path):
+    arrays = course_dict()
+    features = arrays["features"].copy()
+    features[features == -1] = np.nan
+    with pytest.raises(ValueError, match=r"key 'features' has a non-finite value nan .* marks 'not observed' with -1 "
+                                         r"in all four: features = np.nan_to_num\(features, nan=-1\)"):
+        data.load(write(tmp_path, dict(arrays, features=features), "nan.npz"))
+    rounded = dict(arrays, imu_T_cam=np.round(arrays["imu_T_cam"], 4))
+    with pytest.raises(ValueError, match=r"key 'imu_T_cam' is not a rigid transform: .* rounded entries\? store full "
+                                         r"precision, or re-orthonormalise R"):
+        data.load(write(tmp_path, rounded, "rounded.npz"))

@@ -227,3 +227,13 @@ def test_an_inverted_extrinsic_is_named_in_a_warning():
     assert evidence.startswith("warning: the visual odometry contradicts the file's imu_T_cam")
     assert "stored inverted (cam_T_imu)" in evidence
     np.testing.assert_array_equal(imu_T_cam, inverted.imu_T_cam)
+
+
+def test_a_divergence_with_angular_velocity_in_degrees_says_so():
+    from visla_edu import workload
+
+    ds = simulate.simulate_drive("tiny", seed=0)
+    assert "deg/s" not in workload.divergence_hint(ds, FilterConfig(), frame=5)
+    degrees = dataclasses.replace(ds, angular_velocity=np.degrees(ds.angular_velocity), extra={})
+    hint = workload.divergence_hint(degrees, FilterConfig(), frame=5)
+    assert "beyond what a car does (below 2 rad/s): is it in deg/s? Convert with np.radians(angular_velocity)" in hint

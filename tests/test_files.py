@@ -67,3 +67,17 @@ def test_input_file_kinds(tmp_path):
 
 def test_format_bytes():
     assert [_files.format_bytes(n) for n in (512, 3 * 2**20 + 2**19, 7 * 2**40)] == ["512 B", "3.5 MiB", "7.0 TiB"]
+
+
+def test_a_folder_that_refuses_new_files_is_found_before_any_work(tmp_path, monkeypatch):
+    """Permissions do not tell (root, /proc, read-only mounts): a probe file is created and removed."""
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise OSError(30, "Read-only file system")
+
+    assert _files.check_output_path(tmp_path / "out.npz", (".npz",), "--out") == tmp_path / "out.npz"
+    assert os.listdir(tmp_path) == []  # the probe leaves nothing behind
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", refuse)
+    with pytest.raises(PermissionError, match=r"--out .*out.npz: cannot create a file in .* \(Read-only file system\)"):
+        _files.check_output_path(tmp_path / "out.npz", (".npz",), "--out")

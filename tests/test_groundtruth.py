@@ -88,6 +88,7 @@ def _kitti_rows(n=3):
     ("1 0 0 0 0 1 0 0 0 0 1.01 0\n", r"line 1: rotation is not orthonormal .* 0.0201 > 0.001"),
     ("1 0 0 0 0 1 0 0 0 0 -1 0\n", r"line 1: rotation has determinant -1"),
     ("0.2 1 0 0 0 0 1 0 0 0 0 1 0\n0.1 1 0 0 0 0 1 0 0 0 0 1 0\n", r"line 2: time 0.1 does not increase"),
+    ("1,0,0,0,0,1,0,0,0,0,1,0\n", r"line 1 has 1 numbers, expected 12 or 13 .*; separated by commas\? use spaces"),
 ])
 def test_bad_pose_files_name_file_line_and_value(tmp_path, tiny, text, pattern):
     path = tmp_path / "bad.txt"

@@ -25,6 +25,7 @@ import contextlib
 import os
 import secrets
 import stat
+import tempfile
 from pathlib import Path
 
 __all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind", "format_bytes"]
@@ -251,4 +252,18 @@ def _writable_folder(given, option, shown):
     if not os.access(folder, os.W_OK | os.X_OK):
         raise PermissionError(f"{option} {shown}: the folder {folder} is not writable by this user; "
                               "choose another folder")
+    _probe_write(folder, option, shown)
     return folder
+
+
+def _probe_write(folder, option, shown):
+    """Create and remove a small file in ``folder``: permissions alone do not tell (root, /proc, read-only mounts).
+
+    Failing here, before any work, means no output of the command is written at all.
+    """
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".visla-edu-probe-"):
+            pass
+    except OSError as err:
+        raise PermissionError(f"{option} {shown}: cannot create a file in {folder} ({err.strerror or err}); "
+                              "choose another folder") from None

@@ -111,7 +111,8 @@ def read_table(path, allowed_columns, what):
             expected = f"{columns} like line {first_line}"
             if line_no == first_line:
                 expected = " or ".join(map(str, allowed_columns))
-            raise ValueError(f"{path}: line {line_no} has {len(tokens)} numbers, expected {expected} ({what})")
+            hint = "; separated by commas? use spaces" if "," in " ".join(tokens) else ""
+            raise ValueError(f"{path}: line {line_no} has {len(tokens)} numbers, expected {expected} ({what}){hint}")
     return _parse_numbers(path, numbered), np.array([n for n, _ in numbered])
 
 

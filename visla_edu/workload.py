@@ -178,10 +178,27 @@ def divergence_hint(dataset, config, frame=None):
         speed, rate = data.magnitude(twist[:3]), data.magnitude(twist[3:])
         where = (f"the step into frame {frame} lasts {dataset.time_steps[frame - 1]:.4g} s at "
                  f"{speed:.4g} m/s and {rate:.4g} rad/s; ")
+    units = _angular_rate_hint(dataset)
+    if units:
+        return where + units
     return (f"{where}the data look plausible, so check the settings (sigma_pixel {config.sigma_pixel:g} px, "
             f"velocity noise {_setting_text(config.sigma_linear_velocity)} m/s and "
             f"{_setting_text(config.sigma_angular_velocity)} rad/s) "
             "and the calibration (visla-edu info shows the diagnostics)")
+
+
+#: A road vehicle's angular rate stays below this (rad/s) nearly all the time (1 rad/s = 57 deg/s).
+CAR_ANGULAR_RATE = 2.0
+
+
+def _angular_rate_hint(dataset):
+    """A hint about deg/s when the angular velocity's 99th percentile is beyond what a car does, else ''."""
+    rates = data.magnitude(np.asarray(dataset.angular_velocity, dtype=float))
+    typical = float(np.percentile(rates, 99)) if rates.size else 0.0
+    if typical <= CAR_ANGULAR_RATE:
+        return ""
+    return (f"the angular velocity reaches {typical:.3g} rad/s in 1% of the frames, beyond what a car does "
+            f"(below {CAR_ANGULAR_RATE:g} rad/s): is it in deg/s? Convert with np.radians(angular_velocity)")
 
 
 def _setting_text(value):

@@ -184,9 +184,12 @@ def _check_finite_block(block, plane, first, path, first_frame=0):
     if bad.any():
         row, frame = (int(i) for i in np.argwhere(bad)[0])
         landmark, frame_index = first + row, first_frame + frame
+        hint = ("; the course marks 'not observed' with -1 in all four: features = np.nan_to_num(features, nan=-1)"
+                if np.isnan(block[row, frame]) else "")
         raise ValueError(
             f"{path}: key 'features' has a non-finite value {block[row, frame]} at index "
             f"({plane}, {landmark}, {frame_index}) ({_PLANES[plane]} of landmark {landmark} at frame {frame_index})"
+            f"{hint}"
         )
 
 

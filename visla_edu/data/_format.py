@@ -233,6 +233,8 @@ def check_rigid(T, key, path):
     if orth > RIGID_TOL:
         raise ValueError(
             f"{path}: key '{key}' is not a rigid transform: max |R^T R - I| = {orth:.3g} > {RIGID_TOL:g}"
+            + ("; rounded entries? store full precision, or re-orthonormalise R (e.g. U @ Vt of its SVD)"
+               if orth < 1e-2 else "")
         )
     det = float(np.linalg.det(R))
     if abs(det - 1) > 10 * RIGID_TOL:

@@ -56,8 +56,8 @@ def _unexplained_extrinsic_warning(calibration):
     slope = calibration.vo.rotation_slope.get("none")
     slope_text = f" (rotation slope {slope:.2f}, 1 expected)" if slope is not None else ""
     return (f"warning: the visual odometry contradicts the file's imu_T_cam{slope_text} and every axis correction "
-            "of it: is it stored inverted (cam_T_imu), or in another convention? Expect a poor estimate; check the "
-            "extrinsic (visla-edu info shows the evidence)")
+            "of it: is it stored inverted (cam_T_imu), or in another convention (or the angular velocity in deg/s)? "
+            "Expect a poor estimate; check them (visla-edu info shows the evidence)")
 
 
 def check_time_alignment(dataset, imu_T_cam=None, lags=LAGS):
