@@ -658,3 +658,12 @@ def test_nan_as_the_missing_marker_and_rounded_extrinsics_get_a_fix(tmp_path):
     with pytest.raises(ValueError, match=r"key 'imu_T_cam' is not a rigid transform: .* rounded entries\? store full "
                                          r"precision, or re-orthonormalise R"):
         data.load(write(tmp_path, rounded, "rounded.npz"))
+
+
+def test_a_name_that_is_a_file_in_the_current_folder_gets_the_path_suggested(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    write(tmp_path, course_dict(), "mydrive.npz")
+    (tmp_path / "data").mkdir()
+    with pytest.raises(FileNotFoundError, match=r"--data-dir on the command line.* A file mydrive.npz is in the "
+                                                r"current folder: give it as a path, ./mydrive.npz"):
+        data.load("mydrive", tmp_path / "data")

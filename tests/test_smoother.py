@@ -345,6 +345,13 @@ def test_window_smoother_runs_online_and_beats_dead_reckoning(tiny, mode):
     assert metrics.ate(result.online_world_T_imu, truth, align=False) < dead
 
 
+def test_window_costs_are_sums_of_squares_with_the_folded_landmark_priors(tiny):
+    """The priors from held frames carry the squared errors they folded in: no cost is negative."""
+    result = smoother.smooth_window(tiny, config=smoother.SmootherConfig(window_size=8))
+    costs = np.asarray(result.history["cost"])
+    assert len(costs) > tiny.num_frames // 2 and np.all(np.isfinite(costs)) and costs.min() >= 0
+
+
 # --- input checks ---------------------------------------------------------------------------
 
 

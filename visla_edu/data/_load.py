@@ -114,10 +114,12 @@ def _check_name(value):
 
 def _not_found_message(filename, directory, how):
     known = ", ".join(repr(n) for n in (*COURSE_NAMES, *SIMULATED))
+    here = (f" A file {filename} is in the current folder: give it as a path, ./{filename}."
+            if Path(filename).is_file() else "")
     return (
         f"course file {filename} not found in {directory} (the data directory from {how}). "
-        f"Set {ENV_VAR} to the folder with the course files or pass data_dir=...; "
-        f"known names: {known}."
+        f"Set {ENV_VAR} to the folder with the course files or pass data_dir=... (--data-dir on the command "
+        f"line); known names: {known}.{here}"
     )
 
 

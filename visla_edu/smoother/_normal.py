@@ -157,11 +157,11 @@ def evaluate(problem, world_T_imu, landmarks, errors=None):
 
 
 def _landmark_prior_cost(problem, landmarks):
-    """``sum_j m^T Lambda m - 2 m^T eta`` over the active landmarks (up to a constant)."""
-    info, eta = problem.landmark_prior
+    """``sum_j m^T Lambda m - 2 m^T eta + c`` over the active landmarks (a sum of squares, >= 0)."""
+    info, eta, const = problem.landmark_prior
     act = problem.landmark_active
     m = landmarks[act]
-    return float(np.sum(m * (info[act] @ m[:, :, None])[:, :, 0]) - 2 * np.sum(m * eta[act]))
+    return float(np.sum(m * (info[act] @ m[:, :, None])[:, :, 0]) - 2 * np.sum(m * eta[act]) + np.sum(const[act]))
 
 
 def _projection_information(problem, q, wr, w):
@@ -296,7 +296,7 @@ def linearize(problem, world_T_imu, landmarks):
     Hmm = np.moveaxis(_landmark_sum(problem, obs["Hmm"]), -1, 0)
     g_m = _landmark_sum(problem, obs["g_m"]).T
     if problem.landmark_prior is not None:
-        info, eta = problem.landmark_prior
+        info, eta, _ = problem.landmark_prior
         Hmm += info
         g_m += (info @ landmarks[:, :, None])[:, :, 0] - eta
         cost += _landmark_prior_cost(problem, landmarks)

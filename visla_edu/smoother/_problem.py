@@ -76,9 +76,10 @@ class Problem:
     active : ndarray of bool, shape (N,)
     landmark_active : ndarray of bool, shape (L,)
     prior : PosePrior or None
-    landmark_prior : (ndarray, ndarray) or None
-        Quadratic landmark priors ``m^T Lambda m - 2 m^T eta`` per landmark: ``Lambda``
-        (L, 3, 3) and ``eta`` (L, 3) (observations from held poses, folded in).
+    landmark_prior : (ndarray, ndarray, ndarray) or None
+        Quadratic landmark priors ``m^T Lambda m - 2 m^T eta + c`` per landmark: ``Lambda``
+        (L, 3, 3), ``eta`` (L, 3) and ``c`` (L,) (observations from held poses, folded in: the
+        weighted squared errors they had, linearised, so the prior's cost is never negative).
     slot : ndarray of int, shape (N,)
         Row of each observation in the Schur correction rows (-1 at held frames).
     span_lo, span_hi, span_start : ndarray of int, shape (L,)
@@ -155,8 +156,8 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
         ``(motion_from, step_inv, motion_sqrt_information)`` for the steps
         ``motion_from .. last_frame - 1``.
     prior : PosePrior, optional
-    landmark_prior : (ndarray, ndarray), optional
-        ``Lambda`` (M, 3, 3) and ``eta`` (M, 3) indexed by dataset landmark id.
+    landmark_prior : (ndarray, ndarray, ndarray), optional
+        ``Lambda`` (M, 3, 3), ``eta`` (M, 3) and ``c`` (M,) indexed by dataset landmark id.
 
     Returns
     -------
@@ -180,7 +181,7 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
         prior=prior,
     )
     if landmark_prior is not None:
-        problem.landmark_prior = (landmark_prior[0][landmark_ids], landmark_prior[1][landmark_ids])
+        problem.landmark_prior = tuple(part[landmark_ids] for part in landmark_prior)
     _build_structure(problem)
     return problem
 

@@ -75,6 +75,7 @@ class _WindowState:
         self.frames = dataset.observation_frames()
         self.prior_info = np.zeros((M, 3, 3))  # "fix": observations from held poses, folded in
         self.prior_eta = np.zeros((M, 3))
+        self.prior_const = np.zeros(M)
         self.held_count = np.zeros(M, dtype=np.int64)
         self.held_frames = HELD_FRAMES
         self.pose_cov = np.full((T, 6, 6), np.nan)
@@ -138,7 +139,7 @@ class _WindowState:
                              config=config, frames=(min(self.held_from(v0), v0), v0, k),
                              motion=(motion_from, self.step_inv[motion_from:k], self.sqrt_info[motion_from:k]),
                              prior=None if fix or v0 == 1 else self.prior,
-                             landmark_prior=(self.prior_info, self.prior_eta) if fix else None)
+                             landmark_prior=(self.prior_info, self.prior_eta, self.prior_const) if fix else None)
 
     def hold(self, v):
         """Pose ``v`` leaves the window in ``"fix"`` mode: fold its observations into landmark priors.
@@ -161,8 +162,10 @@ class _WindowState:
         s = (r * r).sum(axis=1) / self.config.sigma_pixel**2
         w = robust_loss(s, self.config.loss, self.config.loss_scale)[1] / self.config.sigma_pixel**2
         JtW = np.swapaxes(J, 1, 2) * w[:, None, None]
+        offset = (J @ m0[:, :, None])[:, :, 0] - r  # r + J (m - m0) = J m - offset
         np.add.at(self.prior_info, ids, JtW @ J)
-        np.add.at(self.prior_eta, ids, (JtW @ ((J @ m0[:, :, None])[:, :, 0] - r)[:, :, None])[:, :, 0])
+        np.add.at(self.prior_eta, ids, (JtW @ offset[:, :, None])[:, :, 0])
+        np.add.at(self.prior_const, ids, w * (offset * offset).sum(axis=1))
         np.add.at(self.held_count, ids, 1)
 
 
