@@ -192,6 +192,8 @@ def test_kinematics_checks(capsys):
     _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u[:, [3, 4, 5, 0, 1, 2]]), "twist order")
     _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, lag=1), "u_t")
     _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, scale_tau=False), "time step")
+    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts[0] + np.mean(np.diff(ts)) * np.arange(len(ts)), u),
+           "own tau_t")
     _fails(checks.check_dead_reckon, lambda ts, u: np.array([A.se3_inv(T) for T in A.dead_reckon(ts, u)]),
            "imu_T_world")
     _fails(checks.check_dead_reckon, lambda ts, u: np.moveaxis(A.dead_reckon(ts, u), 0, -1), "shape")
@@ -402,6 +404,7 @@ def test_consistency_checks(capsys):
     _fails(checks.check_motion_noise, lambda tau, sv, sw: np.diag(np.repeat([tau * sv, tau * sw], 3)), "square")
 
     _fails(checks.check_nees, lambda e, P: float(e @ P @ e), "inverse")
+    _fails(checks.check_nees, lambda e, P: e[None] @ np.linalg.solve(P, e)[:, None], "one number, not an array")
     _fails(checks.check_nees, lambda e, P: float(np.sqrt(e @ np.linalg.solve(P, e))), "square root")
 
     _fails(checks.check_average_nees_bounds,

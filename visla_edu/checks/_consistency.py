@@ -4,7 +4,7 @@ import numpy as np
 from scipy import stats
 
 from visla_edu import ekf, metrics, motion
-from visla_edu.checks._core import as_array, compare, exercise_check, ok, rng, student
+from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
 from visla_edu.checks._inputs import random_covariance
 
 __all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds"]
@@ -46,6 +46,8 @@ def check_nees(nees, hidden=False):
         cov = random_covariance(generator, n) * 1e-3
         e = generator.multivariate_normal(np.zeros(n), cov)
         got = call(e, cov)
+        if np.size(got) == 1 and np.ndim(got) > 0:  # [x] or [[x]] (e.g. e[None] @ ... @ e[:, None])
+            raise fail(name, "return one number, not an array of one", f"got {fmt(got)}: use float(...) or .item()")
         ref = float(metrics.nees(e[None], cov[None])[0])
         compare(name, got, ref, f"for a random {n}-dim error", [
             ("you multiplied by the covariance; NEES uses its inverse\nNEES = e^T Sigma^-1 e",

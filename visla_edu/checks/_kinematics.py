@@ -222,6 +222,8 @@ def check_dead_reckon(dead_reckon, hidden=False):
          lambda: motion.dead_reckon(time_stamps, samples, lag=1)),
         ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u_t^)",
          lambda: _dead_reckon_no_tau(time_stamps, samples)),
+        ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
+         lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples)),
         ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
     ], atol=1e-8)
     ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon", hidden)
