@@ -201,6 +201,15 @@ def test_stub_keeps_signature_and_indentation():
                    '\nprint("after")')
 
 
+def test_stub_names_the_students_function_not_the_grade_id():
+    source = ('class Filter:\n    def predict(self, x):\n        ### BEGIN SOLUTION\n        return x\n'
+              '        ### END SOLUTION\n')
+    out = release.stub_source(source, what="capstone_predict")
+    assert 'raise NotImplementedError("predict: write your solution here")' in out
+    top_level = "def f(x):\n    return x\n\n### BEGIN SOLUTION\ny = 2\n### END SOLUTION\n"
+    assert 'NotImplementedError("grade-id: write' in release.stub_source(top_level, what="grade-id")
+
+
 def test_markdown_stub_and_hidden_tests():
     assert release.stub_source("Why?\n### BEGIN SOLUTION\nBecause.\n### END SOLUTION", "markdown") == \
         "Why?\nYOUR ANSWER HERE"

@@ -136,12 +136,25 @@ def stub_source(source, cell_type="code", what="exercise", where="cell", markers
         out.extend(lines[prev:start])
         indent = re.match(r"\s*", lines[start]).group(0)
         if cell_type == "code":
-            out.append(indent + _CODE_STUB.format(what=what))
+            out.append(indent + _CODE_STUB.format(what=_enclosing_function(lines[:start], indent) or what))
         else:
             out.append(indent + _MARKDOWN_STUB)
         prev = stop + 1
     out.extend(lines[prev:])
     return "\n".join(out)
+
+
+def _enclosing_function(lines_before, indent):
+    """Name of the function whose body holds a solution region indented by ``indent``, or None.
+
+    The nearest ``def name(`` above the region with a shorter indentation: the student's
+    function, whatever the exercise's grade id (notebook 09's ``capstone_predict`` is ``predict``).
+    """
+    for line in reversed(lines_before):
+        match = re.match(r"(\s*)def (\w+)\(", line)
+        if match and len(match.group(1)) < len(indent):
+            return match.group(2)
+    return None
 
 
 def strip_hidden_tests(source, where="cell"):
