@@ -298,6 +298,8 @@ def test_jacobian_checks(capsys):
     _fails(checks.check_pose_jacobian, lambda *a: -A.pose_jacobian(*a), "minus sign")
     _fails(checks.check_pose_jacobian, lambda *a: np.roll(A.pose_jacobian(*a), 3, axis=1), "twist order")
     _fails(checks.check_pose_jacobian, _pose_jacobian_left, "left perturbation")
+    _fails(checks.check_pose_jacobian, lambda Ks, o, mu, m: -Ks @ cam.projection_jacobian(
+        o @ lie.se3_inv(mu) @ np.r_[m, 1.0]) @ o @ lie.odot(np.r_[m, 1.0]), "not on the world point")
 
 
 # --------------------------------------------------------------------------- 04 mapping
@@ -345,6 +347,7 @@ def test_pose_checks(capsys):
     _fails(checks.check_pose_update, lambda *a: A.pose_update(*a, side="left"), "on the left")
     _fails(checks.check_pose_update, lambda *a: A.pose_update(*a, sign=-1.0), "wrong sign")
     _fails(checks.check_pose_update, lambda mu, S, *a: (mu, A.pose_update(mu, S, *a)[1]), "did not move")
+    _fails(checks.check_pose_update, _pose_update_twist_swapped, "twist order")
 
 
 # --------------------------------------------------------------------------- 06 SLAM
@@ -481,6 +484,13 @@ def test_library_shortcuts_to_an_exercise_are_hidden_inside_its_check():
     _fails(checks.check_landmark_update, _landmark_update_by_kalman, "kalman.update")
     _fails(checks.check_se3_exp, _se3_exp_from_the_smoothers_jacobian, "se3_right_jacobian")
     _fails(checks.check_motion_residual, _motion_residual_by_finite_differences, "numdiff.central_jacobian")
+
+
+def _pose_update_twist_swapped(mu, Sigma, *args):
+    """The right update, but its correction applied as [w; v]."""
+    mu_new, Sigma_new = A.pose_update(mu, Sigma, *args)
+    delta = lie.se3_log(np.linalg.inv(mu) @ mu_new)
+    return mu @ lie.se3_exp(np.r_[delta[3:], delta[:3]]), Sigma_new
 
 
 def test_smoothing_checks(capsys):

@@ -91,7 +91,8 @@ def check_landmark_update(landmark_update, hidden=False):
     ok(f"{name}: mean and covariance agree with ekf.landmark_update", hidden)
 
 
-def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_world=None, side="right", sign=1.0):
+def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_world=None, side="right", sign=1.0,
+                      swap=False):
     """The visual pose update from its formula; ``imu_T_world`` replaces ``inv(mu)`` (for mistakes)."""
     imu_T_world = lie.se3_inv(mu) if imu_T_world is None else imu_T_world
     s = np.c_[p_world, np.ones(len(p_world))] @ imu_T_world.T  # (k, 4) landmarks in the IMU frame
@@ -99,6 +100,8 @@ def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_wor
     H = (-Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(s)).reshape(-1, _POSE_DIM)
     gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(len(H)))
     delta = sign * gain @ (z - cam.projection(q) @ Ks.T).ravel()
+    if swap:  # the correction read as [w; v]
+        delta = np.r_[delta[3:], delta[:3]]
     mu_new = mu @ lie.se3_exp(delta) if side == "right" else lie.se3_exp(delta) @ mu
     return mu_new, (np.eye(_POSE_DIM) - gain @ H) @ Sigma
 
@@ -117,6 +120,8 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
          "(-Ks dpi/dq o_T_i (mu^-1 m)^odot) and the innovation z - z_pred",
          lambda: _pose_update_with(*args, sign=-1.0)[0]),
         ("the pose did not move", lambda: mu),
+        ("wrong twist order: the correction K r is [v; w] (linear first), as se3_exp expects",
+         lambda: _pose_update_with(*args, swap=True)[0]),
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 

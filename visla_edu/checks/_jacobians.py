@@ -135,6 +135,9 @@ def _pose_jacobian_variants(camera, mu, m, ref):
         ("this is the Jacobian for the left perturbation exp(delta^) mu\nvisla-edu perturbs on the right, "
          "T = mu exp(delta^), so odot acts on the IMU-frame point mu^-1 m",
          lambda: -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ imu_T_world @ lie.odot(np.r_[m, 1.0])),
+        ("odot acts on the IMU-frame point mu^-1 m, not on the world point m\nthe Jacobian is "
+         "-Ks dpi/dq o_T_i (mu^-1 m)^odot",
+         lambda: -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(np.r_[m, 1.0])),
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
