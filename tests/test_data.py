@@ -667,3 +667,14 @@ def test_a_name_that_is_a_file_in_the_current_folder_gets_the_path_suggested(tmp
     with pytest.raises(FileNotFoundError, match=r"--data-dir on the command line.* A file mydrive.npz is in the "
                                                 r"current folder: give it as a path, ./mydrive.npz"):
         data.load("mydrive", tmp_path / "data")
+
+
+def test_summary_of_a_drive_without_observations_says_so():
+    import dataclasses
+
+    from visla_edu import simulate
+
+    ds = simulate.simulate_drive("tiny", seed=0)
+    empty = dataclasses.replace(ds, obs_ids=ds.obs_ids[:0], obs_z=ds.obs_z[:0], frame_ptr=np.zeros_like(ds.frame_ptr))
+    text = data.format_summary(empty)
+    assert "tracks        none: no landmark is observed (every feature is -1)" in text and "None" not in text

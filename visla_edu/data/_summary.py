@@ -143,6 +143,8 @@ def _observation_lines(s):
 
 
 def _track_lines(s):
+    if s["track_length_frames"]["max"] is None:
+        return ["  tracks        none: no landmark is observed (every feature is -1)"]
     lines = [
         f"  tracks        length {_fmt_stats(s['track_length_frames'], ' frames')}; "
         f"{s['landmarks_seen_once']} landmarks seen only once"
