@@ -90,8 +90,11 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
 
 
 def _check_enough_data(dataset, mode):
-    """Refuse a mode the dataset cannot feed: every mode but dead reckoning needs observations,
-    the smoothers at least two frames (one motion factor)."""
+    """Refuse a mode the dataset cannot feed.
+
+    Every mode but dead reckoning needs observations; the smoothers need at least two frames
+    (one motion factor).
+    """
     if mode == DEADRECKON:
         return
     if dataset.num_observations == 0:

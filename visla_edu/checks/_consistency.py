@@ -18,7 +18,7 @@ def check_motion_noise(motion_noise, hidden=False):
     if hidden:  # edge cases, then cases drawn from the teacher's seed
         generator = rng(hidden)
         cases = [(0.01, 2.0, 0.001), (1.0, 0.0, 0.1), (0.25, 0.3, 0.0), (0.1, 1e-3, 1e-4)] + [
-            (float(generator.uniform(0.01, 1.0)), float(generator.uniform(0.0, 2.0)), float(generator.uniform(0.0, 0.3)))
+            tuple(float(generator.uniform(low, high)) for low, high in ((0.01, 1.0), (0.0, 2.0), (0.0, 0.3)))
             for _ in range(3)]
     call = student(motion_noise, name, hide=[motion.motion_noise])
     for tau, sv, sw in cases:

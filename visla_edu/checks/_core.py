@@ -180,6 +180,8 @@ def _private_copy(value):
     """
     if isinstance(value, np.ndarray):
         return value.copy()
+    if isinstance(value, tuple) and hasattr(value, "_fields"):  # a namedtuple
+        return type(value)(*(_private_copy(v) for v in value))
     if isinstance(value, (tuple, list)):
         return type(value)(_private_copy(v) for v in value)
     if isinstance(value, dict):
