@@ -537,8 +537,10 @@ ALL_CHECKS = [getattr(checks, name) for name in checks.__all__ if name.startswit
 @pytest.mark.parametrize("hidden", [False, True], ids=["visible", "hidden"])
 @pytest.mark.parametrize("check", ALL_CHECKS, ids=lambda c: c.__name__)
 def test_stub_raises_not_implemented(check, hidden):
-    with pytest.raises(NotImplementedError, match="not implemented yet"):
+    with pytest.raises(NotImplementedError, match="not implemented yet") as info:
         check(_stub, hidden=hidden)
+    # nbgrader validate shows "    NotImplementedError: <first line>" and cuts it at 87 characters
+    assert len(f"    NotImplementedError: {_first_line(info.value)}") <= 87
 
 
 @pytest.mark.parametrize("check", ALL_CHECKS, ids=lambda c: c.__name__)

@@ -290,6 +290,7 @@ def test_hidden_seed_comes_from_the_environment(monkeypatch, capsys):
     monkeypatch.setenv(_core.HIDDEN_SEED_VARIABLE, "12345")
     assert not np.allclose(_core.rng(hidden=True).normal(size=3), default)
     checks.check_so3_exp(A.so3_exp, hidden=True)
-    monkeypatch.setenv(_core.HIDDEN_SEED_VARIABLE, "twelve")
-    with pytest.raises(ValueError, match="VISLA_EDU_HIDDEN_SEED must be an integer, got 'twelve'"):
-        checks.check_so3_exp(A.so3_exp, hidden=True)
+    for text in ("twelve", "-5"):
+        monkeypatch.setenv(_core.HIDDEN_SEED_VARIABLE, text)
+        with pytest.raises(ValueError, match=f"VISLA_EDU_HIDDEN_SEED must be a non-negative integer, got '{text}'"):
+            checks.check_so3_exp(A.so3_exp, hidden=True)

@@ -62,10 +62,13 @@ def _hidden_seed():
     if not text:
         return _DEFAULT_HIDDEN_SEED
     try:
-        return int(text)
+        seed = int(text)
     except ValueError:
-        raise ValueError(f"{HIDDEN_SEED_VARIABLE} must be an integer, got {text!r}: unset it or "
-                         "set it to a number") from None
+        seed = -1
+    if seed < 0:  # numpy's generators take non-negative seeds only
+        raise ValueError(f"{HIDDEN_SEED_VARIABLE} must be a non-negative integer, got {text!r}: unset it or "
+                         "set it to a number such as 4711")
+    return seed
 
 
 def rng(hidden=False):
@@ -157,7 +160,7 @@ class _Student:
             return self.fn(*args, **kwargs)
         except NotImplementedError:
             raise NotImplementedError(
-                f"{self.name} is not implemented yet: replace the `raise NotImplementedError` line in "
+                f"{self.name} is not implemented yet\nreplace the `raise NotImplementedError` line in "
                 "the exercise cell above with your code, run that cell, then run this check again") from None
         except _hiding.LibraryFunctionHidden as err:
             raise fail("", str(err), f"(while calling {self.name}({_shown(args)}))") from None
