@@ -22,3 +22,13 @@ def test_readme_has_two_setup_commands():
 def test_ci_runs_the_readme_test_command_verbatim():
     ci_lines = (ROOT / ".ci" / "run").read_text().splitlines()
     assert _readme_commands()["2"] in ci_lines, ".ci/run must run exactly the README's test command"
+
+
+def test_the_readme_notebook_table_lists_every_notebook_with_its_points():
+    """The README's hand-written table follows the notebooks' nbgrader metadata (as TEACHING.md's generated one)."""
+    from visla_edu import release
+
+    rows = re.findall(r"^\| `(\w+)` \| .* \| (\d+) \|$", (ROOT / "README.md").read_text(), flags=re.M)
+    expected = [(path.stem, str(round(sum(points for _, points in release._graded_cells(release._read(path))))))
+                for path in release._sources(ROOT / "solutions")]
+    assert rows == expected
