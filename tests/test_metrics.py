@@ -94,6 +94,13 @@ def test_metrics_refuse_a_non_finite_or_non_rigid_pose_and_name_its_frame(metric
         metric(gt, bad_gt)
 
 
+def test_metrics_accept_the_rounding_the_trajectory_readers_accept():
+    """KITTI files carry 7 digits; the readers accept |R^T R - I| up to 1e-3, and so do the metrics."""
+    gt = _straight_drive()
+    gt[:, :3, :3] *= 1 + 4e-4  # |R^T R - I| = 8e-4
+    assert metrics.evaluate(_straight_drive(), gt).ate_raw == pytest.approx(0.0)
+
+
 def test_metrics_refuse_empty_trajectories():
     with pytest.raises(ValueError, match=r"ate: the trajectories are empty \(T = 0\)"):
         metrics.ate(np.zeros((0, 4, 4)), np.zeros((0, 4, 4)))
