@@ -387,7 +387,23 @@ _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "relea
 
 
 def main(argv=None):
-    """Entry point of the ``visla-edu`` console script: the one error boundary; returns the exit status.
+    """Entry point of the ``visla-edu`` console script: the one error boundary of the commands.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``visla-edu`` (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit status of a command that ran: 0, 1 (a failure on valid input) or 2 (bad input).
+
+    Raises
+    ------
+    SystemExit
+        As argparse does, for a usage error (status 2, one line on stderr), ``--help``
+        (status 0) and ``release --check`` finding notebooks that drifted (status 1).
 
     Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected,
     not printed: a failure is reported by its one line (the filter detects a non-finite state

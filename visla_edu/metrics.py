@@ -102,10 +102,21 @@ def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
     Compares ``inv(est[t]) est[t+delta]`` with ``inv(gt[t]) gt[t+delta]``; insensitive to the
     world frame and to drift accumulated before ``t``.
 
+    Parameters
+    ----------
+    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
+    delta : int
+        Frames between the two poses of each pair, ``1 <= delta < T``.
+
     Returns
     -------
     (float, float)
-        Translation RMS and rotation RMS.
+        Translation RMS (m) and rotation RMS (rad) of ``inv(rel_est) rel_gt``.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, a pose that is not finite or rigid, or a bad ``delta``.
     """
     est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "rpe")
     if isinstance(delta, bool) or not isinstance(delta, (int, np.integer)):
@@ -121,7 +132,17 @@ def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
 
 
 def pose_errors(est_world_T_imu, gt_world_T_imu):
-    """Right-perturbation errors ``e_t = se3_log(inv(mu_t) T_t)``, shape (T, 6)."""
+    """Right-perturbation errors ``e_t = se3_log(inv(mu_t) T_t)`` (twist ``[v; w]``).
+
+    Parameters
+    ----------
+    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
+        The estimates ``mu_t`` and the true poses ``T_t``.
+
+    Returns
+    -------
+    ndarray, shape (T, 6)
+    """
     est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "pose_errors")
     return lie.se3_log(lie.se3_inv(est) @ gt)
 
@@ -234,6 +255,20 @@ def average_nees_bounds(dof, runs, probability=0.95):
 
     ``sum`` of the values is chi-square with ``runs * dof`` dof, so the average lies in
     ``chi2.ppf([a, 1 - a], runs * dof) / runs`` with ``a = (1 - probability) / 2``.
+
+    Parameters
+    ----------
+    dof : int
+        Degrees of freedom of each value (6 for a pose NEES).
+    runs : int
+        How many values are averaged (e.g. Monte-Carlo runs, or time steps).
+    probability : float
+        Two-sided coverage of the interval.
+
+    Returns
+    -------
+    (float, float)
+        Lower and upper bound of the average.
     """
     lo, hi = chi2_bounds(dof * runs, probability)
     return lo / runs, hi / runs
@@ -336,8 +371,8 @@ class TrajectoryEvaluation:
 
     ate_raw: float
     ate_aligned: float
-    drift_translation: float
-    drift_rotation: float
+    drift_translation: object  # float, or None without a segment
+    drift_rotation: object
     drift_segments: int
     drift_note: str
     path_length: float
@@ -382,7 +417,7 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
     ------
     ValueError
         Shapes do not fit, the ground truth has more frames than the estimate, or a pose
-        is not finite (the message names the frame).
+        is not finite or not a rigid transform (the message names the frame).
     """
     est = np.asarray(est_world_T_imu, dtype=float)
     gt = np.asarray(gt_world_T_imu, dtype=float)

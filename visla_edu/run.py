@@ -66,7 +66,8 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     Raises
     ------
     ValueError
-        A bad mode, or a dataset with an implausible calibration
+        A bad mode, ``dense`` without ``"slam"``, a dataset without observations for a mode
+        that needs them, or a dataset with an implausible calibration
         (:func:`visla_edu.data.calibration_problems`: in-memory datasets are held to the
         ranges the loader enforces on files, since the filter would silently turn an absurd
         focal length, baseline or extrinsic into inf/NaN covariances or a garbage map).
@@ -241,7 +242,10 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
 
     Raises
     ------
-    visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError
+    ValueError
+        As :func:`make_filter` (bad mode or settings, implausible calibration, no
+        observations for a mode that needs them), or a bad ``blas_threads``.
+    visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError, ArithmeticError, MemoryError
         The filter failed; the exception's ``frame`` attribute is the frame it failed at
         (see :func:`visla_edu.workload.divergence_hint`).
     """
@@ -455,8 +459,9 @@ def save_result(result, path):
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
     ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
     so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
-    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`); the
-    smoothers add ``notes`` and the batch smoother ``start_world_T_imu``.
+    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`),
+    ``notes`` (the smoothers' summary; empty for the filters) and, from the batch smoother,
+    ``start_world_T_imu``.
 
     Parameters
     ----------

@@ -1,7 +1,6 @@
 """Checks of notebook 07 (tuning and consistency): the motion noise W, NEES and its chi-square band."""
 
 import numpy as np
-from scipy import stats
 
 from visla_edu import ekf, metrics, motion
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
@@ -73,13 +72,13 @@ def check_average_nees_bounds(average_nees_bounds, hidden=False):
     for dof, n, p in cases:
         got = as_array(call(dof, n, p), name, (2,), "bounds")
         tail = (1 - p) / 2
-        ref = stats.chi2.ppf([tail, 1 - tail], dof * n) / n
+        ref = metrics.chi2_quantile([tail, 1 - tail], dof * n) / n
         compare(name, got, ref, f"for dof {dof}, {n} values, probability {p}", [
             ("use n * dof degrees of freedom, then divide by n\nthe sum of n values is chi-square with "
              "n * dof degrees of freedom; divide its quantiles by n",
-             lambda: np.array(stats.chi2.ppf([tail, 1 - tail], dof))),
+             lambda: np.array(metrics.chi2_quantile([tail, 1 - tail], dof))),
             ("you forgot to divide the quantiles of the sum by n",
-             lambda: np.array(stats.chi2.ppf([tail, 1 - tail], dof * n))),
-            ("two-sided: put (1 - p) / 2 in each tail", lambda: np.array(stats.chi2.ppf([1 - p, p], dof * n)) / n),
+             lambda: np.array(metrics.chi2_quantile([tail, 1 - tail], dof * n))),
+            ("two-sided: put (1 - p) / 2 in each tail", lambda: np.array(metrics.chi2_quantile([1 - p, p], dof * n)) / n),
         ], rtol=1e-6)
     ok(f"{name}: chi-square bounds of the average NEES", hidden)

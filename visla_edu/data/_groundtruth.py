@@ -122,7 +122,8 @@ def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE):
     Raises
     ------
     ValueError
-        The first row whose time differs by more than ``tolerance``, with both values.
+        The first row whose time differs by more than ``tolerance``, with both values; more
+        times than frames; a ``tolerance`` that is not a finite number >= 0.
     """
     times = np.asarray(times, dtype=float).ravel()
     time_stamps = np.asarray(time_stamps, dtype=float).ravel()
@@ -188,8 +189,11 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
     FileNotFoundError
         A file is missing.
     ValueError
-        A bad file (see :func:`visla_edu.trajectory.read_kitti`), more poses than frames, times
-        not one per pose or not matching the dataset's.
+        A bad file (see :func:`visla_edu.trajectory.read_kitti`), fewer than
+        :data:`MIN_POSES` or more poses than frames, times not one per pose or not matching
+        the dataset's.
+    TypeError
+        ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
     """
     if not isinstance(dataset, Dataset):
         raise TypeError(f"load_ground_truth: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")

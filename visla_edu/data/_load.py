@@ -43,7 +43,9 @@ def load(name_or_path, data_dir=None):
         The path is a folder, the data directory is not one, or the file is not readable.
     ValueError
         The file is not a valid course file (the message names key, expected and actual), or
-        not a regular file (a FIFO, a device).
+        not a regular file (a FIFO, a device), or the name is empty.
+    TypeError
+        ``name_or_path`` is neither a string nor a path.
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
         return attach_registered_ground_truth(load_npz(_find_file(name_or_path, data_dir)))

@@ -16,7 +16,7 @@ __all__ = ["resolve_extrinsics", "check_time_alignment", "imu_noise_and_bias", "
 
 
 def resolve_extrinsics(dataset, correction="auto"):
-    """The ``imu_T_cam`` to use and a line of evidence (empty when nothing was changed).
+    """The ``imu_T_cam`` to use and a line to print about it.
 
     Parameters
     ----------
@@ -28,6 +28,14 @@ def resolve_extrinsics(dataset, correction="auto"):
     -------
     imu_T_cam : ndarray, shape (4, 4)
     evidence : str
+        Why a correction was applied; with ``"auto"`` keeping the file's calibration, a
+        warning when the odometry contradicts it and every correction of it (an inverted or
+        foreign extrinsic, see :data:`UNEXPLAINED_SLOPE`); empty otherwise.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``correction``.
     """
     if correction == "auto":
         calibration = calibrate(dataset)

@@ -16,8 +16,10 @@ WINDOW_MODES = ("fix", "marginalize")
 class SmootherConfig:
     """Noise model, robust loss, stopping rules and window settings of the smoothers.
 
-    The noise settings mean what they mean in :class:`visla_edu.ekf.FilterConfig` and have
-    the same defaults, so the smoother and the filter solve for the same model.
+    The noise settings mean what they mean in :class:`visla_edu.filters.FilterConfig`. Its
+    velocity noise and lag default to ``"auto"`` (measured from the data); here they are the
+    course's fixed 0.5 m/s, 0.05 rad/s and lag 0. :meth:`from_filter_config` takes a filter's
+    resolved settings, which is how ``visla-edu run --mode smooth`` gives both the same model.
 
     Attributes
     ----------
@@ -69,7 +71,7 @@ class SmootherConfig:
         ``fsu b / min_disparity``, is so poorly observed that Gauss-Newton on xyz landmarks
         sends them off along their viewing rays (on dataset 03, landmarks at 300 m ran to
         minus a million metres in six iterations), which stalls Levenberg-Marquardt. The same
-        3 px as :attr:`visla_edu.ekf.FilterConfig.min_init_disparity`.
+        3 px as :attr:`visla_edu.filters.FilterConfig.min_init_disparity`.
     skip_repeated_frames : bool
         Ignore the observations of frames that exactly repeat the previous frame's.
     pose_covariance, landmark_covariance : bool
@@ -143,6 +145,15 @@ class SmootherConfig:
             Resolved (no ``"auto"`` noise or lag: :func:`visla_edu.run.resolve_config`).
         **overrides
             Further :class:`SmootherConfig` fields.
+
+        Returns
+        -------
+        SmootherConfig
+
+        Raises
+        ------
+        ValueError
+            ``filter_config`` still has ``"auto"`` settings.
         """
         if not filter_config.resolved:
             raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
