@@ -29,6 +29,21 @@ def limit_blas_threads(n):
 
 
 def check_blas_threads(n):
+    """``n`` if it is a valid BLAS thread count: a positive integer, or None (numpy's setting).
+
+    Parameters
+    ----------
+    n : int or None
+
+    Returns
+    -------
+    int or None
+
+    Raises
+    ------
+    ValueError
+        Anything else (a bool, a float, zero or a negative number).
+    """
     if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1):
         raise ValueError(f"blas_threads must be a positive integer or None, got {n!r}")
     return n

@@ -97,10 +97,20 @@ def _noise_sigmas(sigma_linear, sigma_angular):
 
 
 def motion_noise(tau, sigma_linear, sigma_angular):
-    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2, sigma_w^2)``, (6, 6).
+    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2, sigma_w^2)`` of a twist ``[v; w]``.
 
-    ``sigma_linear`` (m/s) and ``sigma_angular`` (rad/s) are numbers (the same on every
-    axis) or per-axis triples ``(x, y, z)`` of the body frame.
+    Parameters
+    ----------
+    tau : float
+        The step's duration (s).
+    sigma_linear, sigma_angular : float or (float, float, float)
+        White noise of the measured linear (m/s) and angular (rad/s) velocity: one number for
+        every axis, or a triple ``(x, y, z)`` in the body frame.
+
+    Returns
+    -------
+    ndarray, shape (6, 6)
+        Diagonal: ``(tau sigma_v)^2`` for the three linear entries, then ``(tau sigma_w)^2``.
     """
     return np.diag((tau * _noise_sigmas(sigma_linear, sigma_angular)) ** 2)
 
@@ -112,6 +122,15 @@ def pose_transition(u, tau):
 
 def imu_step(u, tau, sigma_linear, sigma_angular):
     """Everything one prediction step needs, with a single exponential.
+
+    Parameters
+    ----------
+    u : array_like, shape (6,)
+        The body twist ``[v; w]`` that moves the pose over the step.
+    tau : float
+        The step's duration (s).
+    sigma_linear, sigma_angular : float or (float, float, float)
+        As in :func:`motion_noise`.
 
     Returns
     -------

@@ -131,8 +131,22 @@ def resolve_config(dataset, config):
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
     """Yield one :class:`~visla_edu.filters.StepRecord` per frame.
 
-    Parameters are those of :func:`run_filter`; the BLAS thread limit holds while the
-    generator runs.
+    Parameters
+    ----------
+    dataset, mode, config, dense, blas_threads
+        As in :func:`run_filter` (no progress bar, nothing printed); the BLAS thread limit
+        holds while the generator runs.
+
+    Yields
+    ------
+    visla_edu.filters.StepRecord
+        One per frame, ``t = 0 .. T - 1`` (frame 0: the initial pose and its first updates).
+
+    Raises
+    ------
+    ValueError, visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError
+        As :func:`run_filter`; being a generator, it raises them at the first ``next()``,
+        not when called.
     """
     flt = make_filter(dataset, mode, config, dense)
     with limit_blas_threads(blas_threads):
@@ -495,7 +509,23 @@ def _setting(array):
 
 
 def load_result(path):
-    """Load a :class:`RunResult` written by :func:`save_result`."""
+    """Load a :class:`RunResult` written by :func:`save_result`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.npz`` that :func:`save_result` (or ``visla-edu run --out``) wrote.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    FileNotFoundError, ValueError, KeyError
+        As :func:`numpy.load` for a missing or broken file, or a file without the keys a
+        result has.
+    """
     with np.load(path, allow_pickle=False) as f:
         config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
         evaluation = {k[len("eval_"):]: f[k].item() for k in f.files if k.startswith("eval_")}
