@@ -140,7 +140,7 @@ def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1)
     Yields
     ------
     visla_edu.filters.StepRecord
-        One per frame, ``t = 0 .. T - 1`` (frame 0: the initial pose and its first updates).
+        One per frame, ``t = 0 .. T - 1``.
 
     Raises
     ------
