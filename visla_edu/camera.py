@@ -336,11 +336,54 @@ class StereoCamera:
         return z, J_z_landmark, J_z_pose
 
     def jacobian_landmark(self, world_T_imu, p_world):
-        """``J_z_landmark`` of :meth:`predict_with_jacobians`, shape (M, 4, 3)."""
+        """``J_z_landmark`` of :meth:`predict_with_jacobians`, shape (M, 4, 3).
+
+        ``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` with ``P = [I 0]``: the derivative of
+        the predicted pixels with respect to each landmark's world position.
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+            Pose mean ``mu``, the IMU in the world frame.
+        p_world : array_like, shape (M, 3)
+            Landmark positions ``m`` in the world frame, in metres.
+
+        Returns
+        -------
+        ndarray, shape (M, 4, 3)
+            One 4x3 block per landmark, pixels per metre.
+
+        Raises
+        ------
+        ValueError
+            ``world_T_imu`` is not (4, 4) or ``p_world`` is not (M, 3).
+        """
         return self.predict_with_jacobians(world_T_imu, p_world)[1]
 
     def jacobian_pose(self, world_T_imu, p_world):
-        """``J_z_pose`` of :meth:`predict_with_jacobians`, shape (M, 4, 6)."""
+        """``J_z_pose`` of :meth:`predict_with_jacobians`, shape (M, 4, 6).
+
+        ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``: the derivative of the predicted
+        pixels with respect to the right perturbation ``world_T_imu = mu exp(delta^)``,
+        ``delta = [v; w]`` (linear first).
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+            Pose mean ``mu``, the IMU in the world frame.
+        p_world : array_like, shape (M, 3)
+            Landmark positions ``m`` in the world frame, in metres.
+
+        Returns
+        -------
+        ndarray, shape (M, 4, 6)
+            One 4x6 block per landmark; columns 0-2 for ``v``, 3-5 for ``w``.
+
+        Raises
+        ------
+        ValueError
+            ``world_T_imu`` is not (4, 4) or ``p_world`` is not (M, 3).
+        """
         return self.predict_with_jacobians(world_T_imu, p_world)[2]
 
     def triangulate(self, z, world_T_imu=None, method="disparity"):

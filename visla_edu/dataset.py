@@ -92,6 +92,12 @@ class Dataset:
         (:func:`visla_edu.data.load`, :func:`visla_edu.data.attach_ground_truth`).
     label : str
         A human-readable description; stand-ins say so here.
+    extra : dict
+        Metadata, empty by default and not written by :func:`visla_edu.data.save`. A loaded
+        course file has ``"sha256"``, ``"format"`` and ``"known_file"``; a simulated drive
+        ``"preset"``, ``"seed"`` and ``"config"`` (and ``"simulated_imu_T_cam"`` when the
+        reported calibration differs from the simulated rig's). Diagnostics keep results here
+        (``"calibration"``, ``"visual_odometry"``).
     """
 
     name: str
@@ -212,6 +218,18 @@ class Dataset:
             An entry ``(landmark m, frame t)`` is an observation where ``features[0, m, t] != -1``.
         **fields
             All other :class:`Dataset` fields except the sparse ones and ``num_landmarks``.
+
+        Returns
+        -------
+        Dataset
+            ``num_landmarks = M``; ``frame_ptr``, ``obs_ids`` and ``obs_z`` hold the observed
+            entries in frame-major order (:func:`frame_major_order`), ``obs_z`` as float pixels
+            ``[uL, vL, uR, vR]``.
+
+        Raises
+        ------
+        TypeError
+            A required field is missing from ``fields``, or one is unknown or given twice.
         """
         features = np.asarray(features, dtype=float)
         landmark_ids, frames = np.nonzero(features[0] != -1)

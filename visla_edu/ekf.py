@@ -132,7 +132,27 @@ def innovation_covariances(J_pose, J_landmark, Sigma_pose, Sigma_pose_landmark, 
 
 
 def mahalanobis_squared(innovation, S):
-    """``r_i^T S_i^{-1} r_i`` for each observation; innovation (k, 4), S (k, 4, 4) -> (k,)."""
+    """``r_i^T S_i^{-1} r_i`` for each observation; innovation (k, 4), S (k, 4, 4) -> (k,).
+
+    ``S_i^{-1} r_i`` is a linear solve, never an inverse. With ``k = 0`` the result is empty.
+
+    Parameters
+    ----------
+    innovation : ndarray, shape (k, 4)
+        Residuals ``r_i = z_i - h_i(mu)`` in pixels, ``[uL, vL, uR, vR]``.
+    S : ndarray, shape (k, 4, 4)
+        Innovation covariances, e.g. from :func:`innovation_covariances`, in pixels squared.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        Squared Mahalanobis distances (chi-square with 4 dof if consistent).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If some ``S_i`` is singular.
+    """
     return np.einsum("ki,ki->k", innovation, np.linalg.solve(S, innovation[..., None])[..., 0])
 
 
@@ -346,6 +366,17 @@ def invariant_pose_jacobian(J_landmark):
     observation depends on the pose error only through ``p``, with minus the landmark
     Jacobian, and not at all on ``theta``. Moving the whole world (the same ``p`` and ``e_j``)
     changes nothing, whatever the estimate: that is what keeps the invariant filter consistent.
+
+    Parameters
+    ----------
+    J_landmark : ndarray, shape (k, 4, 3)
+        Landmark Jacobians ``Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` of
+        :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
+
+    Returns
+    -------
+    ndarray, shape (k, 4, 6)
+        ``[-J_landmark, 0]``: columns 0-2 for ``p``, columns 3-5 (zero) for ``theta``.
     """
     return np.concatenate([-J_landmark, np.zeros_like(J_landmark)], axis=-1)
 

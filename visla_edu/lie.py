@@ -121,7 +121,25 @@ def twist_hat(u):
 
 
 def twist_vee(U):
-    """Inverse of :func:`twist_hat`: ``(..., 4, 4) -> (..., 6)`` as ``[v; w]``."""
+    """Inverse of :func:`twist_hat`: ``(..., 4, 4) -> (..., 6)`` as ``[v; w]``.
+
+    ``twist_vee([[hat(w), v], [0, 0]]) = [v; w]``. Only ``U[..., :3, 3]`` and the entries
+    ``U32, U13, U21`` are read; the rest of ``U`` is not checked.
+
+    Parameters
+    ----------
+    U : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+        The twist ``[v; w]``, linear part first.
+
+    Raises
+    ------
+    ValueError
+        ``U`` does not have shape (..., 4, 4).
+    """
     U = _as_matrices(U, 4, 4, "twist_vee")
     w = np.stack([U[..., 2, 1], U[..., 0, 2], U[..., 1, 0]], axis=-1)
     return np.concatenate([U[..., :3, 3], w], axis=-1)

@@ -116,7 +116,27 @@ def motion_noise(tau, sigma_linear, sigma_angular):
 
 
 def pose_transition(u, tau):
-    """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6)."""
+    """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6).
+
+    For the right perturbation ``T = mu exp(hat(delta))``: ``delta_{t+1} = F delta_t + n_t``.
+
+    Parameters
+    ----------
+    u : array_like, shape (6,)
+        The body twist ``[v; w]`` (m/s, rad/s) that moves the pose over the step.
+    tau : float
+        The step's duration (s).
+
+    Returns
+    -------
+    ndarray, shape (6, 6)
+        ``F`` acting on perturbations ``[v; w]``, linear first.
+
+    Raises
+    ------
+    ValueError
+        ``u`` does not have 6 entries.
+    """
     return lie.adjoint(lie.se3_exp(-tau * np.asarray(u, dtype=float)))
 
 
@@ -146,12 +166,47 @@ def imu_step(u, tau, sigma_linear, sigma_angular):
 
 
 def predict_pose(world_T_imu, u, tau):
-    """Mean prediction ``mu @ se3_exp(tau u)``, (4, 4)."""
+    """Mean prediction ``mu @ se3_exp(tau u)``, (4, 4).
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (4, 4)
+        Pose mean ``mu`` of the IMU in the world frame at the start of the step.
+    u : array_like, shape (6,)
+        The body twist ``[v; w]`` (m/s, rad/s).
+    tau : float
+        The step's duration (s).
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        ``world_T_imu`` at the end of the step.
+
+    Raises
+    ------
+    ValueError
+        ``u`` does not have 6 entries.
+    """
     return world_T_imu @ lie.se3_exp(tau * np.asarray(u, dtype=float))
 
 
 def predict_pose_covariance(Sigma_pose, F, W):
-    """Covariance prediction ``F Sigma F^T + W`` for the pose alone, (6, 6)."""
+    """Covariance prediction ``F Sigma F^T + W`` for the pose alone, (6, 6).
+
+    Parameters
+    ----------
+    Sigma_pose : ndarray, shape (6, 6)
+        Covariance of the right perturbation ``[v; w]`` of the pose; not modified.
+    F : ndarray, shape (6, 6)
+        :func:`pose_transition` (or the ``F`` of :func:`imu_step`).
+    W : ndarray, shape (6, 6)
+        The step's noise covariance (:func:`motion_noise`).
+
+    Returns
+    -------
+    ndarray, shape (6, 6)
+        A new array; not symmetrised.
+    """
     return F @ Sigma_pose @ F.T + W
 
 

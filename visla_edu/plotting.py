@@ -40,6 +40,27 @@ def save_figure(fig, path, dpi=120):
 
     The image is written to a temporary file and renamed over ``path``
     (:func:`visla_edu._files.atomic_write`), so a failed save never leaves a broken image.
+
+    Parameters
+    ----------
+    fig : matplotlib Figure
+    path : str or os.PathLike
+        Target file; ``~`` is expanded. Its suffix (case-insensitive) is the format, one of
+        :func:`figure_suffixes`; no suffix saves a PNG under that name.
+    dpi : float
+        Resolution of raster formats (dots per inch).
+
+    Returns
+    -------
+    pathlib.Path
+        The absolute path written.
+
+    Raises
+    ------
+    FileNotFoundError
+        The target's folder does not exist.
+    ValueError
+        ``path`` is a folder, or matplotlib does not know the suffix's format.
     """
     path = Path(path).expanduser()
     with atomic_write(path, "wb") as f:
@@ -162,6 +183,8 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
         Default: ``STYLES["landmarks"]`` (grey).
     reference : ndarray, shape (T, 4, 4), optional
         A second trajectory (e.g. dead reckoning), drawn in ``STYLES["dead_reckoning"]``.
+    reference_label : str
+        Legend entry of ``reference`` (unused without it).
     ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
         True trajectory, drawn in :data:`GROUND_TRUTH_STYLE` (bluish green, dash-dot) with a
         legend entry; it may cover fewer frames than the estimate.
@@ -169,6 +192,11 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     Returns
     -------
     matplotlib Axes
+
+    Raises
+    ------
+    ValueError
+        ``ground_truth`` is neither a GroundTruth nor poses of shape (n, 4, 4).
     """
     ax = _axes(ax)
     if landmarks is not None:

@@ -248,11 +248,29 @@ def read_tum(path):
 def read_trajectory(path):
     """Read a trajectory in the format of its suffix (:func:`trajectory_format`).
 
+    ``.tum`` is read by :func:`read_tum`, ``.kitti`` and ``.txt`` by :func:`read_kitti`; the
+    result is always ``(times, poses)``, times first.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
     Returns
     -------
     times : ndarray, shape (n,), or None
-        None for a 12-column KITTI file.
+        Seconds, strictly increasing; None for a 12-column KITTI file.
     poses : ndarray, shape (n, 4, 4)
+        The poses as written, e.g. ``world_T_imu`` of a run.
+
+    Raises
+    ------
+    ValueError
+        An unknown suffix (:func:`trajectory_format`), or a bad file as in :func:`read_kitti`
+        and :func:`read_tum`.
+    FileNotFoundError
+        No such file (or a folder).
+    PermissionError
+        Not readable.
     """
     if trajectory_format(path) == "tum":
         return read_tum(path)

@@ -72,18 +72,56 @@ def _hidden_seed():
 
 
 def rng(hidden=False):
-    """The random generator of a check's visible (fixed seed) or hidden cases."""
+    """The random generator of a check's visible (fixed seed) or hidden cases.
+
+    Parameters
+    ----------
+    hidden : bool
+        False: seeded with :data:`SEED`. True: with the integer in the environment variable
+        :data:`HIDDEN_SEED_VARIABLE`, or a built-in hidden seed when it is unset or empty.
+
+    Returns
+    -------
+    numpy.random.Generator
+        A new generator, so every call starts the same sequence.
+
+    Raises
+    ------
+    ValueError
+        ``hidden`` is True and the environment variable is not a non-negative integer.
+    """
     return np.random.default_rng(_hidden_seed() if hidden else SEED)
 
 
 def ok(message, hidden=False):
-    """Print the success line of a check (hidden cases pass silently)."""
+    """Print the success line of a check (hidden cases pass silently).
+
+    Parameters
+    ----------
+    message : str
+        What passed; printed after a check mark, ``"\u2713 {message}"``.
+    hidden : bool
+        True prints nothing.
+    """
     if not hidden:
         print(f"\u2713 {message}")
 
 
 def fmt(x):
-    """Short text for an input in a failure message."""
+    """Short text for an input in a failure message.
+
+    Parameters
+    ----------
+    x : object
+        A function, a number, an array or anything else.
+
+    Returns
+    -------
+    str
+        A function's ``__name__`` (or ``"a function"``), the ``repr`` of a non-numeric value,
+        the values of an array of at most 8 entries on one line (6 digits), else
+        ``"an array of shape (...)"``.
+    """
     if callable(x):
         return getattr(x, "__name__", "a function")
     arr = np.asarray(x)
@@ -210,7 +248,30 @@ def student(fn, name, hide=()):
 
 
 def as_array(out, name, shape, what="result"):
-    """The student's output as a float array of the expected shape, or a failure with a hint."""
+    """The student's output as a float array of the expected shape, or a failure with a hint.
+
+    Parameters
+    ----------
+    out : array_like
+        The student's output.
+    name : str
+        The student's function, first word of a failure.
+    shape : tuple of int
+        The expected shape.
+    what : str
+        What ``out`` is, for the message (e.g. ``"pose"``, ``"covariance"``).
+
+    Returns
+    -------
+    ndarray, shape ``shape``
+        ``out`` as float.
+
+    Raises
+    ------
+    AssertionError
+        ``out`` is not numeric, or has another shape (the hint says when it is the transpose,
+        or has the right number of entries).
+    """
     try:
         arr = np.asarray(out, dtype=float)
     except (TypeError, ValueError) as err:
@@ -228,7 +289,27 @@ def as_array(out, name, shape, what="result"):
 
 
 def close(a, b, rtol, atol):
-    """True if ``a`` and ``b`` have one shape and agree (NaN equal to NaN)."""
+    """True if ``a`` and ``b`` have one shape and agree (NaN equal to NaN).
+
+    Agreement is ``numpy.allclose``: ``|a - b| <= atol + rtol |b|`` entry by entry.
+
+    Parameters
+    ----------
+    a, b : array_like
+        Converted to float arrays.
+    rtol, atol : float
+        Relative and absolute tolerance.
+
+    Returns
+    -------
+    bool
+        False when the shapes differ (no broadcasting).
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``a`` or ``b`` cannot be converted to a float array.
+    """
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=rtol, atol=atol, equal_nan=True))
 
@@ -248,20 +329,40 @@ def _matching_variant(got, variants, rtol, atol):
 def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_hint="", extra=None):
     """Fail with the most specific message if ``got`` differs from ``expected``.
 
+    The checks, in order: ``got`` agrees with ``expected`` (:func:`close`: same shape,
+    ``|got - expected| <= atol + rtol |expected|``, NaN equal to NaN), then NaN or inf where
+    ``expected`` is finite, then the variants, then ``extra``; else the message shows both
+    arrays.
+
     Parameters
     ----------
     name : str
-    got, expected : array_like
+        The student's function, first word of the message.
+    got : array_like
+        The student's output (numeric).
+    expected : array_like
+        The reference output.
     where : str
         The input, e.g. ``"for w = [1, 2, 3]"`` (second line of the message).
     variants : sequence of (hint, callable)
         Each callable returns the output of one deliberate mistake on the same input; the
-        first that matches ``got`` names the mistake. A hint's first line is short.
+        first that matches ``got`` names the mistake. A hint's first line is short. A
+        variant that raises is skipped; the match uses at least ``rtol = 1e-6`` and
+        ``atol = 1e-8``.
+    rtol : float
+        Relative tolerance of the agreement.
+    atol : float
+        Absolute tolerance of the agreement.
     nan_hint : str
         Hint when ``got`` has NaN or inf and ``expected`` has not.
     extra : callable, optional
         ``extra(got)`` returns a hint (or "") for mistakes found by a property of the
         output (e.g. "not a rotation").
+
+    Raises
+    ------
+    AssertionError
+        ``got`` differs from ``expected``; nothing happens when they agree.
     """
     if close(got, expected, rtol, atol):
         return
@@ -288,10 +389,26 @@ def student_or_reference(student_fn, reference_fn, *probe_args, name=None):
     """The student's function if it runs on ``probe_args`` and agrees with the reference.
 
     Later cells of a notebook use this so that an unfinished exercise never blocks them.
+    It prints which function it uses: ``"using your {name}"``, or ``"using the library's
+    {name} (yours is not finished or disagrees)"``.
+
+    Parameters
+    ----------
+    student_fn : callable
+        The student's function.
+    reference_fn : callable
+        The library's version, same arguments and outputs.
+    *probe_args
+        One input for both; the outputs (arrays, or tuples and lists of them) must agree to
+        ``rtol = 1e-5``, ``atol = 1e-7``. Any exception (e.g. ``NotImplementedError`` of a
+        stub) counts as disagreement.
+    name : str, optional
+        Shown in the printed line; default ``student_fn.__name__``.
 
     Returns
     -------
     callable
+        ``student_fn`` if it agrees, else ``reference_fn``.
     """
     name = name or getattr(student_fn, "__name__", "your function")
     try:

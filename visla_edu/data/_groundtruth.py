@@ -208,9 +208,26 @@ def attach_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOL
 
     Replaces any ground truth the dataset had. The arrays are shared with ``dataset``, not copied.
 
+    Parameters
+    ----------
+    dataset : Dataset
+        The drive; not modified.
+    poses_path : str or os.PathLike
+        KITTI ``poses/NN.txt`` (12 columns, or 13 with the time first), row ``i`` = frame ``i``.
+    times_path : str or os.PathLike, optional
+        KITTI ``times.txt``, one row per pose.
+    tolerance : float
+        Seconds allowed between the times and ``time_stamps - time_stamps[0]``.
+
     Returns
     -------
     Dataset
+        ``ground_truth.world_T_imu`` (n, 4, 4) for frames ``0 .. n - 1``, ``n <= T``.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError, TypeError
+        As :func:`load_ground_truth`.
     """
     truth = load_ground_truth(dataset, poses_path, times_path, tolerance)
     return dataclasses.replace(dataset, ground_truth=truth)
@@ -224,9 +241,22 @@ def attach_registered_ground_truth(dataset):
     poses file is in the folder of ``dataset.source`` (times checked when that file is there
     too). Datasets that already have ground truth, or none registered, come back unchanged.
 
+    Parameters
+    ----------
+    dataset : Dataset
+        A loaded drive: its ``name`` picks the registry entry and ``source`` (the npz path) the
+        folder to look in. Not modified; one without a ``source`` (e.g. simulated) is returned as is.
+
     Returns
     -------
     Dataset
+        ``dataset`` itself, or a copy with ``ground_truth`` (:func:`attach_ground_truth`).
+
+    Raises
+    ------
+    PermissionError, ValueError
+        The registered files are there but not readable, or do not fit the drive (as
+        :func:`load_ground_truth`).
     """
     if dataset.ground_truth is not None or not dataset.source:
         return dataset

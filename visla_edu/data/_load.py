@@ -69,9 +69,20 @@ def input_files(name_or_path, data_dir=None):
 
     Lets a caller refuse to write over an input before loading anything.
 
+    Parameters
+    ----------
+    name_or_path : str or os.PathLike
+        As in :func:`load`. A relative path counts both as given and under the data
+        directory; a course name gives ``<data dir>/<name>.npz`` (and for ``"10"`` the
+        stand-in's inputs, ``10_imu_only.npz`` and ``03.npz``); anything else gives no files.
+    data_dir : str or os.PathLike, optional
+        Folder of the course files, see :func:`~visla_edu.data.data_dir`.
+
     Returns
     -------
     list of pathlib.Path
+        The candidates that exist, as built (not resolved), then every registered KITTI
+        ground-truth file in the folder of each of them.
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
         given = Path(name_or_path).expanduser()

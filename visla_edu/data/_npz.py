@@ -124,7 +124,24 @@ def read_arrays(path, keys):
 
 
 def file_sha256(path, block=2**20):
-    """Hex sha256 of a file, read in blocks of ``block`` bytes."""
+    """Hex sha256 of a file, read in blocks of ``block`` bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    block : int
+        Bytes read at a time (1 MiB by default), so memory stays bounded for any file size.
+
+    Returns
+    -------
+    str
+        64 lowercase hex digits (what :func:`~visla_edu.data._registry.identify` compares).
+
+    Raises
+    ------
+    OSError
+        The file cannot be opened or read (e.g. ``FileNotFoundError``, ``PermissionError``).
+    """
     digest = hashlib.sha256()
     with open(path, "rb") as f:
         while chunk := f.read(block):
@@ -196,7 +213,18 @@ def _reject_unexpected(members, fmt, path):
 
 
 def time_major(arr):
-    """``(k, T)`` file layout -> ``(T, k)`` float64, C-contiguous."""
+    """``(k, T)`` file layout -> ``(T, k)`` float64, C-contiguous.
+
+    Parameters
+    ----------
+    arr : array_like, shape (k, T)
+        Rows of the course file, e.g. ``linear_velocity`` (3, T).
+
+    Returns
+    -------
+    ndarray, shape (T, k)
+        The transpose as float64; a copy unless ``arr.T`` already is C-contiguous float64.
+    """
     return np.ascontiguousarray(arr.T, dtype=float)
 
 

@@ -131,7 +131,19 @@ def check_velocities(linear, angular, keys, path):
 
 
 def magnitude(vectors):
-    """Euclidean norms of ``vectors`` (..., 3) without overflow (1e200 stays 1e200, not inf)."""
+    """Euclidean norms of ``vectors`` (..., 3) without overflow (1e200 stays 1e200, not inf).
+
+    ``|v| = hypot(hypot(v1, v2), v3)``.
+
+    Parameters
+    ----------
+    vectors : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (...)
+        The norms (a numpy float for one vector).
+    """
     v = np.asarray(vectors, dtype=float)
     return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
 

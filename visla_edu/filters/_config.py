@@ -195,6 +195,21 @@ class FilterConfig:
         calibration : object
             Has the attributes of :data:`AUTO_FIELDS` (e.g. a
             :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag.
+            Only the attributes of the settings that are ``"auto"`` are read.
+
+        Returns
+        -------
+        FilterConfig
+            A new config (``self`` is not changed); settings that were not ``"auto"`` are kept,
+            so :attr:`resolved` is True. ``extrinsic_correction`` is not one of
+            :data:`AUTO_FIELDS` and stays as it was.
+
+        Raises
+        ------
+        ValueError
+            A calibration value outside the setting's declared range.
+        AttributeError
+            ``calibration`` lacks an attribute that is needed.
         """
         values = {name: getattr(calibration, name) for name in AUTO_FIELDS if getattr(self, name) == AUTO}
         return replace(self, **values)

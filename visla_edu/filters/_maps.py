@@ -27,6 +27,30 @@ class DeadReckoning(_Filter):
     """IMU prediction only: ``mu <- mu exp(tau u)``, ``Sigma <- F Sigma F^T + W``.
 
     Its pose, with a 6x6 covariance of its own, is also the pose of mapping and VIO.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+        The drive: time stamps, IMU twists and observations.
+    camera : visla_edu.camera.StereoCamera
+        With the calibration to use (after any extrinsic correction).
+    config : visla_edu.filters.FilterConfig
+        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`). Reads
+        the IMU settings (``sigma_linear_velocity``, ``sigma_angular_velocity``, ``imu_lag``)
+        and ``initial_pose_sigma``.
+
+    Attributes
+    ----------
+    pose_cov : ndarray, shape (6, 6)
+        Covariance of the pose's right perturbation ``[v; w]``, ``initial_pose_sigma^2 I`` at
+        the start.
+    t, world_T_imu, landmarks, landmark_cov, record_landmarks
+        Shared by every mode (see :class:`visla_edu.filters._base._Filter`); no landmarks here.
+
+    Raises
+    ------
+    ValueError
+        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
     """
 
     def __init__(self, dataset, camera, config):
@@ -132,6 +156,37 @@ class LandmarkMapping(_LandmarkMap):
     observation's noise becomes ``R + J_pose Q J_pose^T``, in the gate and in the update, so
     a drifting IMU widens the gate instead of rejecting the observations
     (``FilterConfig.mapping_motion_noise``; off, the poses count as exact).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+        The drive: time stamps, IMU twists and observations.
+    camera : visla_edu.camera.StereoCamera
+        With the calibration to use (after any extrinsic correction).
+    config : visla_edu.filters.FilterConfig
+        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`). Reads
+        the IMU settings as :class:`DeadReckoning` does, and the pixel noise, the gate, the
+        landmark initialisation and ``mapping_motion_noise``.
+
+    Attributes
+    ----------
+    pose_cov : ndarray, shape (6, 6)
+        The dead-reckoning pose covariance (:class:`DeadReckoning`).
+    landmarks : ndarray, shape (M, 3)
+        Landmark means in the world frame, NaN until a landmark is initialised.
+    landmark_cov : ndarray, shape (M, 3, 3)
+        Their 3x3 covariances (independent of each other and of the pose).
+    init_frame : ndarray of int, shape (M,)
+        Frame of each landmark's first sighting, -1 before it.
+    pose_history : ndarray, shape (T, 4, 4)
+    pose_cov_history : ndarray, shape (T, 6, 6)
+        Pose mean and covariance at every frame processed so far (rows of later frames are not
+        set), for the motion noise ``Q``.
+
+    Raises
+    ------
+    ValueError
+        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
     """
 
     def __init__(self, dataset, camera, config):
@@ -172,6 +227,33 @@ class VisualInertialOdometry(_LandmarkMap):
     pose and map along together (on the simulated drive that makes the trajectory error 60x
     larger; ``FilterConfig.vio_refine_landmarks`` does it for comparison). The joint filter
     (``JointSlam``) is the consistent way to refine both.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+        The drive: time stamps, IMU twists and observations.
+    camera : visla_edu.camera.StereoCamera
+        With the calibration to use (after any extrinsic correction).
+    config : visla_edu.filters.FilterConfig
+        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`). Reads
+        the IMU settings as :class:`DeadReckoning` does, and the pixel noise, the gate, the
+        landmark initialisation and ``vio_refine_landmarks``.
+
+    Attributes
+    ----------
+    pose_cov : ndarray, shape (6, 6)
+        Covariance of the pose's right perturbation ``[v; w]``, updated by the observations.
+    landmarks : ndarray, shape (M, 3)
+        Landmark means in the world frame, NaN until a landmark is initialised.
+    landmark_cov : ndarray, shape (M, 3, 3)
+        Their 3x3 covariances, including the pose's uncertainty when they were placed.
+    init_frame : ndarray of int, shape (M,)
+        Frame of each landmark's first sighting, -1 before it.
+
+    Raises
+    ------
+    ValueError
+        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
     """
 
     def _update(self, ids, z, status, z_pred):

@@ -143,6 +143,20 @@ def _record(history, round_index, cost, step_norm, accepted, damping):
 def reject_outliers(problem, world_T_imu, landmarks, probability):
     """Deactivate observations with ``s > chi2.ppf(probability, 4)``.
 
+    ``s = |h - z|^2 / sigma^2`` (:func:`~._normal.observation_errors`); ``problem.active`` is
+    cleared in place for the rejected ones.
+
+    Parameters
+    ----------
+    problem : Problem
+        Modified in place.
+    world_T_imu : ndarray, shape (T, 4, 4)
+        IMU poses in the world frame.
+    landmarks : ndarray, shape (L, 3)
+        The problem's landmarks (local order).
+    probability : float
+        Chi-square (4 dof) quantile of the threshold; 1 or more rejects nothing.
+
     Returns
     -------
     ndarray of bool, shape (N,)
@@ -161,6 +175,21 @@ def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
 
     Too far: the largest predicted disparity ``fsu b / depth`` over its active observations is
     below ``min_disparity / 2``.
+
+    Too close: an active observation with depth below ``problem.min_depth`` (or not finite).
+    Each landmark counts once, checked in that order: behind the camera, too far, too few.
+    ``problem.landmark_active`` and ``problem.active`` are cleared in place.
+
+    Parameters
+    ----------
+    problem : Problem
+        Modified in place; ``min_depth`` and ``min_disparity`` come from it.
+    world_T_imu : ndarray, shape (T, 4, 4)
+        IMU poses in the world frame.
+    landmarks : ndarray, shape (L, 3)
+        The problem's landmarks (local order).
+    min_observations : int
+        Fewest active observations an active landmark keeps.
 
     Returns
     -------
@@ -327,6 +356,12 @@ def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, confi
     Returns
     -------
     NormalEquations
+
+    Raises
+    ------
+    ValueError
+        ``world_T_imu`` is not (T, 4, 4) or not finite, ``landmarks`` is not (M, 3), or
+        ``imu_T_cam`` is not (4, 4).
     """
     config = config or SmootherConfig()
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)

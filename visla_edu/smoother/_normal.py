@@ -69,7 +69,24 @@ class Linearization:
 class Step:
     """A damped Gauss-Newton step: pose and landmark increments, predicted cost decrease, and
     the Cholesky factor of the damped reduced system it solved (its inverse approximates the
-    pose covariance at the state the step started from)."""
+    pose covariance at the state the step started from).
+
+    Made by :func:`solve_step`, applied by :func:`apply_step`.
+
+    Attributes
+    ----------
+    d_pose : ndarray, shape (n, 6)
+        Right perturbations ``[v; w]`` of the pose variables (frames ``first_var ..
+        last_frame``): ``T <- T exp(d_pose^)``.
+    d_landmark : ndarray, shape (L, 3)
+        Landmark increments in the world frame (m), ``m <- m + d_landmark``; zero for inactive
+        landmarks.
+    predicted : float
+        The cost decrease the damped linear model predicts, ``-g^T d + lambda d^T diag(H) d``
+        (the denominator of Levenberg-Marquardt's gain ratio).
+    factor : EnvelopeFactor or None
+        Cholesky factor of the reduced pose system ``S`` of the damped ``H + lambda diag(H)``.
+    """
 
     d_pose: np.ndarray
     d_landmark: np.ndarray
@@ -107,7 +124,27 @@ def _pixels(problem, q):
 
 
 def observation_errors(problem, world_T_imu, landmarks):
-    """Squared whitened reprojection errors ``s = |h - z|^2 / sigma^2`` and depths, shape (N,) each."""
+    """Squared whitened reprojection errors ``s = |h - z|^2 / sigma^2`` and depths, shape (N,) each.
+
+    ``h = Ks pi(q)`` with ``q = cam_T_imu inv(T_t) m_j``, for every observation of the
+    problem, active or not, and ``sigma`` = ``problem.sigma_pixel``.
+
+    Parameters
+    ----------
+    problem : Problem
+    world_T_imu : ndarray, shape (T, 4, 4)
+        IMU poses in the world frame, indexed by dataset frame.
+    landmarks : ndarray, shape (L, 3)
+        The problem's landmarks (local order), world frame.
+
+    Returns
+    -------
+    s : ndarray, shape (N,)
+        Squared whitened errors (chi-square with 4 dof for an inlier); observation order of
+        the problem (landmark-major).
+    depth : ndarray, shape (N,)
+        ``q_z``, the landmark's depth in the left camera (m); not positive behind it.
+    """
     _, _, q = _camera_points(problem, world_T_imu, landmarks)
     r = _pixels(problem, q) - problem.obs_z
     return (r * r).sum(axis=1) / problem.sigma_pixel**2, q[2]
@@ -382,6 +419,19 @@ def solve_step(problem, lin, damping):
 def apply_step(problem, world_T_imu, landmarks, step):
     """``T <- T exp(dp^)`` on the pose variables, ``m <- m + dm``.
 
+    Held poses (before ``problem.first_var``) and poses after ``problem.last_frame`` are copied
+    unchanged. The inputs are not modified.
+
+    Parameters
+    ----------
+    problem : Problem
+    world_T_imu : ndarray, shape (T, 4, 4)
+        IMU poses in the world frame, indexed by dataset frame.
+    landmarks : ndarray, shape (L, 3)
+        The problem's landmarks (local order).
+    step : Step
+        From :func:`solve_step`: ``d_pose`` (n, 6) and ``d_landmark`` (L, 3).
+
     Returns
     -------
     world_T_imu : ndarray, shape (T, 4, 4)
@@ -411,12 +461,25 @@ def marginals(problem, lin, landmark_covariance=True):
     factor); a landmark's is ``H_mm^{-1} + Y^T S^{-1}[span, span] Y`` with
     ``Y = H_pm H_mm^{-1}`` over the frames that see it.
 
+    Parameters
+    ----------
+    problem : Problem
+    lin : Linearization
+        At the solution (:func:`linearize`); no damping is applied.
+    landmark_covariance : bool
+        Also compute the landmark blocks; if False only the pose blocks (faster).
+
     Returns
     -------
     pose_cov : ndarray, shape (n, 6, 6)
         Right-perturbation covariances of the pose variables.
     landmark_cov : ndarray, shape (L, 3, 3) or None
-        NaN for inactive landmarks.
+        NaN for inactive landmarks; None when ``landmark_covariance`` is False.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        The reduced system is not positive definite.
     """
     L_inv = _landmark_factors(problem, lin, 0.0)
     system, _, _ = _reduced_system(problem, lin, 0.0, L_inv)
@@ -445,10 +508,20 @@ def normal_equations(problem, lin):
     For teaching (its sparsity pattern) and for checking the Schur solve; the smoother itself
     never builds it.
 
+    Parameters
+    ----------
+    problem : Problem
+        ``n`` pose variables and ``L`` landmarks; inactive observations carry zero weight and
+        an inactive landmark gets an identity block.
+    lin : Linearization
+        The blocks at the state (:func:`linearize`), undamped.
+
     Returns
     -------
     H : scipy.sparse.csr_matrix, shape (6 n + 3 L, 6 n + 3 L)
+        ``J^T W J``: pose variables first (6 columns each), then landmarks (3 each, local order).
     g : ndarray, shape (6 n + 3 L,)
+        ``J^T W r``.
     """
     n, L = problem.num_vars, problem.num_landmarks
     var = problem.obs_var()

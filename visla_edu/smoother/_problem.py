@@ -228,7 +228,24 @@ def observation_status(dataset, config, frames=None):
 
 
 def far_landmarks(dataset, usable, min_disparity):
-    """Landmarks whose usable observations all have a disparity below ``min_disparity`` px, (M,) bool."""
+    """Landmarks whose usable observations all have a disparity below ``min_disparity`` px, (M,) bool.
+
+    The disparity is ``uL - uR`` of the observed pixels.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    usable : ndarray of bool, shape (N,)
+        Observations that may be used (e.g. ``status == USED``), in the dataset's order.
+    min_disparity : float
+        Pixels.
+
+    Returns
+    -------
+    ndarray of bool, shape (M,)
+        True for a landmark with at least one usable observation, all of them below
+        ``min_disparity``; False for landmarks without any.
+    """
     disparity = np.where(usable, dataset.obs_z[:, 0] - dataset.obs_z[:, 2], -np.inf)
     best = np.full(dataset.num_landmarks, -np.inf)
     np.maximum.at(best, dataset.obs_ids, disparity)
@@ -273,5 +290,22 @@ def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):
 
 
 def rig_camera(dataset, imu_T_cam=None):
-    """The dataset's stereo rig, with ``imu_T_cam`` replaced if given (e.g. a corrected one)."""
+    """The dataset's stereo rig, with ``imu_T_cam`` replaced if given (e.g. a corrected one).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+        Gives ``K``, ``b`` and the default ``imu_T_cam``.
+    imu_T_cam : array_like, shape (4, 4), optional
+        Pose of the left camera (optical frame) in the IMU frame.
+
+    Returns
+    -------
+    StereoCamera
+
+    Raises
+    ------
+    ValueError
+        ``imu_T_cam`` is not (4, 4), or ``K`` or ``b`` is not a valid calibration.
+    """
     return StereoCamera(dataset.K, dataset.b, dataset.imu_T_cam if imu_T_cam is None else imu_T_cam)

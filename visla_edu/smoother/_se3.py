@@ -50,7 +50,25 @@ def _as_rotation_vectors(phi, name):
 
 
 def so3_right_jacobian(phi):
-    """SO(3) right Jacobian ``I - B phi^ + C phi^2``, shape (..., 3, 3), for ``phi`` (..., 3)."""
+    """SO(3) right Jacobian ``I - B phi^ + C phi^2``, shape (..., 3, 3), for ``phi`` (..., 3).
+
+    ``B = (1 - cos t) / t^2``, ``C = (t - sin t) / t^3``, ``t = |phi|`` (Taylor series below
+    :data:`visla_edu.lie.SMALL_ANGLE`); ``exp((phi + d)^) ~ exp(phi^) exp((J_r(phi) d)^)``.
+
+    Parameters
+    ----------
+    phi : array_like, shape (..., 3)
+        Rotation vectors (rad).
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+
+    Raises
+    ------
+    ValueError
+        ``phi`` does not have shape (..., 3).
+    """
     phi = _as_rotation_vectors(phi, "so3_right_jacobian")
     theta = np.linalg.norm(phi, axis=-1)
     B = _coefficient(theta, lambda t: (1 - np.cos(t)) / t**2,
@@ -62,7 +80,26 @@ def so3_right_jacobian(phi):
 
 
 def so3_right_jacobian_inv(phi):
-    """Inverse SO(3) right Jacobian ``I + phi^ / 2 + D phi^2``, shape (..., 3, 3)."""
+    """Inverse SO(3) right Jacobian ``I + phi^ / 2 + D phi^2``, shape (..., 3, 3).
+
+    ``D = 1 / t^2 - (1 + cos t) / (2 t sin t)``, ``t = |phi|`` (Taylor series below
+    :data:`visla_edu.lie.SMALL_ANGLE`); the closed form holds for ``t < pi``.
+
+    Parameters
+    ----------
+    phi : array_like, shape (..., 3)
+        Rotation vectors (rad), ``|phi| < pi``.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        The inverse of :func:`so3_right_jacobian`.
+
+    Raises
+    ------
+    ValueError
+        ``phi`` does not have shape (..., 3).
+    """
     phi = _as_rotation_vectors(phi, "so3_right_jacobian_inv")
     theta = np.linalg.norm(phi, axis=-1)
     D = _coefficient(theta, lambda t: 1 / t**2 - (1 + np.cos(t)) / (2 * t * np.sin(t)),
