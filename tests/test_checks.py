@@ -579,3 +579,23 @@ def test_student_or_reference(capsys):
     same = lambda x: (x.copy(), np.outer(x, x))  # noqa: E731
     assert checks.student_or_reference(same, pair, np.ones(3)) is same
     assert checks.student_or_reference(lambda x: (x, x), pair, np.ones(3)) is pair
+
+
+def test_the_reference_fallbacks_agree_with_independent_answers():
+    """checks.reference_* (the notebooks' fallbacks while an exercise is unfinished) are correct."""
+    rng = np.random.default_rng(5)
+    for M, stride in [(5105, 1), (13289, 20), (0, 1), (7, 3)]:
+        assert checks.reference_dense_covariance_bytes(M, stride) == A.dense_covariance_bytes(M, stride)
+    A_p = rng.normal(size=(12, 12))
+    H_pm = rng.normal(size=(12, 9))
+    blocks = np.stack([B @ B.T + 3 * np.eye(3) for B in rng.normal(size=(3, 3, 3))])
+    g_p, g_m = rng.normal(size=12), rng.normal(size=9)
+    for got, expected in zip(checks.reference_schur_reduce(A_p @ A_p.T, H_pm, blocks, g_p, g_m),
+                             A.schur_reduce(A_p @ A_p.T, H_pm, blocks, g_p, g_m)):
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-10)
+    truth = lie.se3_exp(rng.normal(size=6))
+    p_body = rng.normal(scale=5.0, size=(10, 3))
+    q_world = p_body @ truth[:3, :3].T + truth[:3, 3]
+    start = truth @ lie.se3_exp(0.1 * rng.normal(size=6))
+    np.testing.assert_allclose(checks.reference_gauss_newton_step(start, p_body, q_world),
+                               A.gauss_newton_step(start, p_body, q_world), atol=1e-9)
