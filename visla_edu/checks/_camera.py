@@ -24,7 +24,34 @@ def _calibrations(generator, hidden=False):
 
 @exercise_check
 def check_stereo_matrix(stereo_matrix, hidden=False):
-    """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``."""
+    """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``.
+
+    Compares with :func:`visla_edu.camera.stereo_matrix` (default tolerances of
+    :func:`~visla_edu.checks._core.compare`) for 4 calibrations: the simulator's rig, a
+    KITTI-like one and 2 random ones (hidden: 4 random ones). Recognises a flipped or
+    unscaled baseline term and a transposed ``Ks``. Hides ``camera.stereo_matrix``.
+
+    Parameters
+    ----------
+    stereo_matrix : callable
+        The student's function: intrinsics ``K`` (3, 3) and baseline ``b`` (m) to the stereo
+        matrix ``Ks`` (4, 4).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "stereo_matrix"
     call = student(stereo_matrix, name, hide=[cam.stereo_matrix])
     for K, b in _calibrations(rng(hidden), hidden):
@@ -61,7 +88,36 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
 
 @exercise_check
 def check_project(project, hidden=False):
-    """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``."""
+    """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``.
+
+    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), 12
+    points in view at depths of 2 to 60 m (up to 300 m at the fourth pose; hidden: a single
+    point at the second); compares with :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``,
+    ``atol=1e-6`` px). Recognises ``world_T_imu`` used without its inverse, ``imu_T_cam`` for
+    ``cam_T_imu``, a division by ``q4`` and a transposed rotation. Hides
+    ``StereoCamera.predict``, ``predict_with_jacobians`` and ``points_in_camera``.
+
+    Parameters
+    ----------
+    project : callable
+        The student's function: stereo matrix ``Ks`` (4, 4), ``cam_T_imu`` (4, 4),
+        ``world_T_imu`` (4, 4) and world points (M, 3) to pixels ``[uL, vL, uR, vR]`` (M, 4).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "project"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam
@@ -81,7 +137,35 @@ def check_project(project, hidden=False):
 
 @exercise_check
 def check_triangulate(triangulate, hidden=False):
-    """Exercise 02: ``triangulate(z (M, 4), K, b) -> (M, 3)`` points in the left camera (disparity form)."""
+    """Exercise 02: ``triangulate(z (M, 4), K, b) -> (M, 3)`` points in the left camera (disparity form).
+
+    For the calibrations of :func:`check_stereo_matrix`, 10 points at depths of 1.5 to 120 m
+    (hidden: up to 400 m) whose exact pixels are given; compares with the true points
+    (``rtol=atol=1e-6``). Recognises a flipped disparity, a wrong focal length or unit for the
+    depth, x and y not scaled by the depth, and ``fsu`` used for y. Hides
+    ``camera.triangulate_disparity`` and ``camera.triangulate_bearing``.
+
+    Parameters
+    ----------
+    triangulate : callable
+        The student's function: pixels ``z`` (M, 4), intrinsics ``K`` (3, 3) and baseline ``b`` (m)
+        to points in the left camera frame (M, 3).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "triangulate"
     generator = rng(hidden)
     call = student(triangulate, name, hide=[cam.triangulate_disparity, cam.triangulate_bearing])
@@ -121,7 +205,35 @@ def _init_variants(p_cam, imu_T_cam, T):
 
 @exercise_check
 def check_init_landmark(init_landmark, hidden=False):
-    """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point."""
+    """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point.
+
+    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), one
+    landmark in view at 2 to 60 m (hidden: up to 200 m) observed without noise; compares with
+    the true landmark (``rtol=atol=1e-6``). Recognises a point left in the camera or IMU frame,
+    ``cam_T_imu`` or ``inv(world_T_imu)`` used, and a transposed rotation. Hides
+    ``StereoCamera.triangulate`` and ``ekf.initialize_landmarks``.
+
+    Parameters
+    ----------
+    init_landmark : callable
+        The student's function: one observation ``z`` (4,), ``K`` (3, 3), ``b`` (m),
+        ``imu_T_cam`` (4, 4) and ``world_T_imu`` (4, 4) to the landmark in the world frame (3,).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "init_landmark"
     generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
     call = student(init_landmark, name, hide=[cam.StereoCamera.triangulate, ekf.initialize_landmarks])

@@ -171,6 +171,42 @@ def check_capstone_predict(predict, hidden=False):
     """Exercise 09.1: ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W) -> (world_T_imu, Sigma)``.
 
     Then the VIO loop (``parts.pose_update`` with the student's prediction) on a simulated drive.
+
+    First on random states with 0 and 2 landmarks (hidden: 0, 3 and 1), a random ``u``,
+    ``tau = 0.1`` s and a random diagonal ``W``: the result must be a tuple, and is compared
+    with ``(world_T_imu @ parts.se3_exp(tau u), Sigma')`` where ``Sigma'`` has the pose rows
+    and columns moved by ``F = parts.pose_transition(u, tau)`` and ``W`` added to the pose
+    block (``rtol=1e-9``; ``atol=1e-9`` for the pose, 1e-12 for the covariance). Recognises the
+    step on the left, a twist not scaled by ``tau``, a missing ``W``, the cross-covariance left
+    alone and ``F`` on the wrong side. The function must call ``parts.pose_transition`` and
+    ``parts.se3_exp``. Then :func:`visla_edu.capstone.run_capstone` (VIO) on ``sim-tiny``
+    (hidden: a ``"tiny"`` drive simulated with another seed) with the student's ``predict``:
+    every position must stay within :data:`LOOP_TOLERANCE` of the same loop with the
+    reference assembly. Hides the library's ``motion.predict_pose``,
+    ``predict_pose_covariance``, ``predict_joint_covariance``, ``imu_step`` and the
+    reference's ``predict``.
+
+    Parameters
+    ----------
+    predict : callable
+        The student's function: ``parts``, the pose ``world_T_imu`` (4, 4), the joint covariance
+        ``Sigma`` (D, D), the twist ``u = [v; w]`` (6,), the step ``tau`` (s) and the motion noise
+        ``W`` (6, 6) to the predicted pair.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "predict"
     generator, spy = rng(hidden), _Spy()
@@ -239,7 +275,43 @@ def _pose_block(Sigma, G):
 @exercise_check
 def check_capstone_landmarks(add_landmarks, hidden=False):
     """Exercise 09.2: ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
-    -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``."""
+    -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``.
+
+    With the simulator's rig, for 3 states (``n`` landmarks in the state, ``k`` new ones):
+    (0, 2), (3, 1) and (2, 3) (hidden: (0, 1), (4, 3) and (1, 2)), the new observations with
+    0.5 px noise. The result must be a tuple; the means must be ``parts.init_landmark`` of
+    each observation and the covariance ``Sigma`` augmented with the new block
+    ``G Sigma_pp G^T + C_pixels`` (one (3k, 3k) block) and the cross-covariance ``G Sigma_px``,
+    where ``G = (world_T_imu @ parts.odot(s))[:3]`` for the new point ``s`` in the IMU frame
+    (``rtol=1e-8``; ``atol=1e-8`` for the means, 1e-12 for the covariance). Recognises the
+    means not triangulated at ``world_T_imu``, a missing cross-covariance, independent new
+    landmarks, the left perturbation's or an unrotated ``G``, and a missing pixel or pose
+    part. The function must call ``parts.init_landmark`` and ``parts.odot``. No loop is run.
+    Hides ``ekf.initialize_landmarks`` and the reference's helpers.
+
+    Parameters
+    ----------
+    add_landmarks : callable
+        The student's function: ``parts``, ``world_T_imu`` (4, 4), the joint covariance
+        ``Sigma`` (D, D), the new observations ``z`` (k, 4), ``K`` (3, 3), ``b`` (m),
+        ``imu_T_cam`` (4, 4) and the pixel part of the new covariances ``C_pixels`` (k, 3, 3) to
+        the new means and the augmented covariance.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "add_landmarks"
     generator, spy = rng(hidden), _Spy()
     call = student(add_landmarks, name, hide=[ekf.initialize_landmarks, _reference_add_landmarks,
@@ -286,6 +358,44 @@ def check_capstone_slam(slam_update, hidden=False):
     cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``.
 
     Then the joint SLAM loop with it, against the library's ``slam_error="right"`` filter.
+
+    With the simulator's rig, for states of 4 landmarks with 2 observed and 6 with all 6
+    observed (hidden: 2 of 5, 1 of 1 and 5 of 8), ``noise_var = 4``. The result must be a tuple
+    of three; compared with the joint EKF update through ``parts`` (``H`` from
+    ``parts.slam_jacobian``, ``K = Sigma H^T S^-1``, the pose corrected on the right by
+    ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - K H) Sigma``
+    symmetrised): pose ``rtol=1e-7``, ``atol=1e-8``; covariance ``rtol=1e-6``, ``atol=1e-10``;
+    landmarks ``rtol=1e-7``, ``atol=1e-8``. Recognises the correction on the left, its sign, a
+    covariance that does not change, and the landmarks left in place. The function must
+    call ``parts.project``, ``parts.pose_jacobian``, ``parts.landmark_jacobian``,
+    ``parts.slam_jacobian`` and ``parts.se3_exp``. Then
+    :func:`visla_edu.capstone.run_capstone` (joint SLAM) on the drive of
+    :func:`check_capstone_predict` must stay within :data:`LOOP_TOLERANCE` of
+    ``run.run_filter(ds, "slam", config)`` with ``slam_error="right"``. Hides the library's
+    joint and pose updates, the camera's Jacobians and the reference's update.
+
+    Parameters
+    ----------
+    slam_update : callable
+        The student's function: ``parts``, ``world_T_imu`` (4, 4), the joint covariance
+        ``Sigma`` (6 + 3n, 6 + 3n), the landmark means in slot order ``p_active`` (n, 3), the
+        slots of the observed landmarks (k,), their observations ``z`` (k, 4), ``Ks`` (4, 4),
+        ``cam_T_imu`` (4, 4) and the pixel noise variance to the updated triple.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "slam_update"
     generator, spy = rng(hidden), _Spy()
@@ -336,6 +446,22 @@ def capstone_steps(predict, add_landmarks, slam_update):
 
     A function is used if it runs and agrees with the reference on a small case (one line is
     printed per function), so the notebook's later cells run before every exercise is done.
+
+    Each function is called once, with the library's parts and nothing hidden, on a fixed
+    probe (seed 9: a state of 3 landmarks, 2 of them observed, and 2 new observations); it
+    agrees when each of its outputs is ``numpy.allclose`` to the reference's (``rtol=1e-6``,
+    ``atol=1e-8``). Any exception counts as disagreement.
+
+    Parameters
+    ----------
+    predict, add_landmarks, slam_update : callable
+        The student's assembly functions, with the signatures of
+        :class:`visla_edu.capstone.Steps`.
+
+    Returns
+    -------
+    visla_edu.capstone.Steps
+        Each student function that agrees, else the checks' reference assembly for it.
     """
     generator, library = np.random.default_rng(9), capstone.library_parts()
     c, T, Sigma, p_active, slots, z = _slam_case(generator, 3, 2)

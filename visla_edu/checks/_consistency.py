@@ -11,7 +11,36 @@ __all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds"]
 
 @exercise_check
 def check_motion_noise(motion_noise, hidden=False):
-    """Exercise 07: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``."""
+    """Exercise 07: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``.
+
+    ``W = tau^2 diag(sigma_v^2, sigma_v^2, sigma_v^2, sigma_w^2, sigma_w^2, sigma_w^2)``:
+    compares with :func:`visla_edu.motion.motion_noise` (``rtol=1e-9``, ``atol=1e-15``) for 3
+    fixed ``(tau, sigma_v, sigma_w)`` (hidden: 4 edge cases, zero sigmas among them, and 3
+    random ones), each sigma one number. Recognises the angular variances first, a missing
+    ``tau^2``, ``tau`` instead of ``tau^2``, and standard deviations instead of variances.
+    Hides ``motion.motion_noise``.
+
+    Parameters
+    ----------
+    motion_noise : callable
+        The student's function: the step ``tau`` (s) and the velocity noise ``sigma_v`` (m/s)
+        and ``sigma_w`` (rad/s) to the twist noise covariance (6, 6).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "motion_noise"
     cases = [(0.1, 0.5, 0.02), (0.104, 1.0, 0.05), (0.5, 0.2, 0.3)]
     if hidden:  # edge cases, then cases drawn from the teacher's seed
@@ -37,7 +66,34 @@ def check_motion_noise(motion_noise, hidden=False):
 
 @exercise_check
 def check_nees(nees, hidden=False):
-    """Exercise 07: ``nees(error (n,), cov (n, n)) -> float`` = ``e^T cov^-1 e``."""
+    """Exercise 07: ``nees(error (n,), cov (n, n)) -> float`` = ``e^T cov^-1 e``.
+
+    For random errors of dimension 3, 6 and 6 (hidden: 1, 4, 6 and 15) drawn from random
+    covariances; the result must be one number (an array of one entry fails). Compares with
+    :func:`visla_edu.metrics.nees` (``rtol=1e-7``). Recognises ``e^T cov e``, the square root,
+    a division by ``n`` and ``e^T e``. Hides ``metrics.nees`` and ``ekf.mahalanobis_squared``.
+
+    Parameters
+    ----------
+    nees : callable
+        The student's function: an error ``e`` (n,) and its covariance (n, n) to the normalised
+        estimation error squared.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "nees"
     generator = rng(hidden)
     call = student(nees, name, hide=[metrics.nees, ekf.mahalanobis_squared])
@@ -60,7 +116,35 @@ def check_nees(nees, hidden=False):
 
 @exercise_check
 def check_average_nees_bounds(average_nees_bounds, hidden=False):
-    """Exercise 07: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES."""
+    """Exercise 07: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES.
+
+    The two-sided chi-square quantiles of ``n dof`` degrees of freedom at ``(1 - p) / 2`` and
+    ``1 - (1 - p) / 2``, divided by ``n``: compares (``rtol=1e-6``) for 4 fixed ``(dof, n, p)``
+    (hidden: 3 edge cases and 3 random ones); the result must have 2 entries. Recognises the
+    quantiles of ``dof`` degrees of freedom, quantiles not divided by ``n``, and a one-sided
+    split. Hides ``metrics.average_nees_bounds`` and ``metrics.chi2_bounds``.
+
+    Parameters
+    ----------
+    average_nees_bounds : callable
+        The student's function: the degrees of freedom of one NEES, the number ``n`` of values
+        averaged and the probability ``p`` to the bounds ``(lo, hi)``.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "average_nees_bounds"
     cases = [(6, 1, 0.95), (6, 50, 0.95), (4, 200, 0.99), (3, 10, 0.9)]
     if hidden:  # edge cases, then cases drawn from the teacher's seed

@@ -43,6 +43,20 @@ def exercise_check(check):
     A failure found by a comparison is re-raised from the check itself, so a notebook (and
     ``nbgrader validate``) shows the student's cell and the message, not the lines of the
     checks. A crash of the student's code keeps its chained traceback (where it crashed).
+
+    Parameters
+    ----------
+    check : callable
+        ``check(fn, hidden=False)``, raising ``AssertionError`` or ``NotImplementedError`` when
+        the student's function ``fn`` fails.
+
+    Returns
+    -------
+    callable
+        ``run(fn, hidden=False)`` with ``check``'s name and docstring (:func:`functools.wraps`):
+        it returns what ``check`` returns; an ``AssertionError`` or ``NotImplementedError``
+        without a ``__cause__`` is raised again as a new exception of the same type and message
+        (``from None``); one with a cause, and any other exception, propagates unchanged.
     """
 
     @functools.wraps(check)

@@ -68,7 +68,38 @@ def _pair(out, name, what):
 
 @exercise_check
 def check_landmark_update(landmark_update, hidden=False):
-    """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``."""
+    """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``.
+
+    With the simulator's rig, 4 cases (hidden: 6): a random pose, a landmark at 4 to 40 m
+    observed with 2 px noise per coordinate, a prior mean 1 m off (normal) and a random prior
+    covariance; ``noise_var = 4`` (hidden: 1). Compares with :func:`visla_edu.ekf.landmark_update`
+    (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``, ``atol=1e-8``). Recognises a flipped
+    innovation, a mean or covariance that does not change, ``(I + K H) Sigma``, the pixel noise
+    missing from ``S`` and transposed rotations. Hides ``ekf.landmark_update``,
+    ``ekf.joint_update``, ``ekf.cholesky_update`` and ``kalman.update``.
+
+    Parameters
+    ----------
+    landmark_update : callable
+        The student's function: landmark mean ``m`` (3,) and covariance ``Sigma`` (3, 3), one
+        observation ``z`` (4,), ``world_T_imu`` (4, 4), ``Ks`` (4, 4), ``cam_T_imu`` (4, 4) and the
+        pixel noise variance to the tuple ``(m_new (3,), Sigma_new (3, 3))``.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam
@@ -127,7 +158,42 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
 
 @exercise_check
 def check_pose_update(pose_update, hidden=False):
-    """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``."""
+    """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``.
+
+    With the simulator's rig, 3 cases (hidden: 5, the first with a single observation): 8
+    landmarks in view at 4 to 40 m observed with 1 px noise, a random pose covariance and a
+    mean drawn from it around the true pose; ``noise_var = 4``. Compares with the EKF update
+    written out in the checks (``H`` stacked over the observations,
+    ``K = Sigma H^T (H Sigma H^T + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``;
+    mean ``rtol=1e-6``, ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the
+    correction applied on the left, its sign, a pose that does not move, the twist order,
+    transposed rotations, a result that is not a pose and a covariance that does not change.
+    Hides ``ekf.pose_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
+    ``kalman.update``.
+
+    Parameters
+    ----------
+    pose_update : callable
+        The student's function: pose mean ``mu`` (4, 4) and covariance ``Sigma`` (6, 6) of the
+        right perturbation ``[v; w]``, observations ``z`` (k, 4) of the known landmarks
+        ``p_world`` (k, 3), ``Ks``, ``cam_T_imu`` and the pixel noise variance to the tuple
+        ``(mu_new (4, 4), Sigma_new (6, 6))``.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam
@@ -167,7 +233,35 @@ def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=
 
 @exercise_check
 def check_slam_jacobian(slam_jacobian, hidden=False):
-    """Exercise 06: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``."""
+    """Exercise 06: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``.
+
+    For random blocks and 3 fixed ``(n, slots)`` cases (hidden: 3 others); ``H`` must equal
+    exactly the matrix with rows ``4 i .. 4 i + 3`` holding ``J_pose[i]`` in columns 0-5 and
+    ``J_landmark[i]`` in columns ``6 + 3 slots[i] .. 6 + 3 slots[i] + 2``, zero elsewhere.
+    Recognises the state ordered ``[landmarks; pose]`` and landmark columns without the
+    offset 6. Hides ``ekf.slot_columns``.
+
+    Parameters
+    ----------
+    slam_jacobian : callable
+        The student's function: pose and landmark Jacobians of ``k`` observations, their slots in
+        the state and the number ``n`` of landmarks in the state to the joint Jacobian.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "slam_jacobian"
     generator = rng(hidden)
     call = student(slam_jacobian, name, hide=[ekf.slot_columns])
@@ -195,6 +289,22 @@ def reference_dense_covariance_bytes(num_landmarks, stride=1):
 
     ``(6 + 3 n)^2 * 8`` with ``n = ceil(num_landmarks / stride)``: notebook 06's fallback when
     the exercise is not finished (hidden while its check runs the student's version).
+
+    Parameters
+    ----------
+    num_landmarks : int
+        M, the landmarks of the drive.
+    stride : int
+        Landmarks ``0, stride, 2 stride, ...`` are kept (positive).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        ``stride`` is 0.
     """
     n = len(range(0, num_landmarks, stride))
     return (_POSE_DIM + 3 * n) ** 2 * 8
@@ -203,7 +313,36 @@ def reference_dense_covariance_bytes(num_landmarks, stride=1):
 
 @exercise_check
 def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
-    """Exercise 06: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64."""
+    """Exercise 06: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64.
+
+    For 6 fixed ``(num_landmarks, stride)`` cases (hidden: 6 edge cases, 0 landmarks among
+    them, and 3 random ones); compares with :func:`reference_dense_covariance_bytes` to within
+    half a byte. Recognises the pose's 6 dimensions left out, 4-byte floats, a dimension not
+    squared, ``M // stride`` landmarks and one coordinate per landmark. Hides
+    :func:`reference_dense_covariance_bytes`. The success line prints the sizes for 5105 and
+    13289 landmarks.
+
+    Parameters
+    ----------
+    dense_covariance_bytes : callable
+        The student's function: the number of landmarks and the stride to the bytes of the dense
+        joint covariance.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "dense_covariance_bytes"
     cases = [(5105, 1), (13289, 1), (5105, 10), (13289, 20), (7, 3), (1, 1)]
     if hidden:  # edge cases, then cases drawn from the teacher's seed
@@ -235,7 +374,34 @@ def _marginal_cases(hidden):
 
 @exercise_check
 def check_marginalize(marginalize, hidden=False):
-    """Exercise 06: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``."""
+    """Exercise 06: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``.
+
+    For 3 random covariances and index sets (hidden: 4); compares with
+    ``Sigma[np.ix_(keep, keep)]`` (default tolerances of
+    :func:`~visla_edu.checks._core.compare`). Recognises the Schur complement (the conditional,
+    not the marginal) and a detour through the information matrix. Hides nothing.
+
+    Parameters
+    ----------
+    marginalize : callable
+        The student's function: a covariance (D, D) and the indices to keep (k,) to the marginal
+        covariance (k, k).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "marginalize"
     generator = rng(hidden)
     call = student(marginalize, name)

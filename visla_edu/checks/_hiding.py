@@ -31,14 +31,30 @@ MAX_FIRST_LINE = 79
 
 
 class LibraryFunctionHidden(RuntimeError):
-    """Raised by a library function that a check hides while it runs the student's code."""
+    """Raised by a library function that a check hides while it runs the student's code.
+
+    :func:`hide` swaps the hidden function's ``__code__`` for a stub that raises this with the
+    text of :func:`hidden_message`; the checks turn it into an ``AssertionError`` whose first
+    line asks the student to write their own version.
+    """
 
 
 def label(fn):
     """Short dotted name of a function: ``lie.hat``, ``camera.StereoCamera.predict``, ``scipy.linalg.expm``.
 
     visla_edu's own functions drop the package name; others (scipy's) keep it. Private module
-    names are left out.
+    names (a leading underscore) are left out.
+
+    Parameters
+    ----------
+    fn : function
+        Anything with ``__module__`` and ``__qualname__``.
+
+    Returns
+    -------
+    str
+        The module path without ``visla_edu`` and without private parts, then ``fn.__qualname__``,
+        joined by dots.
     """
     package, *rest = fn.__module__.split(".")
     parts = ([] if package == "visla_edu" else [package]) + [p for p in rest if not p.startswith("_")]
@@ -46,7 +62,29 @@ def label(fn):
 
 
 def hidden_message(exercise, fn):
-    """The error text of a hidden function: a short first line, the details after it."""
+    """The error text of a hidden function: a short first line, the details after it.
+
+    Parameters
+    ----------
+    exercise : str
+        The student's function the check runs (e.g. ``"hat"``).
+    fn : function
+        The hidden library function, named by :func:`label`.
+
+    Returns
+    -------
+    str
+        First line: the first of four phrasings, from the most to the least explicit ("write
+        your own {exercise}; the library's {label} is not available inside this check", ...,
+        "write your own {exercise}: the library's version is hidden here"), that has at most
+        :data:`MAX_FIRST_LINE` characters; second line: why the check hides it.
+
+    Raises
+    ------
+    StopIteration
+        None of the four fits (possible only for an ``exercise`` name of more than 26
+        characters with a long label).
+    """
     name = label(fn)
     first = next(line for line in (
         f"write your own {exercise}; the library's {name} is not available inside this check",
@@ -173,11 +211,25 @@ def _restore_changes(snapshot):
 def guard(functions, exercise):
     """Verify the library, hide ``functions``, run the block, restore and verify again.
 
+    Before the block every ``visla_edu`` module but the checks must hold only the package's own
+    functions (:func:`verify_library`), and the namespaces of all loaded ``visla_edu`` modules
+    (the checks included) are copied. Within the block ``functions`` are hidden (:func:`hide`).
+    After it, whatever the block reassigned in those namespaces (or in ``sys.modules``) is put
+    back, and the library is verified again.
+
+    Parameters
+    ----------
+    functions : iterable of function
+        The library functions to hide.
+    exercise : str
+        The student's function, named in the messages.
+
     Raises
     ------
     AssertionError
-        If the library was replaced before the block, or the block reassigned an attribute of a
-        ``visla_edu`` module (put back first) or replaced library code.
+        The library was replaced before the block (or after it, when the block completed), or
+        the block reassigned an attribute of a ``visla_edu`` module (put back first; this error
+        replaces any exception of the block).
     """
     modules = _visla_modules()
     library = [module for name, module in modules if not name.startswith("visla_edu.checks")]

@@ -23,7 +23,35 @@ reference_numerical_jacobian = numdiff.central_jacobian
 
 @exercise_check
 def check_projection_jacobian(projection_jacobian, hidden=False):
-    """Exercise 03: ``projection_jacobian(q (4,)) -> dpi/dq (4, 4)``."""
+    """Exercise 03: ``projection_jacobian(q (4,)) -> dpi/dq (4, 4)``.
+
+    At 6 random points ``q = [x, y, z, 1]`` with depths ``z`` of 1 to 50 (hidden: also a point on
+    the optical axis at depth 1e-3, one at depth 500 and one with ``q4 = 0.5``); compares with
+    :func:`visla_edu.camera.projection_jacobian` (``rtol=1e-7``, ``atol=1e-12``). Recognises the
+    transpose, a missing ``1/q3`` factor, a flipped third column and a wrong last row. Hides
+    ``camera.projection_jacobian``.
+
+    Parameters
+    ----------
+    projection_jacobian : callable
+        The student's function: a homogeneous camera-frame point ``q`` (4,) to the Jacobian of
+        ``pi(q) = q / q3`` (4, 4).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "projection_jacobian"
     generator = rng(hidden)
     call = student(projection_jacobian, name, hide=[cam.projection_jacobian])
@@ -46,7 +74,33 @@ def check_projection_jacobian(projection_jacobian, hidden=False):
 
 @exercise_check
 def check_odot(odot, hidden=False):
-    """Exercise 03: ``odot(s (4,)) -> (4, 6)`` with ``twist_hat(u) @ s == odot(s) @ u``."""
+    """Exercise 03: ``odot(s (4,)) -> (4, 6)`` with ``twist_hat(u) @ s == odot(s) @ u``.
+
+    At 5 random points ``s = [p, 1]`` (``p`` normal with standard deviation 10; hidden: also
+    the origin and a point of size about 1e4); compares with :func:`visla_edu.lie.odot` (default
+    tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the sign of the hat
+    block and the two blocks swapped. Hides ``lie.odot``.
+
+    Parameters
+    ----------
+    odot : callable
+        The student's function: a homogeneous point ``s`` (4,) to ``[[I, -hat(s)], [0, 0]]`` (4, 6).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "odot"
     generator = rng(hidden)
     call = student(odot, name, hide=[lie.odot])
@@ -98,7 +152,35 @@ def _jacobian_cases(generator, hidden):
 
 @exercise_check
 def check_numerical_jacobian(numerical_jacobian, hidden=False):
-    """Exercise 03: ``numerical_jacobian(f, x, eps=1e-6) -> (m, n)`` by central differences."""
+    """Exercise 03: ``numerical_jacobian(f, x, eps=1e-6) -> (m, n)`` by central differences.
+
+    Called as ``numerical_jacobian(f, x)`` (the student's default ``eps``) for a linear map from
+    3 to 4 dimensions and a curved map from 2 to 2 (hidden: a map with one output, one with one
+    input, and the linear map); compares with the exact Jacobians (``rtol=atol=1e-7``).
+    Recognises the transpose, a factor of 2 or 1/2, and forward differences. Hides
+    ``numdiff.central_jacobian``.
+
+    Parameters
+    ----------
+    numerical_jacobian : callable
+        The student's function: a function ``f`` from (n,) to (m,), a point ``x`` (n,) and a step
+        ``eps`` to the Jacobian of ``f`` at ``x`` (m, n).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "numerical_jacobian"
     call = student(numerical_jacobian, name, hide=[numdiff.central_jacobian])
     for f, x, exact in _jacobian_cases(rng(hidden), hidden):
@@ -143,7 +225,38 @@ def _pose_jacobian_variants(camera, mu, m, ref):
 
 @exercise_check
 def check_pose_jacobian(pose_jacobian, hidden=False):
-    """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``."""
+    """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``.
+
+    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), one landmark
+    in view at 2 to 60 m (hidden: up to 200 m); compares with
+    :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``, ``atol=1e-8``), i.e.
+    ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``. Recognises a missing minus sign, the columns
+    ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point, and
+    transposed rotations. Hides ``StereoCamera.jacobian_pose`` and
+    ``StereoCamera.predict_with_jacobians``.
+
+    Parameters
+    ----------
+    pose_jacobian : callable
+        The student's function: stereo matrix ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), the pose mean
+        ``mu`` = ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
+        pixels with respect to the right perturbation ``[v; w]`` (4, 6).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam
@@ -182,7 +295,36 @@ def _landmark_jacobian_variants(camera, T, m, ref):
 
 @exercise_check
 def check_landmark_jacobian(landmark_jacobian, hidden=False):
-    """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``."""
+    """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``.
+
+    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), one landmark
+    in view at 2 to 60 m (hidden: up to 200 m); a 4x4 result fails at once. Compares with
+    :meth:`visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``, ``atol=1e-9``),
+    i.e. ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``. Recognises ``world_T_imu`` without its
+    inverse, a missing ``Ks``, a flipped sign and transposed rotations. Hides
+    ``StereoCamera.jacobian_landmark`` and ``StereoCamera.predict_with_jacobians``.
+
+    Parameters
+    ----------
+    landmark_jacobian : callable
+        The student's function: ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), ``world_T_imu`` (4, 4) and a
+        world point ``m`` (3,) to the Jacobian of its pixels with respect to ``m`` (4, 3).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "landmark_jacobian"
     generator, camera = rng(hidden), stereo_camera()
     imu_T_cam = camera.imu_T_cam

@@ -29,7 +29,33 @@ def _hat_inputs(generator, hidden):
 
 @exercise_check
 def check_hat(hat, hidden=False):
-    """Exercise 01: ``hat(w) -> (3, 3)`` with ``hat(w) @ x == cross(w, x)``."""
+    """Exercise 01: ``hat(w) -> (3, 3)`` with ``hat(w) @ x == cross(w, x)``.
+
+    On ``[1, 2, 3]``, the zero vector and 5 random vectors (hidden: an integer array, a plain
+    list, a vector of size 1e8 and 5 random ones); compares with :func:`visla_edu.lie.hat`
+    (default tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the transpose,
+    entries in the wrong places, and a result that is not skew-symmetric. Hides ``lie.hat``.
+
+    Parameters
+    ----------
+    hat : callable
+        The student's function: a 3-vector ``w`` to the skew-symmetric matrix (3, 3).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "hat"
     call = student(hat, name, hide=[lie.hat])
     for w in _hat_inputs(rng(hidden), hidden):
@@ -113,7 +139,35 @@ def _se3_jacobians():
 def check_so3_exp(so3_exp, hidden=False):
     """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
 
-    Hides ``lie.so3_exp``, ``lie.se3_exp`` and their coefficient helpers; ``lie.hat`` stays.
+    Compares with :func:`visla_edu.lie.so3_exp` (``atol=1e-9``) on the rotation vectors of
+    :func:`~visla_edu.checks._inputs.rotation_vectors` (angles from 0 to pi), then at 3 tiny
+    angles (1e-7, 1e-6 and 1e-5 rad; hidden: 3e-7, 3e-6 and 2e-5) requires the second-order
+    part ``(1 - cos t)/t^2 hat(w)^2`` to relative accuracy 1e-6, which needs the small-angle
+    series. Recognises ``R^T``, an unnormalised axis, a flipped second-order term, NaN near 0
+    and a result that is not a rotation.
+
+    Hides ``lie.so3_exp``, ``lie.se3_exp`` and the library's sin(t)/t and (1 - cos t)/t^2;
+    ``lie.hat`` stays.
+
+    Parameters
+    ----------
+    so3_exp : callable
+        The student's function: a rotation vector ``w`` (3,) to the rotation matrix (3, 3).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "so3_exp"
     generator = rng(hidden)
@@ -156,7 +210,35 @@ def _check_tiny_twist(name, T, u):
 def check_se3_exp(se3_exp, hidden=False):
     """Exercise 01: ``se3_exp(u) -> (4, 4)`` for a twist ``u = [v; w]``, closed form.
 
-    Hides ``lie.se3_exp`` (and the library's (t - sin t)/t^3); ``lie.so3_exp`` and ``lie.hat`` stay.
+    Compares with :func:`visla_edu.lie.se3_exp` (``atol=1e-9``) on the twists of
+    :func:`~visla_edu.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
+    at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``V v`` to relative
+    accuracy 1e-12 of ``|v|`` and the rotation as there. Recognises the twist order ``[w; v]``,
+    the inverse pose, the translation ``v`` instead of ``V v``, a transposed rotation block, NaN
+    near 0 and a result that is not a pose.
+
+    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3 and the smoother's SE(3) right
+    Jacobian and its inverse; ``lie.so3_exp`` and ``lie.hat`` stay.
+
+    Parameters
+    ----------
+    se3_exp : callable
+        The student's function: a twist ``u = [v; w]`` (6,) to the pose (4, 4).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "se3_exp"
     generator = rng(hidden)
@@ -206,7 +288,37 @@ def _drive(generator, T, hidden):
 
 @exercise_check
 def check_dead_reckon(dead_reckon, hidden=False):
-    """Exercise 01: ``dead_reckon(time_stamps (T,), twists (T, 6)) -> (T, 4, 4)`` from the identity."""
+    """Exercise 01: ``dead_reckon(time_stamps (T,), twists (T, 6)) -> (T, 4, 4)`` from the identity.
+
+    On a random drive of 30 frames with steps of 0.08 to 0.12 s (hidden: 45 frames, steps
+    from 0.02 s, and zero twists for a stretch: the car stops); compares with
+    :func:`visla_edu.motion.dead_reckon` (lag 0, ``atol=1e-8``), i.e.
+    ``T_{t+1} = T_t exp(tau_t u_t^)`` from ``T_0 = I``. Recognises multiplication on the left,
+    the twist order ``[w; v]``, ``u_{t+1}`` for the step ``t -> t+1``, a missing ``tau``, one
+    constant ``tau`` and inverted poses. Hides ``motion.dead_reckon`` and
+    ``motion.predict_pose``.
+
+    Parameters
+    ----------
+    dead_reckon : callable
+        The student's function: time stamps (T,) and body twists ``[v; w]`` (T, 6) to the poses
+        ``world_T_imu`` (T, 4, 4).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "dead_reckon"
     T = 45 if hidden else 30
     time_stamps, samples = _drive(rng(hidden), T, hidden)
@@ -231,7 +343,34 @@ def check_dead_reckon(dead_reckon, hidden=False):
 
 @exercise_check
 def check_curly_hat(curly_hat, hidden=False):
-    """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``."""
+    """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
+
+    On ``[1, 2, 3, 4, 5, 6]`` and 4 random twists (hidden: the zero twist, a tiny rotation
+    ``[0, 0, 0, 1e-9, 0, 0]`` and 4 random ones); compares with :func:`visla_edu.lie.curly_hat`
+    (default tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the twist
+    order, ``hat(v)`` in the lower-left block, ``curly_hat(-u)`` and the transpose. Hides
+    ``lie.curly_hat``.
+
+    Parameters
+    ----------
+    curly_hat : callable
+        The student's function: a twist ``u = [v; w]`` (6,) to its adjoint matrix (6, 6).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "curly_hat"
     generator = rng(hidden)
     fixed = [np.zeros(6), np.array([0.0, 0, 0, 1e-9, 0, 0])] if hidden else [np.array([1.0, 2, 3, 4, 5, 6])]
@@ -256,7 +395,35 @@ def check_curly_hat(curly_hat, hidden=False):
 def check_pose_transition(pose_transition, hidden=False):
     """Exercise 05: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
 
-    Hides ``motion.pose_transition``, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp`` stays.
+    On every other twist of :func:`~visla_edu.checks._inputs.twists` (10 visible, 8 hidden),
+    each with a step ``tau`` uniform in 0.05 to 0.2 s; a 4x4 result fails at once. Compares
+    with :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Recognises a
+    missing minus sign, the transpose, the twist order and the first-order ``I - tau
+    curly_hat(u)``.
+
+    Hides ``motion.pose_transition``, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp``
+    stays.
+
+    Parameters
+    ----------
+    pose_transition : callable
+        The student's function: a body twist ``u = [v; w]`` (6,) and the step ``tau`` (s) to the
+        perturbation transition ``F`` (6, 6).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "pose_transition"
     generator = rng(hidden)

@@ -56,7 +56,37 @@ def _update_variants(m, var, z, r):
 
 @exercise_check
 def check_kalman_update_1d(kalman_update_1d, hidden=False):
-    """Exercise 00b: ``kalman_update_1d(mean, variance, z, noise_variance) -> (mean, variance)``."""
+    """Exercise 00b: ``kalman_update_1d(mean, variance, z, noise_variance) -> (mean, variance)``.
+
+    ``K = variance / (variance + r)``, ``(mean + K (z - mean), (1 - K) variance)``: compares
+    with :func:`visla_edu.kalman.update_1d` (``rtol=1e-9``, ``atol=1e-12``) on 4 fixed cases
+    (hidden: 4 random ones, a certain prior with variance 0 and a perfect sensor with noise
+    variance 0). The result must be a pair of single numbers. Recognises a variance that does
+    not shrink, a swapped gain, standard deviations in the gain, a flipped innovation,
+    ``variance / r`` as the gain, ``variance - K`` and the pair swapped. Hides
+    ``kalman.update_1d``, ``kalman.update`` and ``ekf.cholesky_update``.
+
+    Parameters
+    ----------
+    kalman_update_1d : callable
+        The student's function: prior mean and variance, measurement ``z`` and its noise
+        variance ``r`` to the posterior ``(mean, variance)``.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "kalman_update_1d"
     call = student(kalman_update_1d, name, hide=[kalman.update_1d, kalman.update, ekf.cholesky_update])
     for m, var, z, r in _update_cases(hidden):
@@ -85,7 +115,35 @@ def _predict_cases(hidden):
 
 @exercise_check
 def check_kalman_predict(kalman_predict, hidden=False):
-    """Exercise 00b: ``kalman_predict(x, P, F, Q) -> (F x, F P F^T + Q)``."""
+    """Exercise 00b: ``kalman_predict(x, P, F, Q) -> (F x, F P F^T + Q)``.
+
+    On a position-velocity model (step 0.1 s; hidden: 0.25 s) and random models with 3 and 4
+    states (hidden: 1, 3 and 5), ``F`` not symmetric; compares mean and covariance with
+    :func:`visla_edu.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Recognises a mean that
+    does not move, ``F.T @ x``, a missing ``Q``, ``F.T P F``, a missing or untransposed right
+    factor, and ``F (P + Q) F^T``. Hides ``kalman.predict``.
+
+    Parameters
+    ----------
+    kalman_predict : callable
+        The student's function: mean ``x`` (n,), covariance ``P`` (n, n), transition ``F``
+        (n, n) and process noise ``Q`` (n, n) to the pair (mean (n,), covariance (n, n)).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "kalman_predict"
     call = student(kalman_predict, name, hide=[kalman.predict])
     for x, P, F, Q in _predict_cases(hidden):

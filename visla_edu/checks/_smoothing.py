@@ -19,7 +19,24 @@ __all__ = ["check_motion_residual", "check_schur_reduce", "check_gauss_newton_st
 
 
 def reference_motion_residual(world_T_prev, world_T_next, step_inv):
-    """``e = log(step_inv T_prev^{-1} T_next)`` and its Jacobians (the library's motion factor)."""
+    """``e = log(step_inv T_prev^{-1} T_next)`` and its Jacobians (the library's motion factor).
+
+    Parameters
+    ----------
+    world_T_prev, world_T_next : ndarray, shape (4, 4)
+        The poses at the start and the end of the step.
+    step_inv : ndarray, shape (4, 4)
+        ``exp(-tau u^)``, the inverse of the IMU's predicted step.
+
+    Returns
+    -------
+    e : ndarray, shape (6,)
+        The residual twist ``[rho; phi]``.
+    J_prev, J_next : ndarray, shape (6, 6)
+        Its Jacobians with respect to the right perturbations of the two poses:
+        ``J_next = J_r(e)^-1`` and ``J_prev = -J_r(e)^-1 Ad(T_next^-1 T_prev)``
+        (:func:`visla_edu.smoother._factors.motion_residuals`).
+    """
     e, J_prev, J_next = _factors.motion_residuals(np.stack([world_T_prev, world_T_next]), step_inv[None])
     return e[0], J_prev[0], J_next[0]
 
@@ -67,7 +84,38 @@ def _motion_variants(T_prev, T_next, step_inv):
 
 @exercise_check
 def check_motion_residual(motion_residual, hidden=False):
-    """Exercise 08: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``."""
+    """Exercise 08: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``.
+
+    For 3 steps whose next pose is the IMU prediction times an error of size 0.05, 0.2 and 0.5
+    (hidden: 0, 1e-7, 0.3 and 0.9); the result must be a tuple of three. Compares with
+    :func:`reference_motion_residual` (``e``: ``rtol=1e-7``, ``atol=1e-9``; Jacobians:
+    ``rtol=1e-6``, ``atol=1e-9``). Recognises a flipped residual, the IMU increment missing or
+    on the wrong side, the twist order, ``J_r`` or ``J_r(-e)^-1`` in ``J_next``, and a missing,
+    wrong or transposed adjoint, a flipped sign or a missing ``J_r(e)^-1`` in ``J_prev``. Hides
+    the library's motion factor, :func:`reference_motion_residual` and
+    ``numdiff.central_jacobian``.
+
+    Parameters
+    ----------
+    motion_residual : callable
+        The student's function: the poses ``world_T_imu`` at the start and end of a step (4, 4)
+        each and ``step_inv = exp(-tau u^)`` (4, 4) to the residual and its Jacobians.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "motion_residual"
     call = student(motion_residual, name, hide=[_factors.motion_residuals, reference_motion_residual,
                                                              numdiff.central_jacobian])
@@ -90,7 +138,28 @@ def check_motion_residual(motion_residual, hidden=False):
 def reference_schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
     """Eliminate the landmarks from ``[[H_pp, H_pm], [H_pm^T, blockdiag(H_mm)]] dx = -[g_p; g_m]``.
 
-    Returns ``S = H_pp - H_pm H_mm^-1 H_pm^T`` and ``b = g_p - H_pm H_mm^-1 g_m`` (``S dp = -b``).
+    Parameters
+    ----------
+    H_pp : ndarray, shape (p, p)
+        Pose block.
+    H_pm : ndarray, shape (p, 3 L)
+        Pose-landmark block.
+    H_mm : ndarray, shape (L, 3, 3)
+        The landmarks' diagonal blocks (each inverted with ``numpy.linalg.inv``).
+    g_p : ndarray, shape (p,)
+    g_m : ndarray, shape (3 L,)
+
+    Returns
+    -------
+    S : ndarray, shape (p, p)
+        ``H_pp - H_pm H_mm^-1 H_pm^T``.
+    b : ndarray, shape (p,)
+        ``g_p - H_pm H_mm^-1 g_m``; the reduced system is ``S dp = -b``.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        A block of ``H_mm`` is singular.
     """
     L = len(H_mm)
     H_mm_inv = np.zeros((3 * L, 3 * L))
@@ -137,7 +206,35 @@ def _schur_variants(H_pp, H_pm, H_mm, g_p, g_m):
 
 @exercise_check
 def check_schur_reduce(schur_reduce, hidden=False):
-    """Exercise 08: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``."""
+    """Exercise 08: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``.
+
+    For 2 random systems of ``J^T J`` form (6 pose entries and 2 landmarks, 12 and 4; hidden:
+    4 systems, up to 40 landmarks); the result must be a tuple ``(S, b)``. Compares with
+    :func:`reference_schur_reduce` (``rtol=1e-7``, ``atol=1e-9``). Recognises the correction
+    added, ``H_mm`` not inverted, the correction alone, the landmarks dropped, and ``b``
+    without (or with a flipped) reduction. Hides :func:`reference_schur_reduce`.
+
+    Parameters
+    ----------
+    schur_reduce : callable
+        The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L), the landmark blocks
+        ``H_mm`` (L, 3, 3), ``g_p`` (p,) and ``g_m`` (3 L,) to the reduced system ``(S, b)``.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "schur_reduce"
     call = student(schur_reduce, name, hide=[reference_schur_reduce])
     for H_pp, H_pm, H_mm, g_p, g_m in _schur_cases(rng(hidden), hidden):
@@ -173,7 +270,30 @@ def _step(world_T_body, p_body, q_world, sign=-1.0, side="right", swap=False, **
 
 
 def reference_gauss_newton_step(world_T_body, p_body, q_world):
-    """One Gauss-Newton step of ``sum_i |(T p_i)_xyz - q_i|^2`` with ``T <- T exp(delta^)``."""
+    """One Gauss-Newton step of ``sum_i |(T p_i)_xyz - q_i|^2`` with ``T <- T exp(delta^)``.
+
+    ``r_i = R p_i + t - q_i``, ``J_i = R [I, -hat(p_i)]`` (3, 6) and
+    ``delta = -(J^T J)^-1 J^T r`` over the stacked ``r`` (3N,) and ``J`` (3N, 6).
+
+    Parameters
+    ----------
+    world_T_body : ndarray, shape (4, 4)
+        The current pose ``T = [[R, t], [0, 1]]``.
+    p_body : ndarray, shape (N, 3)
+        Points in the body frame.
+    q_world : ndarray, shape (N, 3)
+        Their measured positions in the world frame.
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        ``world_T_body @ se3_exp(delta)``.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``numpy.linalg.solve`` finds ``J^T J`` singular.
+    """
     return _step(world_T_body, p_body, q_world)
 
 
@@ -205,7 +325,36 @@ def _gauss_newton_variants(T, p_body, q_world):
 
 @exercise_check
 def check_gauss_newton_step(gauss_newton_step, hidden=False):
-    """Exercise 08: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``."""
+    """Exercise 08: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``.
+
+    For 2 cases (5 points and a pose error of size 0.2, 12 points and 0.8; hidden: 4 cases
+    from 3 to 30 points, errors from 0 to 1.5) with 1 cm noise on ``q_world``; compares with
+    :func:`reference_gauss_newton_step` (``rtol=1e-6``, ``atol=1e-8``). Recognises a flipped
+    step, the step applied on the left, the rotation missing from the Jacobian or its
+    rotation part's sign flipped, and the twist order. Hides the step that
+    :func:`reference_gauss_newton_step` computes with.
+
+    Parameters
+    ----------
+    gauss_newton_step : callable
+        The student's function: the current pose (4, 4), points in the body frame (N, 3) and
+        their measured world positions (N, 3) to the pose after one step.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
     name = "gauss_newton_step"
     call = student(gauss_newton_step, name, hide=[_step])
     for T, p_body, q_world in _gauss_newton_cases(rng(hidden), hidden):
