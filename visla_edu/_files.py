@@ -105,7 +105,21 @@ def atomic_write(path, mode="w", encoding="utf-8"):
 
 
 def format_bytes(n):
-    """``n`` bytes as a short text: ``"512 B"``, ``"3.2 MiB"``, ``"7.0 TiB"``."""
+    """``n`` bytes as a short text: ``"512 B"``, ``"3.2 MiB"``, ``"7.0 TiB"``.
+
+    Binary units (1 KiB = 1024 bytes), one decimal; below 1 KiB the count as given.
+
+    Parameters
+    ----------
+    n : int or float
+        A number of bytes.
+
+    Returns
+    -------
+    str
+        ``f"{n / unit:.1f} {name}"`` for the largest of TiB, GiB, MiB and KiB that ``n`` reaches,
+        else ``f"{n} B"``.
+    """
     for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n >= size:
             return f"{n / size:.1f} {unit}"
@@ -115,8 +129,24 @@ def format_bytes(n):
 def file_kind(path):
     """What ``path`` is, for messages: ``"a regular file"``, ``"a directory"``, ``"a FIFO (named pipe)"``, ...
 
-    Returns ``"missing"`` when nothing is there and ``"a broken symbolic link"`` for a link
-    to nothing.
+    Symbolic links are followed (:func:`os.stat`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    str
+        ``"a directory"``, ``"a FIFO (named pipe)"``, ``"a socket"``, ``"a character device"`` or
+        ``"a block device"``, else ``"a regular file"``; ``"missing"`` when nothing is there (or a
+        component of the path is not a folder) and ``"a broken symbolic link"`` for a link to
+        nothing.
+
+    Raises
+    ------
+    OSError
+        ``os.stat`` fails for another reason (e.g. ``PermissionError`` on a folder on the way).
     """
     try:
         mode = os.stat(path).st_mode
@@ -171,7 +201,19 @@ def check_input_file(path, what="data file"):
 
 
 def same_file(a, b):
-    """Whether paths ``a`` and ``b`` name the same file (through links, ``..`` or hard links)."""
+    """Whether paths ``a`` and ``b`` name the same file (through links, ``..`` or hard links).
+
+    Parameters
+    ----------
+    a, b : str or os.PathLike
+        ``~`` is expanded.
+
+    Returns
+    -------
+    bool
+        :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise
+        (one is missing, or ``os.stat`` fails) whether both resolve to the same absolute path.
+    """
     a, b = Path(a).expanduser(), Path(b).expanduser()
     with contextlib.suppress(OSError):
         return os.path.samefile(a, b)

@@ -82,7 +82,22 @@ class Parts:
 
 @dataclass(frozen=True)
 class Steps:
-    """The three assembly functions of notebook 09 (each takes :class:`Parts` first)."""
+    """The three assembly functions of notebook 09 (each takes :class:`Parts` first).
+
+    Attributes
+    ----------
+    predict : callable
+        ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W (6, 6)) -> (world_T_imu,
+        Sigma)``: :class:`CapstoneFilter`'s prediction, in VIO and in SLAM.
+    add_landmarks : callable
+        ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
+        -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``: places new landmarks in joint SLAM (VIO
+        uses ``parts.init_landmark``).
+    slam_update : callable
+        ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks,
+        cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``: the joint SLAM update (VIO
+        uses ``parts.pose_update``).
+    """
 
     predict: Callable
     add_landmarks: Callable
@@ -140,6 +155,13 @@ def library_parts():
     """The library's versions of the notebooks' exercises, as :class:`Parts`.
 
     Swap in your own with ``dataclasses.replace(library_parts(), pose_update=my_pose_update)``.
+
+    Returns
+    -------
+    Parts
+        ``lie.se3_exp``, ``motion.pose_transition`` and ``lie.odot``, and this module's
+        implementations of the other exercises (``marginalize`` is
+        ``Sigma[np.ix_(keep, keep)]``).
     """
     return Parts(se3_exp=lie.se3_exp, pose_transition=motion.pose_transition, project=_project,
                  pose_jacobian=_pose_jacobian, landmark_jacobian=_landmark_jacobian,

@@ -70,7 +70,20 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser():
-    """The argument parser of ``visla-edu``."""
+    """The argument parser of ``visla-edu``.
+
+    Subcommands ``info``, ``run``, ``stepper`` and ``release`` (required, stored as
+    ``command``); ``--debug`` is accepted before or after the subcommand, ``--data-dir`` after
+    ``info``, ``run`` and ``stepper``. Values are checked while parsing (paths, ports, strides,
+    BLAS threads and ``--set NAME=VALUE`` settings).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        A subclass whose ``error`` prints one line, ``"visla-edu: error: ... (see visla-edu
+        --help)"``, to stderr and raises ``SystemExit`` with status 2 (:data:`EXIT_BAD_INPUT`)
+        instead of printing the usage block.
+    """
     parser = _Parser(prog="visla-edu",
                      description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
     parser.add_argument("--debug", action="store_true", help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")

@@ -27,6 +27,12 @@ def figure_suffixes():
     """File suffixes matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
 
     ``.pgf`` is left out: it needs a LaTeX installation.
+
+    Returns
+    -------
+    tuple of str
+        Lower-case suffixes with the dot: the three above, then the other formats of
+        ``FigureCanvasBase.get_supported_filetypes()`` in alphabetical order.
     """
     from matplotlib.backend_bases import FigureCanvasBase
 

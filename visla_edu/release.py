@@ -158,7 +158,30 @@ def _enclosing_function(lines_before, indent):
 
 
 def strip_hidden_tests(source, where="cell"):
-    """Remove every hidden-test region of ``source`` (markers included)."""
+    """Remove every hidden-test region of ``source`` (markers included).
+
+    A region runs from a line ``### BEGIN HIDDEN TESTS`` to a line ``### END HIDDEN TESTS``
+    (compared after stripping spaces). When there is a region, blank lines at the end of the
+    result are dropped too (wherever the region was); without one ``source`` is returned
+    unchanged.
+
+    Parameters
+    ----------
+    source : str
+        Cell source.
+    where : str
+        Named in error messages about unbalanced markers.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValueError
+        A ``BEGIN`` inside an open region, an ``END`` without a ``BEGIN``, or a region never
+        closed.
+    """
     lines = source.split("\n")
     regions = list(_marker_regions(lines, BEGIN_HIDDEN, END_HIDDEN, where))
     if not regions:
@@ -174,7 +197,21 @@ def strip_hidden_tests(source, where="cell"):
 
 
 def clean_notebook(nb):
-    """A copy of ``nb`` without outputs, execution counts and per-run cell metadata."""
+    """A copy of ``nb`` without outputs, execution counts and per-run cell metadata.
+
+    Parameters
+    ----------
+    nb : nbformat.NotebookNode
+        Not modified.
+
+    Returns
+    -------
+    nbformat.NotebookNode
+        A deep copy whose code cells have no outputs and no execution count, and whose cells
+        have none of the metadata keys ``execution``, ``collapsed``, ``scrolled`` and
+        ``ExecuteTime``; the notebook's metadata, the other cell metadata (nbgrader's) and the
+        markdown cells' attachments are kept.
+    """
     nb = copy.deepcopy(nb)
     for cell in nb.cells:
         if cell.cell_type == "code":
@@ -221,7 +258,17 @@ def student_notebook(nb, name="notebook"):
 
 
 def notebook_text(nb):
-    """The exact text a notebook is stored as (nbformat's JSON, newline at the end)."""
+    """The exact text a notebook is stored as (nbformat's JSON, newline at the end).
+
+    Parameters
+    ----------
+    nb : nbformat.NotebookNode
+
+    Returns
+    -------
+    str
+        ``nbformat.writes(nb, version=4)``, with a final newline added if it has none.
+    """
     nbformat = _nbformat()
     text = nbformat.writes(nb, version=4)
     return text if text.endswith("\n") else text + "\n"
@@ -400,7 +447,31 @@ def _teaching_next_to(src_dir):
 
 
 def main(argv=None):
-    """Command line: ``python -m visla_edu.release [--src DIR] [--dst DIR] [--check] [--clean-sources]``."""
+    """Command line: ``python -m visla_edu.release [--src DIR] [--dst DIR] [--check] [--clean-sources]``.
+
+    Without ``--check``: with ``--clean-sources`` first strips the solution notebooks
+    (:func:`clean_sources`), then writes the student notebooks (:func:`make_student_notebooks`)
+    and, if ``TEACHING.md`` exists in the folder above ``--src``, its points table
+    (:func:`update_points_table`), printing each file written. With ``--check``: writes
+    nothing (``--clean-sources`` is ignored) and lists what is out of date.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        Exit status: 0 done (or in sync), 1 out of date (``--check``), 2 on a
+        ``FileNotFoundError`` or ``ValueError`` (no solutions folder or notebooks, unbalanced
+        markers, ``TEACHING.md`` without its points markers...), whose message goes to stderr.
+
+    Raises
+    ------
+    SystemExit
+        From argparse, for bad arguments or ``--help``.
+    """
     parser = argparse.ArgumentParser(
         prog="python -m visla_edu.release",
         description="Generate the student notebooks (stubs, no hidden tests, no outputs) from the solutions.",

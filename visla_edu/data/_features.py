@@ -66,7 +66,29 @@ def _drain(fp, block=2**22):
 
 
 def features_in_memory(dense, path):
-    """Like :func:`features_streamed` for the whole dense array ``(4, M, T)`` already read."""
+    """Like :func:`features_streamed` for the whole dense array ``(4, M, T)`` already read.
+
+    The array is scanned in chunks of landmark rows of one plane at a time, as a C-order file
+    is streamed.
+
+    Parameters
+    ----------
+    dense : ndarray, shape (4, M, T)
+        Pixels ``[uL, vL, uR, vR]``, all four -1 where a landmark is not observed.
+    path : pathlib.Path or str
+        The file, for messages.
+
+    Returns
+    -------
+    tuple
+        ``(frame_ptr (T+1,), obs_ids (N,), obs_z (N, 4))``, frame-major.
+
+    Raises
+    ------
+    ValueError
+        A value is not finite, an observation is partly -1 (``uL`` decides what is observed),
+        or there are more than :data:`MAX_OBSERVATIONS` observations.
+    """
     _, M, T = dense.shape
     return _collect_observations(_array_chunks(dense, M, T), T, path)
 

@@ -110,7 +110,36 @@ def check_course_headers(headers, fmt, path):
 
 
 def check_course_arrays(arrays, fmt, path):
-    """Check dtypes, shapes, finiteness, meaning and plausibility of the non-feature keys; return T."""
+    """Check dtypes, shapes, finiteness, meaning and plausibility of the non-feature keys; return T.
+
+    The keys ``time_stamps`` (1, T), ``linear_velocity`` and the angular velocity (3, T),
+    ``K`` (3, 3), ``b`` () and the extrinsics (4, 4) of format ``fmt`` must hold real numbers
+    (:func:`check_numeric`), have these shapes (``1 <= T <= MAX_FRAMES``) and be finite
+    (:func:`check_finite`); the time stamps must increase (:func:`check_increasing`) at a
+    camera's rate (:func:`~._plausible.check_time_stamps`), the velocities be plausible
+    (:func:`~._plausible.check_velocities`), and ``K``, ``b`` and the extrinsics be valid
+    (:func:`check_intrinsics`, :func:`check_baseline`, :func:`check_rigid`) and plausible
+    (:func:`~._plausible.check_calibration`).
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        The file's arrays (at least the keys of ``fmt`` but ``features``).
+    fmt : str
+        :data:`FORMAT_2021` or :data:`FORMAT_2019`.
+    path : pathlib.Path or str
+        The file, for messages.
+
+    Returns
+    -------
+    int
+        T, the number of frames.
+
+    Raises
+    ------
+    ValueError
+        The first check that fails, naming the file and the key.
+    """
     velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
     keys = ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key)
     for key in keys:
@@ -133,7 +162,29 @@ def check_course_arrays(arrays, fmt, path):
 
 
 def check_features_header(header, T, path):
-    """Shape ``(4, M, T)``, a dtype that can hold -1 and pixels, and a bounded size; return M."""
+    """Shape ``(4, M, T)``, a dtype that can hold -1 and pixels, and a bounded size; return M.
+
+    Parameters
+    ----------
+    header : visla_edu.data._zip.NpyHeader
+        The ``features`` member's header (anything with ``shape``, ``dtype`` and ``nbytes``).
+    T : int
+        Frames, from ``time_stamps``.
+    path : pathlib.Path or str
+        The file, for messages.
+
+    Returns
+    -------
+    int
+        M, the number of landmarks.
+
+    Raises
+    ------
+    ValueError
+        The shape is not ``(4, M, T)`` (the message suggests a transpose for ``(4, T, M)``), the
+        dtype is unsigned or boolean (cannot hold -1) or not real, or the array would exceed
+        :data:`MAX_FEATURES_BYTES`.
+    """
     shape, dtype = header.shape, header.dtype
     if len(shape) != 3 or shape[0] != 4 or shape[2] != T:
         swapped = len(shape) == 3 and shape[0] == 4 and shape[1] == T
@@ -156,7 +207,23 @@ def check_features_header(header, T, path):
 
 
 def check_numeric(arr, key, path, kinds="fiu"):
-    """``arr`` (any shape) has a dtype kind in ``kinds`` (``"fiu"``: real numbers, ``"b"``: boolean)."""
+    """``arr`` (any shape) has a dtype kind in ``kinds`` (``"fiu"``: real numbers, ``"b"``: boolean).
+
+    Parameters
+    ----------
+    arr : ndarray or NpyHeader
+        Anything with a ``dtype``.
+    key : str
+        Its key in the file, for the message.
+    path : pathlib.Path or str
+    kinds : str
+        Allowed ``dtype.kind`` letters.
+
+    Raises
+    ------
+    ValueError
+        ``arr.dtype.kind`` is not in ``kinds``.
+    """
     if arr.dtype.kind not in kinds:
         want = "boolean" if kinds == "b" else "real numbers"
         raise ValueError(f"{path}: key '{key}' must hold {want}, got dtype {arr.dtype}")
@@ -174,14 +241,44 @@ def _frame_count(time_stamps, path):
 
 
 def check_shape(arr, expected, key, path, T=None):
-    """``arr.shape == expected``; ``T`` (if given) is named as coming from ``time_stamps``."""
+    """``arr.shape == expected``; ``T`` (if given) is named as coming from ``time_stamps``.
+
+    Parameters
+    ----------
+    arr : ndarray or NpyHeader
+        Anything with a ``shape``.
+    expected : tuple of int
+    key : str
+        Its key in the file, for the message.
+    path : pathlib.Path or str
+    T : int, optional
+        Mentioned in the message when given.
+
+    Raises
+    ------
+    ValueError
+        The shapes differ.
+    """
     if arr.shape != tuple(expected):
         note = f" (T = {T} from time_stamps)" if T is not None else ""
         raise ValueError(f"{path}: key '{key}' expected shape {tuple(expected)}{note}, got {arr.shape}")
 
 
 def check_finite(arr, key, path):
-    """No NaN or inf in ``arr`` (any shape); the message gives the index of the first one."""
+    """No NaN or inf in ``arr`` (any shape); the message gives the index of the first one.
+
+    Parameters
+    ----------
+    arr : ndarray
+    key : str
+        Its key in the file, for the message.
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        ``arr`` has a NaN or infinite entry.
+    """
     bad = ~np.isfinite(arr)
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
@@ -189,7 +286,19 @@ def check_finite(arr, key, path):
 
 
 def check_increasing(stamps, path):
-    """``stamps`` (T,) strictly increasing; indices are reported as in the file's (1, T) key."""
+    """``stamps`` (T,) strictly increasing; indices are reported as in the file's (1, T) key.
+
+    Parameters
+    ----------
+    stamps : ndarray, shape (T,)
+        ``time_stamps[0]``.
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        A stamp is not after the one before it (names the first such pair).
+    """
     bad = np.flatnonzero(np.diff(stamps) <= 0)
     if bad.size:
         i = int(bad[0])
@@ -204,6 +313,17 @@ def check_intrinsics(K, path):
 
     A skew ``K[0, 1] != 0`` is refused: the stereo model (:func:`visla_edu.camera.stereo_matrix`)
     has none (rectified images have none), so it would be silently ignored.
+
+    Parameters
+    ----------
+    K : ndarray, shape (3, 3)
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        An entry below the diagonal is not 0 or ``K[2, 2] != 1``, ``fsu`` or ``fsv`` is not
+        positive, or the skew is not 0 (checked in this order).
     """
     lower = K[np.tril_indices(3, -1)]
     if np.any(lower != 0) or K[2, 2] != 1:
@@ -221,13 +341,38 @@ def check_intrinsics(K, path):
 
 
 def check_baseline(b, path):
-    """The stereo baseline ``b`` (a 0-d array, metres) is positive."""
+    """The stereo baseline ``b`` (a 0-d array, metres) is positive.
+
+    Parameters
+    ----------
+    b : ndarray, shape ()
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        ``b`` is not greater than 0 (NaN included).
+    """
     if not b > 0:
         raise ValueError(f"{path}: key 'b' (stereo baseline, metres) must be positive, got {b.item()!r}")
 
 
 def check_rigid(T, key, path):
-    """``T`` (4, 4) is in SE(3): ``R^T R = I`` within :data:`RIGID_TOL`, ``det R = +1``, last row ``[0, 0, 0, 1]``."""
+    """``T`` (4, 4) is in SE(3): ``R^T R = I`` within :data:`RIGID_TOL`, ``det R = +1``, last row ``[0, 0, 0, 1]``.
+
+    Parameters
+    ----------
+    T : ndarray, shape (4, 4)
+    key : str
+        Its key in the file, for the message.
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        An entry of ``R^T R - I`` exceeds :data:`RIGID_TOL` in size, ``det R`` differs from 1 by
+        more than ``10 RIGID_TOL``, or the last row is not exactly ``[0, 0, 0, 1]``.
+    """
     R = T[:3, :3]
     orth = float(np.abs(R.T @ R - np.eye(3)).max())
     if orth > RIGID_TOL:
@@ -251,6 +396,23 @@ def check_extras(arrays, T, M, path):
     """Check the ground-truth keys (all or none; shapes from T and M, finite) and the text keys.
 
     Both are written by :func:`~visla_edu.data.save`.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        The file's arrays; keys other than :data:`GROUND_TRUTH_KEYS` and :data:`TEXT_KEYS` are
+        ignored.
+    T, M : int
+        Frames and landmarks of the file.
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        Some ground-truth keys are present but not all; one is not numeric (boolean for
+        ``ground_truth_outlier``), has the wrong shape (``(T, 4, 4)``, ``(M, 3)``, ``(T, 3)``,
+        ``(T, 3)``, ``(M,)``) or a non-finite entry; or ``name`` or ``label`` is not a single
+        string of at most 10,000 characters.
     """
     _check_extras_layout(arrays, T, M, path)
     for key in GROUND_TRUTH_KEYS:

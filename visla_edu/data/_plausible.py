@@ -90,7 +90,20 @@ def check_time_stamps(stamps, path):
 
     The median step must lie in :data:`FRAME_STEP_RANGE` (else the stamps are probably in
     other units, and the message says which); no step may exceed ``max(MAX_GAP_SECONDS,
-    MAX_GAP_STEPS * median)``.
+    MAX_GAP_STEPS * median)``. Fewer than 2 stamps pass.
+
+    Parameters
+    ----------
+    stamps : ndarray, shape (T,)
+    path : pathlib.Path or str
+        The file (or dataset name), for messages.
+
+    Raises
+    ------
+    ValueError
+        The median step is outside :data:`FRAME_STEP_RANGE` (the message suggests the unit,
+        milliseconds to hours, that would give a plausible step), or a step is a gap longer
+        than allowed (the message names the frames).
     """
     if len(stamps) < 2:
         return
@@ -117,7 +130,21 @@ def check_time_stamps(stamps, path):
 
 
 def check_velocities(linear, angular, keys, path):
-    """Speeds at most :data:`MAX_SPEED` and angular rates at most :data:`MAX_ANGULAR_RATE` (``(3, T)`` each)."""
+    """Speeds at most :data:`MAX_SPEED` and angular rates at most :data:`MAX_ANGULAR_RATE` (``(3, T)`` each).
+
+    Parameters
+    ----------
+    linear, angular : array_like, shape (3, T)
+        Linear (m/s) and angular (rad/s) velocities, one column per frame.
+    keys : (str, str)
+        Their keys in the file, for messages.
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        The norm (:func:`magnitude`) of a column exceeds its limit; names the first such frame.
+    """
     for values, key, limit, unit, hint in (
         (linear, keys[0], MAX_SPEED, "m/s", "the speed of sound; are they in km/h, mm/s or another unit?"),
         (angular, keys[1], MAX_ANGULAR_RATE, "rad/s", "2000 deg/s, a gyro's full range; are they in deg/s?"),
@@ -154,6 +181,25 @@ def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
     ``K`` (3, 3) must already be ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal
     lengths, ``b`` positive and ``pose`` (4, 4) rigid (see :mod:`visla_edu.data._format`);
     without ``pose`` its translation is not checked. ``pose_key`` names it in messages.
+
+    Parameters
+    ----------
+    K : ndarray, shape (3, 3)
+    b : float
+        Stereo baseline (m).
+    path : pathlib.Path or str
+    pose : ndarray, shape (4, 4), optional
+        The extrinsics (``imu_T_cam`` or ``cam_T_imu``).
+    pose_key : str
+
+    Raises
+    ------
+    ValueError
+        ``fsu`` or ``fsv`` outside :data:`FOCAL_RANGE`, ``fsv / fsu`` outside
+        :data:`ASPECT_RANGE`, ``cu`` or ``cv`` not in ``(0, 20000]`` px
+        (:data:`PRINCIPAL_POINT_RANGE` without 0), ``b`` outside :data:`BASELINE_RANGE`, or the
+        extrinsic translation longer than :data:`MAX_EXTRINSIC_TRANSLATION` (checked in this
+        order; a length that would fit in millimetres says so).
     """
     fsu, fsv, cu, cv = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     for name, value in (("fsu = K[0, 0]", fsu), ("fsv = K[1, 1]", fsv)):

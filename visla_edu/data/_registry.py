@@ -135,12 +135,33 @@ def available(data_dir=None):
 
 
 def missing_standin_inputs(directory):
-    """The :data:`STANDIN_INPUTS` that are not files in ``directory`` (a pathlib.Path), in order."""
+    """The :data:`STANDIN_INPUTS` that are not files in ``directory`` (a pathlib.Path), in order.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+
+    Returns
+    -------
+    list of str
+        File names of :data:`STANDIN_INPUTS` (``"10_imu_only.npz"``, ``"03.npz"``) that are not
+        regular files (after following links) in ``directory``.
+    """
     return [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
 
 
 def has_standin_inputs(directory):
-    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path)."""
+    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path).
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+
+    Returns
+    -------
+    bool
+        True when :func:`missing_standin_inputs` is empty.
+    """
     return not missing_standin_inputs(directory)
 
 

@@ -67,6 +67,20 @@ class NpyHeader:
 def member_infos(zf, path):
     """Key -> ``ZipInfo`` of every member (``np.savez`` stores key ``k`` as ``k.npy``).
 
+    Folder entries are skipped; a member not ending in ``.npy`` keeps its whole name as key.
+
+    Parameters
+    ----------
+    zf : zipfile.ZipFile
+        The open archive.
+    path : pathlib.Path or str
+        The file, for messages.
+
+    Returns
+    -------
+    dict of str to zipfile.ZipInfo
+        In the archive's order.
+
     Raises
     ------
     ValueError
@@ -98,12 +112,28 @@ def read_header(zf, info, key, path):
 
     Reads only the magic string and the header (decompressing a few hundred bytes).
 
+    Parameters
+    ----------
+    zf : zipfile.ZipFile
+    info : zipfile.ZipInfo
+        The member (:func:`member_infos`).
+    key : str
+        Its key, for messages.
+    path : pathlib.Path or str
+        The file, for messages.
+
+    Returns
+    -------
+    NpyHeader
+
     Raises
     ------
     ValueError
         Not an ``.npy`` member, an ``.npy`` version other than 1.0 or 2.0, an object dtype
-        (needs pickle, refused), or a declared size that differs from the zip entry's
-        uncompressed size (a damaged, truncated or forged member).
+        (needs pickle, refused), a negative dimension, or a declared size that differs from the
+        zip entry's uncompressed size (a damaged, truncated or forged member).
+    zipfile.BadZipFile, zlib.error
+        The archive itself is damaged (passed on for the caller to report).
     """
     with zf.open(info) as fp:
         header = _parse_header(fp, key, path)
@@ -144,7 +174,28 @@ def _size_mismatch(header, actual, declared, key, path):
 
 
 def read_member(zf, info, key, path):
-    """One whole member as an array (its size already checked; CRC-checked by ``zf.read``)."""
+    """One whole member as an array (its size already checked; CRC-checked by ``zf.read``).
+
+    Parameters
+    ----------
+    zf : zipfile.ZipFile
+    info : zipfile.ZipInfo
+    key : str
+        Its key, for messages.
+    path : pathlib.Path or str
+        The file, for messages.
+
+    Returns
+    -------
+    ndarray
+
+    Raises
+    ------
+    ValueError
+        numpy cannot read the member as an array (pickles refused).
+    zipfile.BadZipFile
+        ``zf.read`` finds a CRC mismatch (a damaged member).
+    """
     raw = zf.read(info)
     try:
         return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)

@@ -305,6 +305,17 @@ def cache_path(dataset):
     """The cache file of ``dataset``'s calibration: ``<cache dir>/calibration-<content hash>.json``.
 
     The hash covers :data:`CACHED_ARRAYS` and :data:`CALIBRATION_VERSION`.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+
+    Returns
+    -------
+    pathlib.Path
+        In :func:`visla_edu.cache.cache_dir`, with the 64-hex-digit
+        :func:`visla_edu.cache.content_hash` of the dataset's arrays; neither the folder nor the
+        file is created.
     """
     key = user_cache.content_hash({name: getattr(dataset, name) for name in CACHED_ARRAYS},
                                   f"visla-edu calibration {CALIBRATION_VERSION}")

@@ -131,5 +131,25 @@ def imu_noise_and_bias(dataset, imu_T_cam=None, lag=0):
 
 
 def diagnose(dataset):
-    """Run every diagnostic and return the readable report of :func:`calibrate` (str)."""
+    """The readable report of :func:`calibrate` (str): the diagnostics' evidence and decision.
+
+    Runs :func:`calibrate` with its defaults, so a result already kept in
+    ``dataset.extra["calibration"]`` or in the user cache is reused (and a new one is kept in
+    both).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+
+    Returns
+    -------
+    str
+        :meth:`Calibration.report` with the dataset's name: what ``visla-edu info`` prints,
+        ending with "the filter will use: ...".
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`calibrate`.
+    """
     return calibrate(dataset).report(dataset.name)

@@ -73,22 +73,74 @@ def odometry_of(dataset):
 
 
 def vo_pairs(vo):
-    """Frame pairs the checks use: valid odometry with at least :data:`MIN_INLIERS` inliers, (T-1,) bool."""
+    """Frame pairs the checks use: valid odometry with at least :data:`MIN_INLIERS` inliers, (T-1,) bool.
+
+    Parameters
+    ----------
+    vo : visla_edu.odometry.VisualOdometry
+
+    Returns
+    -------
+    ndarray of bool, shape (T - 1,)
+        ``vo.valid & (vo.inliers >= MIN_INLIERS)``; entry ``t`` is the pair ``t, t + 1``.
+    """
     return vo.valid & (vo.inliers >= MIN_INLIERS)
 
 
 def vo_motion_in_imu_frame(vo, imu_T_cam):
-    """VO motions as IMU motions ``imu_T_cam cam_T_next cam_T_imu``, shape (T-1, 4, 4)."""
+    """VO motions as IMU motions ``imu_T_cam cam_T_next cam_T_imu``, shape (T-1, 4, 4).
+
+    Parameters
+    ----------
+    vo : visla_edu.odometry.VisualOdometry
+        Its ``cam_T_next`` (T - 1, 4, 4): the left camera at ``t + 1`` in the one at ``t``.
+    imu_T_cam : ndarray, shape (4, 4)
+        The calibration (or a candidate correction of it).
+
+    Returns
+    -------
+    ndarray, shape (T - 1, 4, 4)
+        The IMU at ``t + 1`` in the IMU at ``t``, ``cam_T_imu = inv(imu_T_cam)``; invalid pairs
+        give the identity, as their ``cam_T_next`` is.
+    """
     return imu_T_cam @ vo.cam_T_next @ lie.se3_inv(imu_T_cam)
 
 
 def vo_in_imu_frame(vo, imu_T_cam):
-    """VO motions as IMU motions (:func:`vo_motion_in_imu_frame`), as twists ``[v; w]``, shape (T-1, 6)."""
+    """VO motions as IMU motions (:func:`vo_motion_in_imu_frame`), as twists ``[v; w]``, shape (T-1, 6).
+
+    Parameters
+    ----------
+    vo : visla_edu.odometry.VisualOdometry
+    imu_T_cam : ndarray, shape (4, 4)
+
+    Returns
+    -------
+    ndarray, shape (T - 1, 6)
+        ``se3_log`` of each motion: comparable with :func:`imu_step_twists`.
+    """
     return lie.se3_log(vo_motion_in_imu_frame(vo, imu_T_cam))
 
 
 def imu_step_twists(dataset, lag=0):
-    """IMU motion over each frame interval as twists ``tau_t u[t + lag]`` (:func:`select_twists`), (T-1, 6)."""
+    """IMU motion over each frame interval as twists ``tau_t u[t + lag]`` (:func:`select_twists`), (T-1, 6).
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    lag : int
+        The step ``t -> t+1`` uses the velocity sample ``u[t + lag]`` (clipped at the ends).
+
+    Returns
+    -------
+    ndarray, shape (T - 1, 6)
+        ``tau_t = t_{t+1} - t_t`` times the selected twist ``[v; w]``.
+
+    Raises
+    ------
+    ValueError
+        The dataset's twists do not have shape (T, 6).
+    """
     return dataset.time_steps[:, None] * select_twists(dataset.twists, lag)
 
 

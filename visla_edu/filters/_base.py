@@ -26,7 +26,14 @@ MIN_DEPTH = 0.1
 
 
 class FilterDivergedError(RuntimeError):
-    """The filter produced a non-finite state or a covariance that is not positive definite."""
+    """The filter produced a non-finite state or a covariance that is not positive definite.
+
+    Raised by a filter's ``step()`` when, after the frame, the pose or its covariance has a
+    non-finite entry, a pose variance is negative, or the pose lies more than
+    :data:`MAX_DISTANCE` metres from the world origin; and when an update cannot factorise its
+    innovation covariance (chained from the ``numpy.linalg.LinAlgError``). The message names
+    the dataset and the frame.
+    """
 
 
 @dataclass

@@ -28,59 +28,202 @@ __all__ = ["RightForm", "InvariantForm", "ERROR_FORMS"]
 
 
 class RightForm:
-    """The right perturbation ``T = mu exp(hat(delta))``, ``m = mu_m + delta_m`` (notebooks 05-06)."""
+    """The right perturbation ``T = mu exp(hat(delta))``, ``m = mu_m + delta_m`` (notebooks 05-06).
+
+    A namespace of static methods (the class itself is used, never an instance); the joint
+    filter calls them on its state ``[pose (6); landmarks (3 each, in slot order)]``.
+
+    Attributes
+    ----------
+    name : str
+        ``"right"``, the value of ``FilterConfig.slam_error`` that selects it.
+    """
 
     name = "right"
 
     @staticmethod
     def predict(Sigma, world_T_imu, p_active, F, W):
-        """``Sigma_pp <- F Sigma_pp F^T + W``, ``Sigma_pl <- F Sigma_pl`` (in place)."""
+        """``Sigma_pp <- F Sigma_pp F^T + W``, ``Sigma_pl <- F Sigma_pl`` (in place).
+
+        :func:`visla_edu.motion.predict_joint_covariance` (which also keeps ``Sigma``
+        symmetric).
+
+        Parameters
+        ----------
+        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
+            The joint covariance, modified in place.
+        world_T_imu : ndarray, shape (4, 4)
+            Unused here.
+        p_active : ndarray, shape (n, 3)
+            Unused here.
+        F : ndarray, shape (6, 6)
+            :func:`visla_edu.motion.pose_transition` of the step.
+        W : ndarray, shape (6, 6)
+            The step's motion noise.
+        """
         motion.predict_joint_covariance(Sigma, F, W)
 
     @staticmethod
     def pose_jacobian(J_landmark, J_pose):
-        """The camera's right-perturbation pose Jacobian, unchanged, (k, 4, 6)."""
+        """The camera's right-perturbation pose Jacobian, unchanged, (k, 4, 6).
+
+        Parameters
+        ----------
+        J_landmark : ndarray, shape (k, 4, 3)
+            Unused here.
+        J_pose : ndarray, shape (k, 4, 6)
+            From :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
+
+        Returns
+        -------
+        ndarray, shape (k, 4, 6)
+            ``J_pose`` itself.
+        """
         return J_pose
 
     @staticmethod
     def retract(world_T_imu, p_active, delta):
-        """``mu exp(hat(delta_pose))`` and ``mu_m + delta_m``."""
+        """``mu exp(hat(delta_pose))`` and ``mu_m + delta_m``.
+
+        Parameters
+        ----------
+        world_T_imu : ndarray, shape (4, 4)
+        p_active : ndarray, shape (n, 3)
+            Means of the landmarks in the state, in slot order.
+        delta : ndarray, shape (6 + 3n,)
+            The correction ``[delta_pose (6); delta_m (3 each)]``.
+
+        Returns
+        -------
+        world_T_imu : ndarray, shape (4, 4)
+            ``world_T_imu @ se3_exp(delta[:6])``.
+        p_active : ndarray, shape (n, 3)
+            ``p_active + delta[6:].reshape(-1, 3)``.
+        """
         return world_T_imu @ lie.se3_exp(delta[:6]), p_active + delta[6:].reshape(-1, 3)
 
     @staticmethod
     def landmark_sensitivity(G_pose):
-        """``G_pose`` of :func:`visla_edu.ekf.initialize_landmarks` (the body-frame error), (k, 3, 6)."""
+        """``G_pose`` of :func:`visla_edu.ekf.initialize_landmarks` (the body-frame error), (k, 3, 6).
+
+        Parameters
+        ----------
+        G_pose : ndarray, shape (k, 3, 6)
+
+        Returns
+        -------
+        ndarray, shape (k, 3, 6)
+            ``G_pose`` itself.
+        """
         return G_pose
 
     @staticmethod
     def pose_cov(Sigma_pose, world_T_imu):
-        """The state's pose block is already the right-perturbation covariance."""
+        """The state's pose block is already the right-perturbation covariance.
+
+        Parameters
+        ----------
+        Sigma_pose : ndarray, shape (6, 6)
+        world_T_imu : ndarray, shape (4, 4)
+            Unused here.
+
+        Returns
+        -------
+        ndarray, shape (6, 6)
+            ``Sigma_pose`` itself.
+        """
         return Sigma_pose
 
     @staticmethod
     def landmark_covs(Sigma, cols, means):
-        """Marginal covariances of the slots with columns ``cols`` (k, 3), (k, 3, 3)."""
+        """Marginal covariances of the slots with columns ``cols`` (k, 3), (k, 3, 3).
+
+        Parameters
+        ----------
+        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
+        cols : ndarray of int, shape (k, 3)
+            State columns of each landmark.
+        means : ndarray, shape (k, 3)
+            Unused here.
+
+        Returns
+        -------
+        ndarray, shape (k, 3, 3)
+            The diagonal blocks ``Sigma[cols_i, cols_i]``.
+        """
         return Sigma[cols[:, :, None], cols[:, None, :]]
 
 
 class InvariantForm:
-    """The invariant error ``T = exp(hat(xi)) mu``, ``m_j = exp(hat(theta)) mu_j + e_j``."""
+    """The invariant error ``T = exp(hat(xi)) mu``, ``m_j = exp(hat(theta)) mu_j + e_j``.
+
+    ``xi = [p; theta]`` is in the world frame. A namespace of static methods with the same
+    signatures as :class:`RightForm`'s; :meth:`pose_cov` and :meth:`landmark_covs` convert back
+    to the library's convention (the right perturbation ``[v; w]`` of the pose, ``m - mu_m``).
+
+    Attributes
+    ----------
+    name : str
+        ``"invariant"``, the value of ``FilterConfig.slam_error`` that selects it.
+    """
 
     name = "invariant"
 
     @staticmethod
     def predict(Sigma, world_T_imu, p_active, F, W):
-        """``Sigma <- Sigma + B B^T`` (:func:`visla_edu.motion.predict_invariant_covariance`); F is the identity here."""
+        """``Sigma <- Sigma + B B^T`` (:func:`visla_edu.motion.predict_invariant_covariance`); F is the identity here.
+
+        Parameters
+        ----------
+        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
+            The joint covariance, modified in place.
+        world_T_imu : ndarray, shape (4, 4)
+            The pose mean after the step.
+        p_active : ndarray, shape (n, 3)
+            Landmark means in slot order; non-finite entries count as 0 (the dense filter's
+            placeholders get no noise).
+        F : ndarray, shape (6, 6)
+            Ignored.
+        W : ndarray, shape (6, 6)
+            The step's motion noise.
+        """
         motion.predict_invariant_covariance(Sigma, world_T_imu, p_active, W)
 
     @staticmethod
     def pose_jacobian(J_landmark, J_pose):
-        """``[-J_landmark, 0]`` (:func:`visla_edu.ekf.invariant_pose_jacobian`), (k, 4, 6)."""
+        """``[-J_landmark, 0]`` (:func:`visla_edu.ekf.invariant_pose_jacobian`), (k, 4, 6).
+
+        Parameters
+        ----------
+        J_landmark : ndarray, shape (k, 4, 3)
+        J_pose : ndarray, shape (k, 4, 6)
+            Unused here.
+
+        Returns
+        -------
+        ndarray, shape (k, 4, 6)
+            Columns 0-2 (for ``p``) ``-J_landmark``, columns 3-5 (for ``theta``) zero.
+        """
         return ekf.invariant_pose_jacobian(J_landmark)
 
     @staticmethod
     def retract(world_T_imu, p_active, delta):
-        """:func:`visla_edu.ekf.invariant_retract`."""
+        """:func:`visla_edu.ekf.invariant_retract`.
+
+        ``mu <- exp(hat(xi)) mu`` and ``mu_j <- R_xi mu_j + J_l(theta) e_j``.
+
+        Parameters
+        ----------
+        world_T_imu : ndarray, shape (4, 4)
+        p_active : ndarray, shape (n, 3)
+        delta : ndarray, shape (6 + 3n,)
+            ``[xi (6); e_0 (3); e_1 (3); ...]``.
+
+        Returns
+        -------
+        world_T_imu : ndarray, shape (4, 4)
+        p_active : ndarray, shape (n, 3)
+        """
         return ekf.invariant_retract(world_T_imu, p_active, delta)
 
     @staticmethod
@@ -90,6 +233,16 @@ class InvariantForm:
         With ``T = exp(hat(xi)) mu`` the new point is ``exp(hat(theta)) mu p_imu + p`` to first
         order, so its invariant error takes the pose's translation error ``p`` and nothing of
         ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance in the world frame).
+
+        Parameters
+        ----------
+        G_pose : ndarray, shape (k, 3, 6)
+            Only its length ``k`` is used.
+
+        Returns
+        -------
+        ndarray, shape (k, 3, 6)
+            ``[I, 0]`` for each new landmark.
         """
         G = np.zeros((len(G_pose), 3, 6))
         G[:, :, :3] = np.eye(3)
@@ -97,13 +250,41 @@ class InvariantForm:
 
     @staticmethod
     def pose_cov(Sigma_pose, world_T_imu):
-        """The right-perturbation covariance ``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (``delta = Ad(inv(mu)) xi``)."""
+        """The right-perturbation covariance ``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (``delta = Ad(inv(mu)) xi``).
+
+        Parameters
+        ----------
+        Sigma_pose : ndarray, shape (6, 6)
+            Covariance of ``xi``.
+        world_T_imu : ndarray, shape (4, 4)
+            ``mu``.
+
+        Returns
+        -------
+        ndarray, shape (6, 6)
+        """
         A = lie.adjoint(lie.se3_inv(world_T_imu))
         return A @ Sigma_pose @ A.T
 
     @staticmethod
     def landmark_covs(Sigma, cols, means):
-        """Covariances of ``m - mu_m = e - hat(mu_m) theta`` for the slots with columns ``cols``, (k, 3, 3)."""
+        """Covariances of ``m - mu_m = e - hat(mu_m) theta`` for the slots with columns ``cols``, (k, 3, 3).
+
+        ``A Sigma_theta A^T + A Sigma_theta,e + (A Sigma_theta,e)^T + Sigma_e`` with
+        ``A = -hat(mu_m)``, symmetrised.
+
+        Parameters
+        ----------
+        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
+        cols : ndarray of int, shape (k, 3)
+            State columns of each landmark's ``e``.
+        means : ndarray, shape (k, 3)
+            The landmark means ``mu_m``.
+
+        Returns
+        -------
+        ndarray, shape (k, 3, 3)
+        """
         See = Sigma[cols[:, :, None], cols[:, None, :]]
         if len(cols) == 0:
             return See

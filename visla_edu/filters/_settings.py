@@ -119,25 +119,111 @@ class SettingSpec:
 
 def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why="",
             per_axis=False):
-    """A dataclass field with its :class:`SettingSpec` (arguments as its attributes)."""
+    """A dataclass field with its :class:`SettingSpec` (arguments as its attributes).
+
+    Parameters
+    ----------
+    default : object
+        The field's default (not checked here; :func:`check_settings` checks it on each
+        instance).
+    kind : {float, int, bool, str}
+    low, high : float, optional
+        The plausible range; None leaves that side open.
+    low_open : bool
+        The range excludes ``low``.
+    words : iterable of str
+        Text values accepted as they are (stored as a tuple).
+    optional : bool
+        None is allowed.
+    unit, why : str
+        For messages.
+    per_axis : bool
+        Also accept three numbers, one per body axis.
+
+    Returns
+    -------
+    dataclasses.Field
+        ``dataclasses.field(default=default)`` with the spec in its metadata under :data:`SPEC`.
+    """
     spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why, per_axis)
     return dataclasses.field(default=default, metadata={SPEC: spec})
 
 
 def spec_of(cls, name):
-    """The :class:`SettingSpec` of field ``name`` of dataclass ``cls`` (KeyError if it has none)."""
+    """The :class:`SettingSpec` of field ``name`` of dataclass ``cls`` (KeyError if it has none).
+
+    Parameters
+    ----------
+    cls : type or instance
+        A dataclass (or one of its instances).
+    name : str
+        A field name.
+
+    Returns
+    -------
+    SettingSpec
+
+    Raises
+    ------
+    KeyError
+        ``cls`` has no field ``name``, or the field was not declared with :func:`setting`.
+    TypeError
+        ``cls`` is not a dataclass.
+    """
     return {f.name: f for f in dataclasses.fields(cls)}[name].metadata[SPEC]
 
 
 def check_settings(config):
-    """Check every declared field of ``config`` in place (integral floats of int fields become ints)."""
+    """Check every declared field of ``config`` in place (integral floats of int fields become ints).
+
+    Each field declared with :func:`setting` is replaced by :meth:`SettingSpec.check` of its
+    value: numbers of float fields become Python floats, integral numbers of int fields Python
+    ints, numpy booleans Python booleans, and three per-axis numbers a tuple. Other fields are
+    left alone.
+
+    Parameters
+    ----------
+    config : dataclass instance
+        E.g. a :class:`~visla_edu.filters.FilterConfig`; modified in place.
+
+    Raises
+    ------
+    ValueError
+        The first invalid value: ``"FilterConfig.<name> must be <what is valid> (<why>), got
+        <value>"``.
+    """
     for f in dataclasses.fields(config):
         if SPEC in f.metadata:
             setattr(config, f.name, f.metadata[SPEC].check(f.name, getattr(config, f.name)))
 
 
 def parse_setting(cls, pair):
-    """``"NAME=VALUE"`` -> ``(name, value)`` for a field of ``cls``, parsed strictly; ValueError otherwise."""
+    """``"NAME=VALUE"`` -> ``(name, value)`` for a field of ``cls``, parsed strictly; ValueError otherwise.
+
+    Spaces around the name are ignored; the value is parsed by :meth:`SettingSpec.parse` (see
+    the module docstring for what each kind accepts) and then checked like a value given in
+    Python.
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass whose fields were declared with :func:`setting`.
+    pair : str
+        ``"NAME=VALUE"``, split at the first ``=``.
+
+    Returns
+    -------
+    name : str
+    value : object
+        The parsed value: a number, a bool, a declared word (lower case), a text, a tuple of
+        three numbers (per-axis settings) or None (``none`` for an optional setting).
+
+    Raises
+    ------
+    ValueError
+        No ``=``, an unknown name (the message lists the settings), or a value that does not
+        parse or is out of range.
+    """
     name, sep, text = pair.partition("=")
     name = name.strip()
     specs = {f.name: f.metadata[SPEC] for f in dataclasses.fields(cls) if SPEC in f.metadata}
@@ -148,7 +234,25 @@ def parse_setting(cls, pair):
 
 
 def parse_settings(cls, pairs):
-    """``["sigma_pixel=2", ...]`` -> keyword arguments of ``cls``; a name given twice is an error."""
+    """``["sigma_pixel=2", ...]`` -> keyword arguments of ``cls``; a name given twice is an error.
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass whose fields were declared with :func:`setting`.
+    pairs : iterable of str
+        ``"NAME=VALUE"`` each (:func:`parse_setting`).
+
+    Returns
+    -------
+    dict
+        Name -> parsed value, in the order given.
+
+    Raises
+    ------
+    ValueError
+        A pair :func:`parse_setting` refuses, or a name given twice.
+    """
     out = {}
     for pair in pairs:
         name, value = parse_setting(cls, pair)

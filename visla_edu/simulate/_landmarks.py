@@ -8,8 +8,22 @@ __all__ = ["place_landmarks", "scene_change", "default_time_stamps", "check_pose
 def scene_change(world_T_imu, time_stamps, config):
     """How much the view changes per step: distance + ``scene_speed_floor`` * time, shape (T-1,).
 
-    Normalised to mean 1 (uniform if the car never moves). New features appear and
-    tracks are lost at rates proportional to it, so a stopped car keeps its features.
+    Normalised to mean 1 (all ones when every change is 0: a car that never moves with
+    ``scene_speed_floor = 0``). New features appear and tracks are lost at rates proportional
+    to it, so a stopped car keeps its features.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (T, 4, 4)
+        True IMU poses.
+    time_stamps : ndarray, shape (T,)
+    config : SimulationConfig
+        Its ``scene_speed_floor`` (m/s).
+
+    Returns
+    -------
+    ndarray, shape (T - 1,)
+        ``|p_{t+1} - p_t| + scene_speed_floor (t_{t+1} - t_t)``, divided by its mean.
     """
     step_len = np.linalg.norm(np.diff(world_T_imu[:, :3, 3], axis=0), axis=1)
     change = step_len + config.scene_speed_floor * np.diff(time_stamps)
@@ -17,7 +31,25 @@ def scene_change(world_T_imu, time_stamps, config):
 
 
 def default_time_stamps(time_stamps, T, config):
-    """``time_stamps`` checked to have shape (T,), or uniform steps of ``config.time_step`` if None."""
+    """``time_stamps`` checked to have shape (T,), or uniform steps of ``config.time_step`` if None.
+
+    Parameters
+    ----------
+    time_stamps : array_like, shape (T,), or None
+    T : int
+    config : SimulationConfig
+
+    Returns
+    -------
+    ndarray, shape (T,)
+        ``time_stamps`` as float, or ``config.time_step * [0, 1, ..., T - 1]`` (starting at 0,
+        not at ``config.start_time``).
+
+    Raises
+    ------
+    ValueError
+        ``time_stamps`` does not have shape (T,).
+    """
     if time_stamps is None:
         return config.time_step * np.arange(T)
     stamps = np.asarray(time_stamps, dtype=float)
@@ -104,7 +136,25 @@ def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):
 
 
 def check_poses(world_T_imu, where):
-    """``world_T_imu`` as a float array of shape (T, 4, 4), T >= 2; ``where`` names the caller."""
+    """``world_T_imu`` as a float array of shape (T, 4, 4), T >= 2; ``where`` names the caller.
+
+    Only the shape is checked (not that the poses are rigid or finite).
+
+    Parameters
+    ----------
+    world_T_imu : array_like, shape (T, 4, 4)
+    where : str
+        Starts the error message.
+
+    Returns
+    -------
+    ndarray, shape (T, 4, 4)
+
+    Raises
+    ------
+    ValueError
+        Another shape, or fewer than 2 poses.
+    """
     poses = np.asarray(world_T_imu, dtype=float)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) < 2:
         raise ValueError(f"{where}: world_T_imu must have shape (T, 4, 4) with T >= 2, got {poses.shape}")

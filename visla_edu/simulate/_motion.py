@@ -107,6 +107,18 @@ def lag_samples(samples, lag):
     """Samples recorded ``lag`` steps late: ``out[k] = samples[clip(k - lag, 0, T - 1)]``, shape (T, ...).
 
     The inverse of :func:`visla_edu.motion.select_twists` with the same ``lag`` (away from the ends).
+
+    Parameters
+    ----------
+    samples : array_like, shape (T, ...)
+        E.g. the true velocities (T, 3).
+    lag : int
+        Steps of delay; negative values shift the other way.
+
+    Returns
+    -------
+    ndarray, shape (T, ...)
+        The edge samples are repeated.
     """
     samples = np.asarray(samples)
     index = np.clip(np.arange(len(samples)) - int(lag), 0, len(samples) - 1)

@@ -46,7 +46,23 @@ ROUGH_ITERATIONS = 2
 
 
 def motion_information(tau, config):
-    """Diagonal of ``W_t^{-1/2}`` for each step: ``1 / (tau_t sigma)``, shape (K, 6)."""
+    """Diagonal of ``W_t^{-1/2}`` for each step: ``1 / (tau_t sigma)``, shape (K, 6).
+
+    With ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` (:func:`visla_edu.motion.motion_noise`),
+    the whitened motion residual is ``W_t^{-1/2} e_t``.
+
+    Parameters
+    ----------
+    tau : array_like, shape (K,)
+        The steps' durations (s).
+    config : SmootherConfig
+        Its :attr:`~SmootherConfig.velocity_sigmas` ``[sigma_v (3); sigma_w (3)]``.
+
+    Returns
+    -------
+    ndarray, shape (K, 6)
+        ``1 / (tau_t sigma_i)``, linear axes first.
+    """
     return 1.0 / (np.asarray(tau)[:, None] * config.velocity_sigmas)
 
 

@@ -109,6 +109,15 @@ def envelope_reach(system):
 
     ``reach[i] = max(i + 1, hi[k] for corrections with lo[k] <= i)`` (clipped to ``n - 1``), a
     nondecreasing sequence: a Cholesky factor has no fill below it.
+
+    Parameters
+    ----------
+    system : EnvelopeSystem
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        ``n`` the system's number of block rows.
     """
     n = system.num_blocks
     last = np.minimum(np.arange(n) + 1, n - 1)
@@ -333,7 +342,19 @@ def inverse_diagonal(factor, visit=None):
 
 
 def to_dense(system):
-    """The full matrix of an :class:`EnvelopeSystem`, shape (n b, n b) (tests, small systems)."""
+    """The full matrix of an :class:`EnvelopeSystem`, shape (n b, n b) (tests, small systems).
+
+    ``tridiag(sub, diag, sub^T) - sum_k P_k V_k V_k^T P_k^T``.
+
+    Parameters
+    ----------
+    system : EnvelopeSystem
+
+    Returns
+    -------
+    ndarray, shape (n b, n b)
+        A new dense array (``n`` block rows of size ``b``).
+    """
     n, b = system.num_blocks, system.diag.shape[1]
     A = np.zeros((n * b, n * b))
     for row in range(n):

@@ -114,7 +114,26 @@ class SmootherResult:
 
 
 def check_trajectory(world_T_imu, num_frames, name):
-    """``world_T_imu`` as a finite float array of shape (T, 4, 4), or a ValueError naming the problem."""
+    """``world_T_imu`` as a finite float array of shape (T, 4, 4), or a ValueError naming the problem.
+
+    Parameters
+    ----------
+    world_T_imu : array_like, shape (T, 4, 4)
+        The initial trajectory of a smoother.
+    num_frames : int
+        T, the dataset's frames.
+    name : str
+        Starts the error message (the dataset's name).
+
+    Returns
+    -------
+    ndarray, shape (T, 4, 4)
+
+    Raises
+    ------
+    ValueError
+        Another shape, or a pose with a non-finite entry (the message names the first frame).
+    """
     world_T_imu = np.asarray(world_T_imu, dtype=float)
     if world_T_imu.shape != (num_frames, 4, 4):
         raise ValueError(f"{name}: initial world_T_imu must have shape ({num_frames}, 4, 4) "
@@ -127,7 +146,29 @@ def check_trajectory(world_T_imu, num_frames, name):
 
 
 def check_landmarks(landmarks, num_landmarks, name):
-    """``landmarks`` as a float array of shape (M, 3) (NaN rows allowed), or None."""
+    """``landmarks`` as a float array of shape (M, 3) (NaN rows allowed), or None.
+
+    Only the shape is checked; the values are not (NaN rows mark unknown landmarks).
+
+    Parameters
+    ----------
+    landmarks : array_like, shape (M, 3), or None
+        Initial landmark positions of a smoother.
+    num_landmarks : int
+        M, the dataset's landmarks.
+    name : str
+        Starts the error message (the dataset's name).
+
+    Returns
+    -------
+    ndarray, shape (M, 3), or None
+        None when ``landmarks`` is None.
+
+    Raises
+    ------
+    ValueError
+        ``landmarks`` does not have shape (M, 3).
+    """
     if landmarks is None:
         return None
     landmarks = np.asarray(landmarks, dtype=float)

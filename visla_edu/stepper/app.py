@@ -16,7 +16,14 @@ __all__ = ["serve", "app_notebook_path"]
 
 
 def app_notebook_path():
-    """Path of the standalone stepper page (``stepper_app.ipynb``, shipped in the package)."""
+    """Path of the standalone stepper page (``stepper_app.ipynb``, shipped in the package).
+
+    Returns
+    -------
+    pathlib.Path
+        ``visla_edu/stepper_app.ipynb`` in the installed package (absolute, symbolic links
+        resolved); its existence is not checked.
+    """
     return Path(__file__).resolve().parent.parent / "stepper_app.ipynb"
 
 
