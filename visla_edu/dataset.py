@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from visla_edu import lie
 from visla_edu.camera import StereoCamera
 
 __all__ = ["Dataset", "GroundTruth", "frame_major_order", "repeated_frames"]
@@ -181,6 +182,47 @@ class Dataset:
         """Number of observations of each landmark, shape (M,)."""
         return np.bincount(self.obs_ids, minlength=self.num_landmarks)
 
+    def segment(self, start, stop):
+        """Frames ``start .. stop - 1`` as a drive of their own, its world at the segment's first pose.
+
+        A shorter drive to iterate on quickly, or several independent drives with ground truth
+        from one long one (``benchmarks/bench_accuracy.py --only segments``).
+
+        Parameters
+        ----------
+        start, stop : int
+            ``0 <= start``, ``start + 2 <= stop <= T`` (a drive needs a step to move).
+
+        Returns
+        -------
+        Dataset
+            ``name`` ``"<name>[start:stop]"``; the frames' time stamps, velocities and
+            observations; only the landmarks observed in the segment, renumbered in their
+            original order; ``extra`` empty (calibrations are measured on the segment anew).
+            The ground truth, where it covers frame ``start``, is re-expressed in the
+            segment's world (the true IMU frame at ``start``): ``seg_world_T_imu[k] =
+            inv(world_T_imu[start]) @ world_T_imu[start + k]``, the landmarks likewise; it
+            keeps only the poses it has (``None`` if it ends before ``start``).
+
+        Raises
+        ------
+        ValueError
+            ``start`` or ``stop`` is not an integer or lies outside that range.
+        """
+        start, stop = _segment_bounds(start, stop, self.num_frames, self.name)
+        lo, hi = self.frame_ptr[start], self.frame_ptr[stop]
+        kept, obs_ids = np.unique(self.obs_ids[lo:hi], return_inverse=True)
+        return Dataset(
+            name=f"{self.name}[{start}:{stop}]", source=self.source,
+            time_stamps=self.time_stamps[start:stop].copy(),
+            linear_velocity=self.linear_velocity[start:stop].copy(),
+            angular_velocity=self.angular_velocity[start:stop].copy(),
+            K=self.K.copy(), b=self.b, imu_T_cam=self.imu_T_cam.copy(), num_landmarks=len(kept),
+            frame_ptr=self.frame_ptr[start:stop + 1] - lo, obs_ids=obs_ids.astype(np.int64).reshape(-1),
+            obs_z=self.obs_z[lo:hi].copy(),
+            ground_truth=_segment_ground_truth(self.ground_truth, start, stop, kept),
+            label=f"frames {start}..{stop - 1} of {self.label or self.name}")
+
     def to_dense_features(self, frames=None, landmarks=None):
         """The course's dense layout: ``(4, M, T)`` with -1 where not observed.
 
@@ -242,6 +284,35 @@ class Dataset:
             obs_z=features[:, landmark_ids, frames].T.copy(),
             **fields,
         )
+
+
+def _segment_bounds(start, stop, num_frames, name):
+    """``(start, stop)`` as ints after checking ``0 <= start``, ``start + 2 <= stop <= num_frames``."""
+    for label, value in (("start", start), ("stop", stop)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise ValueError(f"{name}: segment {label} must be an integer frame index, got {value!r}")
+    if not (0 <= start and start + 2 <= stop <= num_frames):
+        raise ValueError(f"{name}: segment [{start}:{stop}] must satisfy 0 <= start, start + 2 <= stop <= "
+                         f"{num_frames} (the drive's frames); a segment needs at least 2 frames")
+    return int(start), int(stop)
+
+
+def _segment_ground_truth(truth, start, stop, kept):
+    """``truth`` of frames ``start .. stop - 1`` in the segment's world, landmarks ``kept``; or None."""
+    if truth is None or truth.num_frames <= start:
+        return None
+    seg_T_world = lie.se3_inv(truth.world_T_imu[start])
+    landmarks = None
+    if truth.landmarks is not None:
+        landmarks = truth.landmarks[kept] @ seg_T_world[:3, :3].T + seg_T_world[:3, 3]
+    frames = slice(start, stop)
+    return GroundTruth(
+        world_T_imu=seg_T_world @ truth.world_T_imu[frames],
+        landmarks=landmarks,
+        linear_velocity=None if truth.linear_velocity is None else truth.linear_velocity[frames].copy(),
+        angular_velocity=None if truth.angular_velocity is None else truth.angular_velocity[frames].copy(),
+        outlier=None if truth.outlier is None else truth.outlier[kept].copy(),
+        source=truth.source)
 
 
 def frame_major_order(obs_ids, obs_frames, num_frames):
