@@ -53,6 +53,13 @@ def test_hidden_error_message_is_short_and_names_the_function():
     assert _hiding.label(checks.reference_numerical_jacobian) == "numdiff.central_jacobian"
 
 
+def test_hidden_error_message_of_a_long_exercise_name_keeps_the_name():
+    long_name = "estimate_the_landmark_covariance_of_the_map"  # 43 characters: no phrasing fits
+    message = _hiding.hidden_message(long_name, cam.StereoCamera.predict)
+    assert _first_line(message) == f"write your own {long_name}"
+    assert len(_first_line(message)) <= 79 and "camera.StereoCamera.predict" in message.split("\n")[1]
+
+
 def _alias_answers():
     from visla_edu.lie import hat as imported_hat  # the student's own binding, made before the check
 

@@ -77,21 +77,17 @@ def hidden_message(exercise, fn):
         First line: the first of four phrasings, from the most to the least explicit ("write
         your own {exercise}; the library's {label} is not available inside this check", ...,
         "write your own {exercise}: the library's version is hidden here"), that has at most
-        :data:`MAX_FIRST_LINE` characters; second line: why the check hides it.
-
-    Raises
-    ------
-    StopIteration
-        None of the four fits (possible only for an ``exercise`` name of more than 26
-        characters with a long label).
+        :data:`MAX_FIRST_LINE` characters, or else just "write your own {exercise}" (longer
+        than :data:`MAX_FIRST_LINE` only if ``exercise`` has more than 64 characters: the name
+        is never cut); second line: why the check hides it, naming {label}.
     """
     name = label(fn)
-    first = next(line for line in (
+    first = next((line for line in (
         f"write your own {exercise}; the library's {name} is not available inside this check",
         f"write your own {exercise}: {name} is hidden inside this check",
         f"write your own {exercise}: {name} is hidden here",
         f"write your own {exercise}: the library's version is hidden here",
-    ) if len(line) <= MAX_FIRST_LINE)
+    ) if len(line) <= MAX_FIRST_LINE), f"write your own {exercise}")
     return (f"{first}\nThe check hides {name} while it runs your {exercise}, so that it "
             "grades your code, not the library's. Use numpy/scipy and the functions the exercise "
             "text allows.")
