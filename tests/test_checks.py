@@ -350,6 +350,13 @@ def test_pose_checks(capsys):
     _fails(checks.check_pose_update, _pose_update_twist_swapped, "twist order")
 
 
+def test_pose_update_success_line_names_what_it_compared_with(capsys):
+    checks.check_pose_update(A.pose_update)
+    out = capsys.readouterr().out
+    assert "the reference update mu exp(K r), (I - K H) Sigma" in out  # the check's own formula
+    assert "ekf.pose_update" not in out  # the check never calls it
+
+
 # --------------------------------------------------------------------------- 06 SLAM
 
 

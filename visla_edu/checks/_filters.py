@@ -215,7 +215,7 @@ def check_pose_update(pose_update, hidden=False):
         compare(name, as_array(out[1], name, (6, 6), "covariance"), S_ref, "(covariance)", [
             ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
         ], rtol=1e-6, atol=1e-10)
-    ok(f"{name}: pose and covariance agree with ekf.pose_update", hidden)
+    ok(f"{name}: pose and covariance agree with the reference update mu exp(K r), (I - K H) Sigma", hidden)
 
 
 def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=True, offset=_POSE_DIM):
