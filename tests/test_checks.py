@@ -350,6 +350,13 @@ def test_pose_checks(capsys):
     _fails(checks.check_pose_update, _pose_update_twist_swapped, "twist order")
 
 
+def test_curly_hat_success_line_claims_only_the_comparison(capsys):
+    checks.check_curly_hat(A.curly_hat)
+    out = capsys.readouterr().out
+    assert "agrees with the library on 5 twists" in out  # what the check compares
+    assert "expm" not in out  # the check does not evaluate expm(curly_hat(u))
+
+
 def test_pose_update_success_line_names_what_it_compared_with(capsys):
     checks.check_pose_update(A.pose_update)
     out = capsys.readouterr().out

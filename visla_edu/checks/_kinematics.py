@@ -375,7 +375,8 @@ def check_curly_hat(curly_hat, hidden=False):
     generator = rng(hidden)
     fixed = [np.zeros(6), np.array([0.0, 0, 0, 1e-9, 0, 0])] if hidden else [np.array([1.0, 2, 3, 4, 5, 6])]
     call = student(curly_hat, name, hide=[lie.curly_hat])
-    for u in fixed + [generator.normal(size=6) for _ in range(4)]:
+    cases = fixed + [generator.normal(size=6) for _ in range(4)]
+    for u in cases:
         got = as_array(call(u), name, (6, 6))
         ref = lie.curly_hat(u)
         v, w = lie.hat(u[:3]), lie.hat(u[3:])
@@ -388,7 +389,7 @@ def check_curly_hat(curly_hat, hidden=False):
             ("the signs are flipped (you built curly_hat(-u))", lambda: -ref),
             ("curly_hat is transposed", lambda: ref.T),
         ])
-    ok(f"{name}: expm(curly_hat(u)) == adjoint(se3_exp(u)) holds with your matrix", hidden)
+    ok(f"{name}: [[hat(w), hat(v)], [0, hat(w)]] agrees with the library on {len(cases)} twists [v; w]", hidden)
 
 
 @exercise_check
