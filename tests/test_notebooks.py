@@ -274,3 +274,11 @@ def test_command_line_writes_notebooks(tmp_path, capsys):
     assert release.main(["--src", str(SOLUTIONS), "--dst", str(tmp_path / "out"), "--check"]) == 0
     assert release.main(["--src", str(tmp_path / "missing"), "--dst", str(tmp_path / "out")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_command_line_refuses_check_with_clean_sources(tmp_path, capsys):
+    with pytest.raises(SystemExit) as info:
+        release.main(["--src", str(SOLUTIONS), "--dst", str(tmp_path), "--check", "--clean-sources"])
+    assert info.value.code == 2
+    assert "--check and --clean-sources cannot be combined" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())  # nothing written

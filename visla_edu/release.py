@@ -453,7 +453,7 @@ def main(argv=None):
     (:func:`clean_sources`), then writes the student notebooks (:func:`make_student_notebooks`)
     and, if ``TEACHING.md`` exists in the folder above ``--src``, its points table
     (:func:`update_points_table`), printing each file written. With ``--check``: writes
-    nothing (``--clean-sources`` is ignored) and lists what is out of date.
+    nothing and lists what is out of date (``--clean-sources`` with it is refused).
 
     Parameters
     ----------
@@ -470,7 +470,8 @@ def main(argv=None):
     Raises
     ------
     SystemExit
-        From argparse, for bad arguments or ``--help``.
+        From argparse, for bad arguments, ``--check`` with ``--clean-sources`` (status 2) or
+        ``--help``.
     """
     parser = argparse.ArgumentParser(
         prog="python -m visla_edu.release",
@@ -483,6 +484,9 @@ def main(argv=None):
     parser.add_argument("--clean-sources", action="store_true",
                         help="first strip outputs and execution counts from the solution notebooks")
     args = parser.parse_args(argv)
+    if args.check and args.clean_sources:
+        parser.error("--check and --clean-sources cannot be combined: --check writes nothing, "
+                     "--clean-sources rewrites the solution notebooks; run them one after the other")
     try:
         teaching = _teaching_next_to(args.src)
         if args.check:
