@@ -595,6 +595,12 @@ def test_student_or_reference(capsys):
     assert checks.student_or_reference(lambda x: (x, x), pair, np.ones(3)) is pair
 
 
+@pytest.mark.parametrize("stride", [0, -1, -3])
+def test_reference_dense_covariance_bytes_refuses_a_stride_below_one(stride):
+    with pytest.raises(ValueError, match=f"stride must be a positive integer, got {stride}: use 1"):
+        checks.reference_dense_covariance_bytes(100, stride)
+
+
 def test_the_reference_fallbacks_agree_with_independent_answers():
     """checks.reference_* (the notebooks' fallbacks while an exercise is unfinished) are correct."""
     rng = np.random.default_rng(5)

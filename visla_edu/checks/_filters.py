@@ -304,8 +304,11 @@ def reference_dense_covariance_bytes(num_landmarks, stride=1):
     Raises
     ------
     ValueError
-        ``stride`` is 0.
+        ``stride`` is 0 or negative.
     """
+    if stride < 1:
+        raise ValueError(f"stride must be a positive integer, got {stride}: use 1 to keep every landmark, "
+                         "k to keep every k-th")
     n = len(range(0, num_landmarks, stride))
     return (_POSE_DIM + 3 * n) ** 2 * 8
 
