@@ -380,6 +380,18 @@ def test_bad_initial_values_get_a_clear_error(tiny):
         smoother.smooth(tiny, T, np.zeros((3, 3)))
 
 
+def test_infinite_initial_landmarks_are_refused_and_nan_rows_allowed(tiny):
+    T = tiny.ground_truth.world_T_imu
+    given = np.full((tiny.num_landmarks, 3), np.nan)  # NaN rows: not mapped, triangulated
+    given[4] = [1.0, 2.0, 3.0]
+    assert smoother.normal_equations(tiny, T, given).H.shape[0] > 0
+    given[9, 1] = np.inf
+    with pytest.raises(ValueError, match=r"infinite entries at landmark 9 \(1 landmarks\); use a NaN row"):
+        smoother.smooth(tiny, T, given)
+    with pytest.raises(ValueError, match="infinite entries at landmark 9"):
+        smoother.normal_equations(tiny, T, given)
+
+
 def test_initial_landmarks_come_from_the_largest_disparity_observation(tiny):
     usable = tiny.obs_z[:, 0] - tiny.obs_z[:, 2] > 0
     T = tiny.ground_truth.world_T_imu

@@ -265,7 +265,8 @@ def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None, bl
         Its first pose is held.
     landmarks : array_like, shape (M, 3), optional
         Initial map (e.g. ``RunResult.landmarks``); NaN rows and a missing map are
-        triangulated from each landmark's largest-disparity observation.
+        triangulated from each landmark's largest-disparity observation (an infinite entry is
+        a ValueError).
     imu_T_cam : array_like, shape (4, 4), optional
         Calibration to use (e.g. ``RunResult.imu_T_cam``, after the extrinsic correction);
         default the dataset's.
@@ -376,8 +377,8 @@ def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, confi
     Raises
     ------
     ValueError
-        ``world_T_imu`` is not (T, 4, 4) or not finite, ``landmarks`` is not (M, 3), or
-        ``imu_T_cam`` is not (4, 4).
+        ``world_T_imu`` is not (T, 4, 4) or not finite, ``landmarks`` is not (M, 3) or has
+        infinite entries, or ``imu_T_cam`` is not (4, 4).
     """
     config = config or SmootherConfig()
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)

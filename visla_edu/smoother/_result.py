@@ -146,9 +146,9 @@ def check_trajectory(world_T_imu, num_frames, name):
 
 
 def check_landmarks(landmarks, num_landmarks, name):
-    """``landmarks`` as a float array of shape (M, 3) (NaN rows allowed), or None.
+    """``landmarks`` as a float array of shape (M, 3) without inf (NaN rows allowed), or None.
 
-    Only the shape is checked; the values are not (NaN rows mark unknown landmarks).
+    NaN rows mark unknown landmarks (the smoother triangulates them); infinite entries are refused.
 
     Parameters
     ----------
@@ -167,7 +167,8 @@ def check_landmarks(landmarks, num_landmarks, name):
     Raises
     ------
     ValueError
-        ``landmarks`` does not have shape (M, 3).
+        ``landmarks`` does not have shape (M, 3), or has an infinite entry (the message names
+        the first such landmark).
     """
     if landmarks is None:
         return None
@@ -175,6 +176,10 @@ def check_landmarks(landmarks, num_landmarks, name):
     if landmarks.shape != (num_landmarks, 3):
         raise ValueError(f"{name}: initial landmarks must have shape ({num_landmarks}, 3) "
                          f"(NaN rows for unknown ones), got {landmarks.shape}")
+    bad = np.flatnonzero(np.any(np.isinf(landmarks), axis=1))
+    if len(bad):
+        raise ValueError(f"{name}: initial landmarks have infinite entries at landmark {bad[0]} "
+                         f"({len(bad)} landmarks); use a NaN row for a landmark without a position")
     return landmarks
 
 
