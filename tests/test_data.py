@@ -638,6 +638,19 @@ def test_calibration_at_the_edges_of_the_plausible_ranges_loads(tmp_path, key, v
     data.load(write(tmp_path, arrays))
 
 
+@pytest.mark.parametrize("index", [(0, 2), (1, 2)])
+def test_principal_point_at_zero_is_refused_and_at_the_upper_edge_accepted(index):
+    from visla_edu.data import _plausible
+
+    K = course_dict()["K"].copy()
+    K[index] = 0.0
+    with pytest.raises(ValueError, match=r"= 0 px is outside any image \(it lies near the image centre, above 0 "
+                                         r"and at most 20000 px\)"):
+        _plausible.check_calibration(K, 0.6, "x")
+    K[index] = _plausible.PRINCIPAL_POINT_RANGE[1]
+    _plausible.check_calibration(K, 0.6, "x")
+
+
 def test_swapped_left_and_right_columns_are_named(tmp_path):
     arrays = course_dict()
     swapped = dict(arrays, features=arrays["features"][[2, 3, 0, 1]].copy())

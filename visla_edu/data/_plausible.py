@@ -12,8 +12,9 @@ quantity                  plausible             why
 focal lengths fsu, fsv    4 .. 250,000 px       ``f = (W/2) / tan(FOV/2)`` for images 100 to
                                                 20,000 px wide and fields of view 5 to 170 deg
 fsv / fsu                 0.2 .. 5              pixels are close to square (1 on course rigs)
-principal point cu, cv    0 .. 20,000 px        inside an image at most 20,000 px wide, and
-                                                inside the region where features are seen
+principal point cu, cv    > 0 .. 20,000 px      inside an image at most 20,000 px wide, and
+                                                inside the region where features are seen;
+                                                exactly 0 (the image's corner) is refused
 off-axis angle of pixels  < 85 deg              a pinhole camera sees less than 170 deg
 observed pixels           >= -10 px             inside the image, give or take a tracker's
                                                 sub-pixel slack; not a 'missing' marker
@@ -58,7 +59,7 @@ __all__ = [
 
 FOCAL_RANGE = (4.0, 2.5e5)  # px
 ASPECT_RANGE = (0.2, 5.0)  # fsv / fsu
-PRINCIPAL_POINT_RANGE = (0.0, 2e4)  # px
+PRINCIPAL_POINT_RANGE = (0.0, 2e4)  # px, 0 excluded
 MAX_OFF_AXIS_DEG = 85.0
 BASELINE_RANGE = (0.005, 5.0)  # m
 MAX_EXTRINSIC_TRANSLATION = 20.0  # m
@@ -214,7 +215,7 @@ def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
     for name, value in (("cu = K[0, 2]", cu), ("cv = K[1, 2]", cv)):
         if not PRINCIPAL_POINT_RANGE[0] < value <= PRINCIPAL_POINT_RANGE[1]:
             raise ValueError(f"{path}: key 'K': principal point {name} = {value:.6g} px is outside any image (it "
-                             f"lies near the image centre, between 0 and {PRINCIPAL_POINT_RANGE[1]:g} px)")
+                             f"lies near the image centre, above 0 and at most {PRINCIPAL_POINT_RANGE[1]:g} px)")
     _check_length(b, BASELINE_RANGE, "b", "the stereo baseline", "(from a phone's stereo pair to a rig across a "
                   "truck)", path)
     if pose is None:
