@@ -217,6 +217,12 @@ def test_markdown_stub_and_hidden_tests():
     assert release.strip_hidden_tests(source) == "check(f)"
 
 
+def test_hidden_tests_in_the_middle_keep_the_end_of_the_cell():
+    hidden = "### BEGIN HIDDEN TESTS\nassert f(1) == 2\n### END HIDDEN TESTS"
+    assert release.strip_hidden_tests(f"check(f)\n{hidden}\nprint(f(3))\n\n") == "check(f)\nprint(f(3))\n\n"
+    assert release.strip_hidden_tests(f"check(f)\n\n{hidden}\n\n") == "check(f)"  # at the end: blanks go
+
+
 def test_answers_to_questions_are_replaced_in_markdown_only():
     nb = nbformat.v4.new_notebook()
     answers = f"**Answers**\n{release.BEGIN_ANSWERS}\n1. Because.\n{release.END_ANSWERS}\nEnd."

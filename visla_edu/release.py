@@ -161,9 +161,10 @@ def strip_hidden_tests(source, where="cell"):
     """Remove every hidden-test region of ``source`` (markers included).
 
     A region runs from a line ``### BEGIN HIDDEN TESTS`` to a line ``### END HIDDEN TESTS``
-    (compared after stripping spaces). When there is a region, blank lines at the end of the
-    result are dropped too (wherever the region was); without one ``source`` is returned
-    unchanged.
+    (compared after stripping spaces). When the last region ends the cell (only blank lines
+    after it), the blank lines before it and after it are dropped too, so the result does not
+    end where the tests were; otherwise the cell's end is kept as it was. Without a region
+    ``source`` is returned unchanged.
 
     Parameters
     ----------
@@ -190,7 +191,9 @@ def strip_hidden_tests(source, where="cell"):
     for start, stop in regions:
         out.extend(lines[prev:start])
         prev = stop + 1
-    out.extend(lines[prev:])
+    rest = lines[prev:]
+    if any(line.strip() for line in rest):  # the last region is in the middle: keep the cell's end
+        return "\n".join(out + rest)
     while out and not out[-1].strip():  # no trailing blank lines where the tests were
         out.pop()
     return "\n".join(out)
