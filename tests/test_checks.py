@@ -595,10 +595,15 @@ def test_student_or_reference(capsys):
     assert checks.student_or_reference(lambda x: (x, x), pair, np.ones(3)) is pair
 
 
-@pytest.mark.parametrize("stride", [0, -1, -3])
-def test_reference_dense_covariance_bytes_refuses_a_stride_below_one(stride):
-    with pytest.raises(ValueError, match=f"stride must be a positive integer, got {stride}: use 1"):
-        checks.reference_dense_covariance_bytes(100, stride)
+@pytest.mark.parametrize("num_landmarks, stride, words", [
+    (100, 0, r"stride must be a positive integer \(1 keeps every landmark\), got 0"),
+    (100, -3, "stride must be a positive integer .*, got -3"),
+    (100, 2.5, "stride must be a positive integer .*, got 2.5"),
+    (-1, 1, "num_landmarks must be a non-negative integer, got -1"),
+    (10.0, 1, "num_landmarks must be a non-negative integer, got 10.0")])
+def test_reference_dense_covariance_bytes_refuses_bad_counts(num_landmarks, stride, words):
+    with pytest.raises(ValueError, match=words):
+        checks.reference_dense_covariance_bytes(num_landmarks, stride)
 
 
 def test_the_reference_fallbacks_agree_with_independent_answers():

@@ -304,11 +304,12 @@ def reference_dense_covariance_bytes(num_landmarks, stride=1):
     Raises
     ------
     ValueError
-        ``stride`` is 0 or negative.
+        ``num_landmarks`` is not a non-negative integer, or ``stride`` not a positive one.
     """
-    if stride < 1:
-        raise ValueError(f"stride must be a positive integer, got {stride}: use 1 to keep every landmark, "
-                         "k to keep every k-th")
+    hints = {"num_landmarks": "a non-negative integer", "stride": "a positive integer (1 keeps every landmark)"}
+    for name, value, low in (("num_landmarks", num_landmarks, 0), ("stride", stride, 1)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise ValueError(f"{name} must be {hints[name]}, got {value!r}")
     n = len(range(0, num_landmarks, stride))
     return (_POSE_DIM + 3 * n) ** 2 * 8
 
