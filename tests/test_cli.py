@@ -170,3 +170,45 @@ def test_info_and_run_0020_with_its_ground_truth(require_data, capsys):
     text = capsys.readouterr().out
     assert "ATE against ground truth (kitti_odometry_06_poses.txt, 1101 frames)" in text
     assert "first 1101 of 1104 frames" in text and "segments of 100-800 m" in text
+
+
+# ----------------------------------------------------------------------------- --frames
+
+
+def test_frames_runs_a_segment_against_its_own_ground_truth(real_like_drive, tmp_path, capsys):
+    from visla_edu import lie, metrics
+
+    path, poses, times, ds = real_like_drive
+    out = tmp_path / "r.npz"
+    argv = ["run", str(path), "--ground-truth", str(poses), "--ground-truth-times", str(times),
+            "--frames", "20:45", "--mode", "deadreckon", "--out", str(out), "--quiet"]
+    assert cli.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "frames 20..44 of" in text and "ATE against ground truth (poses.txt, 25 frames)" in text
+    result = run.load_result(out)
+    assert result.name == "drive[20:45]" and result.world_T_imu.shape == (25, 4, 4)
+    np.testing.assert_array_equal(result.time_stamps, ds.time_stamps[20:45])
+    truth = lie.se3_inv(ds.ground_truth.world_T_imu[20]) @ ds.ground_truth.world_T_imu[20:45]
+    assert result.evaluation["estimate_ate_raw"] == pytest.approx(metrics.ate(result.world_T_imu, truth, False))
+
+
+def test_frames_open_ends_and_info(capsys):
+    assert cli.main(["run", "sim-tiny", "--frames", "50:", "--mode", "deadreckon", "--quiet"]) == 0
+    assert "sim-tiny[50:60]: mode deadreckon, 10 frames" in capsys.readouterr().out
+    assert cli.main(["info", "sim-tiny", "--frames", ":20", "--no-diagnostics"]) == 0
+    assert "sim-tiny[0:20]: frames 0..19 of" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("value", ["3", "a:b", "-1:5", "1:2:3"])
+def test_a_malformed_frames_option_is_an_argparse_error(value, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["run", "sim-tiny", "--quiet", f"--frames={value}"])
+    err = capsys.readouterr().err
+    assert "argument --frames: expected START:STOP" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("value", ["58:70", "30:31", "40:20"])
+def test_frames_outside_the_drive_are_refused_before_the_run(value, capsys):
+    assert cli.main(["run", "sim-tiny", "--quiet", "--frames", value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"--frames {value}: sim-tiny has frames 0..59" in err and len(err.splitlines()) == 1

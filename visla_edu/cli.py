@@ -98,6 +98,7 @@ def build_parser():
     info = sub.add_parser("info", parents=[common], help="summarise a dataset and diagnose its problems")
     info.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     info.add_argument("--no-diagnostics", action="store_true", help="skip the visual-odometry diagnostics")
+    _add_frames_option(info)
 
     _add_run_parser(sub, common)
 
@@ -138,6 +139,36 @@ def _add_run_parser(sub, common):
     run.add_argument("--trajectory-out", default=None, type=_path, metavar="FILE",
                      help="write the estimated trajectory: .kitti or .txt (KITTI, 12 numbers per row) or .tum "
                           "(TUM: t x y z qx qy qz qw)")
+    _add_frames_option(run)
+
+
+def _add_frames_option(parser):
+    parser.add_argument("--frames", default=None, type=_frames, metavar="START:STOP",
+                        help="use frames START..STOP-1 only, as a drive of their own (its ground truth starts at "
+                             "frame START); either end may be left out, e.g. 0:300 or 500:")
+
+
+def _frames(text):
+    """``--frames START:STOP``: ``(start, stop)``, ``start`` 0 and ``stop`` None when left out."""
+    parts = text.split(":")
+    expected = f"START:STOP frame indices such as 0:300, 500: or :300, got {text!r}"
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected {expected}")
+    start = _integer_in(parts[0], 0, 10**9, expected) if parts[0].strip() else 0
+    stop = _integer_in(parts[1], 0, 10**9, expected) if parts[1].strip() else None
+    return start, stop
+
+
+def _select_frames(dataset, frames):
+    """``dataset`` cut to ``--frames`` (:meth:`~visla_edu.dataset.Dataset.segment`), or unchanged."""
+    if frames is None:
+        return dataset
+    start, stop = frames
+    stop = dataset.num_frames if stop is None else stop
+    if not start + 2 <= stop <= dataset.num_frames:
+        raise ValueError(f"--frames {start}:{stop}: {dataset.name} has frames 0..{dataset.num_frames - 1}; give "
+                         f"0 <= START, START + 2 <= STOP <= {dataset.num_frames} (STOP is excluded)")
+    return dataset.segment(start, stop)
 
 
 def _integer_in(text, low, high, expected):
@@ -199,7 +230,7 @@ def _stride(text):
 def _cmd_info(args):
     from visla_edu import data, diagnostics
 
-    dataset = data.load(args.dataset, args.data_dir)
+    dataset = _select_frames(data.load(args.dataset, args.data_dir), args.frames)
     print(data.format_summary(dataset))
     if not args.no_diagnostics and dataset.num_observations:
         print()
@@ -343,13 +374,13 @@ def _save_plot(result, dataset, args, path):
 
 
 def _load_with_ground_truth(args):
-    """The dataset of ``args``, with the ground truth of ``--ground-truth`` when given."""
+    """The dataset of ``args``, with the ground truth of ``--ground-truth`` when given, cut to ``--frames``."""
     from visla_edu import data
 
     dataset = data.load(args.dataset, args.data_dir)
     if args.ground_truth:
         dataset = data.attach_ground_truth(dataset, args.ground_truth, args.ground_truth_times)
-    return dataset
+    return _select_frames(dataset, args.frames)
 
 
 def _print_evaluation(evaluations, ground_truth, mode):
