@@ -321,3 +321,18 @@ def test_lag_rule_takes_the_best_lag_when_it_clearly_beats_lag_zero():
                                     {"+0": [0.4, -0.7], "+2": [0.1, -0.7]})
     assert _calibration._decide_lag(undecided)[0] == 0
     assert _calibration._decide_lag(_tracks.TrackChoice(2, 2, "chosen", {"+0": [1.0, 0.5]}))[0] == 2
+
+
+def test_a_drive_too_short_to_measure_its_noise_gets_the_courses_values_and_says_so():
+    rng = np.random.default_rng(2)
+    short = diagnostics.imu_noise(rng.normal(size=(diagnostics.MIN_NOISE_SAMPLES - 1, 6)))
+    assert not short["measured"]
+    np.testing.assert_array_equal(short["sigma"], [0.5] * 3 + [0.05] * 3)
+    assert diagnostics.imu_noise(rng.normal(size=(diagnostics.MIN_NOISE_SAMPLES, 6)))["measured"]
+    piece = simulate.simulate_drive("tiny", 0).segment(0, 4)
+    calibration = diagnostics.calibrate(piece)
+    np.testing.assert_array_equal(calibration.sigma_linear_velocity, [0.5] * 3)
+    np.testing.assert_array_equal(calibration.sigma_angular_velocity, [0.05] * 3)
+    report = calibration.report(piece.name)
+    assert "IMU noise per axis from the velocities: not measured: 4 velocity samples, fewer than 10" in report
+    assert "white (second differences)" not in report

@@ -39,7 +39,8 @@ from visla_edu.diagnostics._calibration import (
 )
 from visla_edu.diagnostics._checks import check_time_alignment, diagnose, imu_noise_and_bias, resolve_extrinsics
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
-from visla_edu.diagnostics._noise import MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR, imu_noise
+from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR, UNMEASURED_SIGMA_ANGULAR,
+                                          UNMEASURED_SIGMA_LINEAR, imu_noise)
 from visla_edu.diagnostics._tracks import TrackChoice, TrackEvidence, TrackScorer, track_pairs
 from visla_edu.diagnostics._vo import (
     CORRECTIONS,
@@ -58,6 +59,9 @@ __all__ = [
     "MIN_SIGNIFICANCE",
     "MIN_SIGMA_LINEAR",
     "MIN_SIGMA_ANGULAR",
+    "MIN_NOISE_SAMPLES",
+    "UNMEASURED_SIGMA_LINEAR",
+    "UNMEASURED_SIGMA_ANGULAR",
     "CALIBRATION_VERSION",
     "CACHED_ARRAYS",
     "Calibration",

@@ -24,7 +24,8 @@ import numpy as np
 from visla_edu import cache as user_cache
 from visla_edu.dataset import Dataset, repeated_frames
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
-from visla_edu.diagnostics._noise import imu_noise
+from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR,
+                                          UNMEASURED_SIGMA_ANGULAR, UNMEASURED_SIGMA_LINEAR, imu_noise)
 from visla_edu.diagnostics._report import calibration_report
 from visla_edu.diagnostics._tracks import NOT_ENOUGH, TrackEvidence, TrackScorer
 from visla_edu.diagnostics._vo import (
@@ -42,7 +43,7 @@ __all__ = ["CALIBRATION_VERSION", "CACHED_ARRAYS", "VoEvidence", "Calibration", 
 
 #: Bump whenever the diagnostics change what they compute: cached calibrations of older
 #: versions are then ignored.
-CALIBRATION_VERSION = 3
+CALIBRATION_VERSION = 4
 #: The dataset arrays the cache key is computed from.
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
                  "obs_ids", "obs_z")
@@ -180,6 +181,15 @@ class Calibration:
             raise ValueError(f"Calibration.from_dict: malformed calibration ({type(err).__name__}: {err})") from None
 
 
+def _noise_reason(noise, samples):
+    """How the filter's velocity noise was chosen (:func:`~visla_edu.diagnostics._noise.imu_noise`), one line."""
+    if noise["measured"]:
+        return (f"measured from {samples} velocity samples: sqrt(white^2 + hold^2), floors {MIN_SIGMA_LINEAR:g} m/s "
+                f"and {MIN_SIGMA_ANGULAR:g} rad/s")
+    return (f"not measured: {samples} velocity samples, fewer than {MIN_NOISE_SAMPLES}; the course's "
+            f"{UNMEASURED_SIGMA_LINEAR:g} m/s and {UNMEASURED_SIGMA_ANGULAR:g} rad/s")
+
+
 def outlier_indicators(dataset, epipolar_px=3.0):
     """Shares of observations that break the rectified stereo geometry.
 
@@ -294,7 +304,8 @@ def _compute(dataset):
         extrinsic_correction=correction, imu_T_cam=imu_T_cam, imu_lag=lag,
         sigma_linear_velocity=noise["sigma"][:3], sigma_angular_velocity=noise["sigma"][3:],
         white_noise=noise["white"], hold_noise=noise["hold"],
-        reasons={"extrinsic_correction": why_correction, "imu_lag": why_lag},
+        reasons={"extrinsic_correction": why_correction, "imu_lag": why_lag,
+                 "noise": _noise_reason(noise, dataset.num_frames)},
         tracks=scorer.evidence(correction_choice, lag_choice),
         vo=_vo_evidence(dataset, check, slope_lag, imu_T_cam, lag),
         repeated_frames=repeated_frames(dataset), outliers=outlier_indicators(dataset),

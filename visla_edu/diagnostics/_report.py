@@ -93,9 +93,13 @@ def calibration_report(calibration, name=""):
              f"computing it took {c.seconds:.2f} s)"]
     lines += _track_lines(c.tracks)
     lines += _vo_lines(c.vo, c.repeated_frames)
-    lines.append(f"IMU noise per axis from the velocities: white (second differences) linear "
-                 f"{_vector(c.white_noise[:3])} m/s, angular {_vector(c.white_noise[3:], 5)} rad/s; hold (change "
-                 f"within a step) linear {_vector(c.hold_noise[:3])} m/s, angular {_vector(c.hold_noise[3:], 5)} rad/s")
+    noise_reason = c.reasons.get("noise", "")
+    if noise_reason.startswith("not measured"):
+        lines.append(f"IMU noise per axis from the velocities: {noise_reason}")
+    else:
+        lines.append(f"IMU noise per axis from the velocities: white (second differences) linear "
+                     f"{_vector(c.white_noise[:3])} m/s, angular {_vector(c.white_noise[3:], 5)} rad/s; hold (change "
+                     f"within a step) linear {_vector(c.hold_noise[:3])} m/s, angular {_vector(c.hold_noise[3:], 5)} rad/s")
     out = c.outliers
     lines.append(f"observations with non-positive disparity: {100 * out['non_positive_disparity']:.2f}%, "
                  f"breaking the epipolar line by > 3 px: {100 * out['epipolar']:.2f}%, "
@@ -104,6 +108,6 @@ def calibration_report(calibration, name=""):
     lines.append(f"IMU lag: {c.reasons['imu_lag']}")
     lines.append(f"the filter will use: extrinsic_correction {c.extrinsic_correction!r}, imu_lag {c.imu_lag:+d}, "
                  f"sigma_linear_velocity {_vector(c.sigma_linear_velocity)} m/s, sigma_angular_velocity "
-                 f"{_vector(c.sigma_angular_velocity, 5)} rad/s (sqrt(white^2 + hold^2), floors 1e-3 m/s and "
-                 f"1e-4 rad/s; gyro bias and velocity scale are not applied)")
+                 f"{_vector(c.sigma_angular_velocity, 5)} rad/s ({noise_reason or 'sqrt(white^2 + hold^2)'}; "
+                 f"gyro bias and velocity scale are not applied)")
     return "\n".join(lines)

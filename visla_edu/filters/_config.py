@@ -31,8 +31,9 @@ class FilterConfig:
 
     * Velocity noise (``"auto"``, per body axis): :func:`visla_edu.diagnostics.calibrate`
       measures the samples' white noise (second differences) and how much the velocity changes
-      within a step, which the motion model holds constant (first differences), with floors. A
-      fixed noise fits no drive: the KITTI drives' velocities are nearly clean, the 2020
+      within a step, which the motion model holds constant (first differences), with floors; a
+      drive of fewer than 10 samples, too short to measure them, gets the course's 0.5 m/s and
+      0.05 rad/s (:data:`visla_edu.diagnostics.MIN_NOISE_SAMPLES`). A fixed noise fits no drive: the KITTI drives' velocities are nearly clean, the 2020
       release's carry about 0.5 m/s and 0.05 rad/s, and a filter told the wrong level trusts
       far landmarks over an accurate IMU, or an IMU over the camera.
     * ``imu_lag`` (``"auto"``): the velocity sample that moves frame t to t+1, from the
