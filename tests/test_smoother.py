@@ -428,3 +428,20 @@ def test_batch_improves_on_the_ekf_and_dead_reckoning_on_kitti_0020(require_data
         ("smoother", result.world_T_imu), ("ekf", ekf.world_T_imu),
         ("dead reckoning", motion.dead_reckon(ds.time_stamps, ds.twists, lag=1)))}
     assert ate["smoother"] < ate["ekf"] < ate["dead reckoning"], ate
+
+
+def test_window_keeps_the_status_of_unusable_observations_of_a_landmark_it_drops(tiny):
+    """A landmark dropped as too close keeps its non-positive-disparity observation counted as such."""
+    import dataclasses
+
+    reference = smoother.smooth_window(tiny, config=smoother.SmootherConfig(window_size=8))
+    assert reference.rejected["landmarks_behind_camera"] > 0
+    j = tiny.obs_ids[np.flatnonzero(reference.obs_status == _problem.DROPPED)[0]]
+    i = np.flatnonzero(tiny.obs_ids == j)[-1]
+    z = tiny.obs_z.copy()
+    z[i, 2] = z[i, 0] + 1.0  # no depth: never usable
+    ds = dataclasses.replace(tiny, obs_z=z, extra={})
+    result = smoother.smooth_window(ds, config=smoother.SmootherConfig(window_size=8))
+    nonpositive = int(np.sum(z[:, 0] - z[:, 2] <= 0))
+    assert result.obs_status[i] == _problem.NONPOSITIVE
+    assert result.rejected["nonpositive_disparity"] == result.status_totals()["nonpositive_disparity"] == nonpositive

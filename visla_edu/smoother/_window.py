@@ -170,14 +170,19 @@ class _WindowState:
 
 
 def _drop_close(state, problem, m):
-    """Drop landmarks predicted closer than ``min_depth`` in the window (for good)."""
+    """Drop landmarks predicted closer than ``min_depth`` in the window (for good).
+
+    Their usable observations become ``landmark_dropped``; the others keep their status
+    (non-positive disparity, repeated frame, rejected), so the counts stay those of the batch.
+    """
     _, depth = _normal.observation_errors(problem, state.world_T_imu, m)
     close = np.zeros(problem.num_landmarks, dtype=bool)
     np.logical_or.at(close, problem.obs_landmark, ~(depth >= problem.min_depth))
     if close.any():
         problem.landmark_active[close] = False
         problem.active &= problem.landmark_active[problem.obs_landmark]
-        state.status[np.isin(state.dataset.obs_ids, problem.landmark_ids[close])] = DROPPED
+        gone = np.isin(state.dataset.obs_ids, problem.landmark_ids[close])
+        state.status[gone & (state.status == USED)] = DROPPED
         state.dropped["landmarks_behind_camera"] += int(close.sum())
 
 
