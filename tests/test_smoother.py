@@ -445,3 +445,23 @@ def test_window_keeps_the_status_of_unusable_observations_of_a_landmark_it_drops
     nonpositive = int(np.sum(z[:, 0] - z[:, 2] <= 0))
     assert result.obs_status[i] == _problem.NONPOSITIVE
     assert result.rejected["nonpositive_disparity"] == result.status_totals()["nonpositive_disparity"] == nonpositive
+
+
+@pytest.mark.parametrize("min_disparity,rejection_probability", [(8.0, 0.999), (3.0, 0.05)])
+def test_window_counts_every_landmark_it_did_not_estimate_as_the_batch_does(tiny, min_disparity,
+                                                                            rejection_probability):
+    """No observation counts as used unless its landmark is in the map; each landmark left out is
+    counted once (8 px: far landmarks, never triangulated; 0.05: most observations rejected)."""
+    config = smoother.SmootherConfig(window_size=8, min_disparity=min_disparity,
+                                     rejection_probability=rejection_probability)
+    result = smoother.smooth_window(tiny, config=config)
+    batch = smoother.smooth(tiny, tiny.ground_truth.world_T_imu, config=config)
+    assert set(result.rejected) == set(batch.rejected)
+    estimated = np.isfinite(result.landmarks[:, 0])
+    assert not np.any((result.obs_status == _problem.USED) & ~estimated[tiny.obs_ids])
+    usable = np.bincount(tiny.obs_ids, np.isin(result.obs_status, [_problem.USED, _problem.DROPPED, _problem.REJECTED]),
+                         tiny.num_landmarks) > 0
+    left_out = {k: v for k, v in result.rejected.items() if k.startswith("landmarks_")}
+    assert sum(left_out.values()) == usable.sum() - estimated.sum() > 0
+    if min_disparity > 3:
+        assert result.rejected["landmarks_too_far"] > 0

@@ -83,7 +83,7 @@ class _WindowState:
         self.prior = None
         self.threshold = chi2_quantile(config.rejection_probability, 4) if config.rejection_probability < 1 \
             else np.inf
-        self.dropped = {"landmarks_too_few": 0, "landmarks_behind_camera": 0}
+        self.dropped = {"landmarks_behind_camera": 0}
 
     def predict(self, k):
         """Predict pose ``k`` from pose ``k - 1``; triangulate the landmarks seen at ``k`` for the
@@ -282,15 +282,31 @@ def _run_window(dataset, world_T_imu0, camera, config):
     return _window_result(dataset, state, history, frame_seconds, config, time.perf_counter() - start)
 
 
-def _window_result(dataset, state, history, frame_seconds, config, total):
-    status = state.status
+def _final_landmarks(dataset, state, config):
+    """The map, with what the window never estimated left out; the landmark drop counts.
+
+    A landmark whose usable observations all lie below ``min_disparity`` was never
+    triangulated (too far); one left with fewer than ``min_observations`` usable observations
+    (e.g. all rejected as outliers) is dropped (too few). The usable observations of both become ``landmark_dropped`` in
+    ``state.status``, as in the batch.
+    """
+    status, M = state.status, dataset.num_landmarks
+    used = np.bincount(dataset.obs_ids, status == USED, M)
+    too_far = np.isnan(state.landmarks[:, 0]) & (used > 0)
+    dropped = np.bincount(dataset.obs_ids, status == DROPPED, M) > 0  # behind a camera, counted already
+    too_few = np.isfinite(state.landmarks[:, 0]) & ~dropped & (used < config.min_observations)
     landmarks = state.landmarks.copy()
-    used = np.bincount(dataset.obs_ids, status == USED, dataset.num_landmarks)
     landmarks[used < config.min_observations] = np.nan
+    status[(status == USED) & np.isnan(landmarks[dataset.obs_ids, 0])] = DROPPED
+    return landmarks, {"landmarks_too_far": int(too_far.sum()), "landmarks_too_few": int(too_few.sum())}
+
+
+def _window_result(dataset, state, history, frame_seconds, config, total):
+    landmarks, dropped = _final_landmarks(dataset, state, config)
+    status = state.status
     rejected = {"nonpositive_disparity": int(np.sum(status == NONPOSITIVE)),
-                "repeated_frame": int(np.sum(status == REPEATED)), "landmarks_no_position": 0,
-                "outliers": int(np.sum(status == REJECTED)), **state.dropped}
-    rejected["landmarks_too_few"] = int(np.sum((used < config.min_observations) & (used > 0)))
+                "repeated_frame": int(np.sum(status == REPEATED)), "landmarks_no_position": 0, **dropped,
+                **state.dropped, "outliers": int(np.sum(status == REJECTED))}
     return SmootherResult(
         name=dataset.name, mode="window", time_stamps=dataset.time_stamps.copy(),
         world_T_imu=state.world_T_imu, landmarks=landmarks, pose_cov=state.pose_cov,
