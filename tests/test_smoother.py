@@ -465,3 +465,10 @@ def test_window_counts_every_landmark_it_did_not_estimate_as_the_batch_does(tiny
     assert sum(left_out.values()) == usable.sum() - estimated.sum() > 0
     if min_disparity > 3:
         assert result.rejected["landmarks_too_far"] > 0
+
+
+def test_window_time_per_frame_leaves_out_the_held_first_frame(tiny):
+    result = smoother.smooth_window(tiny.segment(0, 2))
+    assert result.frame_seconds[0] == 0 and result.frame_seconds[1] > 0
+    ms = f"{1e3 * result.frame_seconds[1]:.2f} ms"
+    assert f"per frame: median {ms}, max {ms}" in result.summary()

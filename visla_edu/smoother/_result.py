@@ -50,7 +50,8 @@ class SmootherResult:
     imu_T_cam : ndarray, shape (4, 4)
         The calibration used.
     frame_seconds : ndarray, shape (T,)
-        Sliding window only: the time spent on each new frame (empty for the batch).
+        Sliding window only: the time spent on each new frame, 0 for frame 0 (the held first
+        pose; :meth:`summary` leaves it out); empty for the batch.
     online_world_T_imu : ndarray, shape (T, 4, 4)
         Sliding window only: each pose as estimated when its frame was the newest (the
         real-time estimate; ``world_T_imu`` is the estimate when it left the window).
@@ -107,9 +108,9 @@ class SmootherResult:
             lines.append(f"{len(h['cost'])} iterations ({int(np.sum(h['accepted']))} accepted), "
                          f"final cost {h['cost'][-1]:.6g}" + self._stop_note())
         lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in self.timing.items()))
-        if len(self.frame_seconds):
-            lines.append(f"per frame: median {1e3 * np.median(self.frame_seconds):.2f} ms, "
-                         f"max {1e3 * np.max(self.frame_seconds):.2f} ms")
+        if len(self.frame_seconds) > 1:  # frame 0 is the held first pose: no work, not a frame
+            lines.append(f"per frame: median {1e3 * np.median(self.frame_seconds[1:]):.2f} ms, "
+                         f"max {1e3 * np.max(self.frame_seconds[1:]):.2f} ms")
         return "\n".join(lines)
 
 
