@@ -472,3 +472,15 @@ def test_window_time_per_frame_leaves_out_the_held_first_frame(tiny):
     assert result.frame_seconds[0] == 0 and result.frame_seconds[1] > 0
     ms = f"{1e3 * result.frame_seconds[1]:.2f} ms"
     assert f"per frame: median {ms}, max {ms}" in result.summary()
+
+
+@pytest.mark.parametrize("field,value", [
+    ("imu_lag", 100), ("imu_lag", -3), ("sigma_pixel", True), ("min_depth", False),
+    ("rejection_probability", True), ("rejection_probability", "0.5"), ("initial_damping", np.True_),
+])
+def test_config_refuses_what_it_would_clip_or_read_as_a_number(field, value):
+    """A lag beyond the filter's -2 .. 2 was clipped to the drive's ends by select_twists; a bool
+    was read as 0 or 1; a string probability raised a TypeError."""
+    with pytest.raises(ValueError, match=f"SmootherConfig.{field} must"):
+        smoother.SmootherConfig(**{field: value})
+    assert smoother.SmootherConfig(imu_lag=-2).imu_lag == -2

@@ -4,6 +4,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from visla_edu.filters._config import MAX_IMU_LAG
+
 __all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
@@ -31,7 +33,8 @@ class SmootherConfig:
         :meth:`from_filter_config` takes the filter's values, measured from the data when the
         filter's are ``"auto"``.
     imu_lag : int
-        The step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
+        The step ``t -> t+1`` uses the twist ``u[t + imu_lag]``, in ``-2 .. 2`` as the filter's
+        (:data:`visla_edu.filters.MAX_IMU_LAG`).
     loss : {"cauchy", "huber", "none"}
         Robust loss ``rho(s)`` of the squared whitened reprojection error ``s = |r|^2 / sigma^2``:
         Cauchy ``k^2 log(1 + s / k^2)``, Huber ``s`` up to ``k^2`` then ``2 k sqrt(s) - k^2``.
@@ -110,19 +113,20 @@ class SmootherConfig:
     def __post_init__(self):
         for name in ("sigma_pixel", "loss_scale", "function_tolerance", "step_tolerance", "initial_damping"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) or value <= 0:
+            if not _is_number(value) or not np.isfinite(value) or value <= 0:
                 raise ValueError(f"SmootherConfig.{name} must be a positive number, got {value!r}")
         for name in ("sigma_linear_velocity", "sigma_angular_velocity"):
             setattr(self, name, _positive_per_axis(name, getattr(self, name)))
         for name, unit in (("min_depth", "m"), ("min_disparity", "px")):
             value = getattr(self, name)
-            if not isinstance(value, (int, float, np.number)) or not 0 <= value < np.inf:
+            if not _is_number(value) or not 0 <= value < np.inf:
                 raise ValueError(f"SmootherConfig.{name} must be a number >= 0 ({unit}), got {value!r}")
-        if not 0 < self.rejection_probability <= 1:
+        if not _is_number(self.rejection_probability) or not 0 < self.rejection_probability <= 1:
             raise ValueError(f"SmootherConfig.rejection_probability must be in (0, 1], got "
                              f"{self.rejection_probability!r}")
-        for name, low in (("imu_lag", None), ("max_iterations", 1), ("rejection_rounds", 0),
-                          ("min_observations", 2), ("window_size", 2), ("window_iterations", 1)):
+        _check_int("imu_lag", self.imu_lag, -MAX_IMU_LAG, MAX_IMU_LAG)
+        for name, low in (("max_iterations", 1), ("rejection_rounds", 0), ("min_observations", 2),
+                          ("window_size", 2), ("window_iterations", 1)):
             _check_int(name, getattr(self, name), low)
         if self.loss not in LOSSES:
             raise ValueError(f"SmootherConfig.loss must be one of {LOSSES}, got {self.loss!r}")
@@ -169,12 +173,18 @@ class SmootherConfig:
         return asdict(self)
 
 
-def _check_int(name, value, low):
-    """Raise ValueError unless ``value`` is an integer (bools are not) and at least ``low``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+def _is_number(value):
+    """True for a real number (a bool is not one: ``True`` would silently mean 1)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _check_int(name, value, low, high=None):
+    """Raise ValueError unless ``value`` is an integer (bools are not) in ``low .. high``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"SmootherConfig.{name} must be an integer, got {value!r}")
-    if low is not None and value < low:
-        raise ValueError(f"SmootherConfig.{name} must be >= {low}, got {value!r}")
+    if value < low or (high is not None and value > high):
+        bound = f">= {low}" if high is None else f"in {low} .. {high}"
+        raise ValueError(f"SmootherConfig.{name} must be {bound}, got {value!r}")
 
 
 def _positive_per_axis(name, value):
