@@ -36,6 +36,20 @@ def test_right_jacobian_inverse_matches_finite_differences_of_log(angle):
     assert np.allclose(smoother.se3_right_jacobian(x) @ smoother.se3_right_jacobian_inv(x), np.eye(6), atol=1e-12)
 
 
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.0999, 0.1001, 2.5])
+def test_so3_right_jacobians_match_finite_differences(angle):
+    """``exp((phi + d)^) ~ exp(phi^) exp((J_r d)^)`` and ``log(exp(phi^) exp(d^)) ~ phi + J_r^{-1} d``."""
+    from visla_edu.smoother import _se3
+
+    phi = np.random.default_rng(5).normal(size=3)
+    phi *= angle / np.linalg.norm(phi)
+    R = lie.so3_exp(phi)
+    fd = fd_jacobian(lambda d: lie.so3_log(R.T @ lie.so3_exp(phi + d)), np.zeros(3), 1e-5)
+    assert rel(_se3.so3_right_jacobian(phi), fd) < FD_REL
+    fd_inv = fd_jacobian(lambda d: lie.so3_log(R @ lie.so3_exp(d)), np.zeros(3), 1e-5)
+    assert rel(_se3.so3_right_jacobian_inv(phi), fd_inv) < FD_REL
+
+
 def test_right_jacobian_rejects_a_wrong_shape():
     with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
         smoother.se3_right_jacobian_inv(np.zeros(3))
@@ -484,3 +498,71 @@ def test_config_refuses_what_it_would_clip_or_read_as_a_number(field, value):
     with pytest.raises(ValueError, match=f"SmootherConfig.{field} must"):
         smoother.SmootherConfig(**{field: value})
     assert smoother.SmootherConfig(imu_lag=-2).imu_lag == -2
+
+
+# --- the window's priors: Jacobians against finite differences ---------------------------------
+
+
+def _with_priors(tiny, rng):
+    """The batch problem at a perturbed truth, with a pose prior and landmark priors (as the window builds)."""
+    T = tiny.ground_truth.world_T_imu @ lie.se3_exp(rng.normal(0, 0.01, (tiny.num_frames, 6)))
+    T[0] = tiny.ground_truth.world_T_imu[0]
+    problem, m = _problem_at(tiny, T, smoother.SmootherConfig())
+    m = m + rng.normal(0, 0.05, m.shape)
+    U = np.triu(rng.normal(0, 1, (6, 6))) + 5 * np.eye(6)
+    problem.prior = _problem.PosePrior(7, T[7] @ lie.se3_exp(rng.normal(0, 0.05, 6)), U)
+    A = rng.normal(0, 1, (problem.num_landmarks, 3, 3))
+    problem.landmark_prior = (A @ np.swapaxes(A, 1, 2) + np.eye(3), rng.normal(0, 1, (problem.num_landmarks, 3)),
+                              np.zeros(problem.num_landmarks))
+    return problem, T, m
+
+
+def test_pose_prior_jacobian_matches_finite_differences(tiny):
+    problem, T, _ = _with_priors(tiny, np.random.default_rng(11))
+    frame = problem.prior.frame
+
+    def residual(d):
+        moved = T.copy()
+        moved[frame] = T[frame] @ lie.se3_exp(d)
+        return _normal._prior_residual(problem, moved)[0]
+    assert rel(_normal._prior_residual(problem, T)[1], fd_jacobian(residual, np.zeros(6), 1e-6)) < FD_REL
+
+
+def test_gradient_with_pose_and_landmark_priors_matches_finite_differences(tiny):
+    problem, T, m = _with_priors(tiny, np.random.default_rng(12))
+    lin = _normal.linearize(problem, T, m)
+    assert lin.cost == pytest.approx(_normal.evaluate(problem, T, m), rel=1e-12)
+    frame = problem.prior.frame
+
+    def pose_cost(d):
+        moved = T.copy()
+        moved[frame] = T[frame] @ lie.se3_exp(d)
+        return np.array([_normal.evaluate(problem, moved, m)])
+    assert rel(2 * lin.g_p[frame - problem.first_var], fd_jacobian(pose_cost, np.zeros(6), 1e-6)[0]) < 1e-6
+    for j in (0, 40):
+        def landmark_cost(d, j=j):
+            moved = m.copy()
+            moved[j] = m[j] + d
+            return np.array([_normal.evaluate(problem, T, moved)])
+        # the priors' cost is large (m^T Lambda m over every landmark): a wider step keeps rounding out
+        assert rel(2 * lin.g_m[j], fd_jacobian(landmark_cost, np.zeros(3), 1e-4)[0]) < 1e-6
+
+
+def test_marginalised_pose_prior_propagates_through_the_motion_jacobian():
+    """``_next_prior``: ``F = Ad(exp(-tau u^))`` is the Jacobian of ``log(mean^{-1} T_v exp(a) exp(tau u^))``."""
+    import types
+
+    from visla_edu.smoother import _window
+
+    rng = np.random.default_rng(13)
+    step_inv = lie.se3_exp(-np.r_[rng.normal(0, 1, 3), rng.normal(0, 0.1, 3)])
+    T_v = lie.se3_exp(rng.normal(0, 1, 6))
+    state = types.SimpleNamespace(step_inv=step_inv[None], sqrt_info=np.full((1, 6), 3.0), world_T_imu=T_v[None])
+    A = rng.normal(0, 0.1, (6, 6))
+    cov = A @ A.T
+    prior = _window._next_prior(state, cov, 0)
+    assert prior.frame == 1 and np.allclose(prior.mean, T_v @ lie.se3_inv(step_inv))
+    F = fd_jacobian(lambda a: lie.se3_log(lie.se3_inv(prior.mean) @ T_v @ lie.se3_exp(a) @ lie.se3_inv(step_inv)),
+                    np.zeros(6), 1e-6)
+    information = prior.sqrt_information.T @ prior.sqrt_information
+    assert rel(np.linalg.inv(information), F @ cov @ F.T + np.eye(6) / 9) < 1e-8
