@@ -245,12 +245,13 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_
     imu_T_cam : array_like, shape (4, 4), optional
         Calibration to use (e.g. after the extrinsic correction); default the dataset's.
     config : SmootherConfig, optional
+        ``window_size``, ``window_iterations``, ``window_mode`` and the noise model (a window
+        longer than the drive optimises every frame so far at each new frame).
     blas_threads : int or None
         BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`): its dense blocks
         are small (6x6 to a few hundred rows), where a second thread costs far more in
         synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
         12 s with two on a busy 2-core machine); None leaves numpy's setting alone.
-        ``window_size``, ``window_iterations``, ``window_mode`` and the noise model.
 
     Returns
     -------
