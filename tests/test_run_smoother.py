@@ -90,3 +90,14 @@ def test_a_landmark_stride_is_refused_by_the_smoothers_not_ignored():
     ds = simulate.simulate_drive("tiny", seed=0)
     with pytest.raises(ValueError, match="landmark_stride=10 thins the map of the filters .* mode window uses every"):
         run.run_smoother(ds, "window", FilterConfig(landmark_stride=10), progress=False)
+
+
+@pytest.mark.parametrize("mode", SMOOTHER_MODES)
+def test_a_filter_setting_the_smoother_cannot_take_is_refused_before_the_ekf_runs(tiny, mode, monkeypatch):
+    """A velocity noise of 0 suits the filters' settings but not the smoother's motion factors:
+    refused before any filtering (it used to fail only after a whole EKF run)."""
+    monkeypatch.setattr(run, "run_filter", lambda *a, **k: pytest.fail("the EKF ran before the check"))
+    config = FilterConfig(extrinsic_correction="none", sigma_linear_velocity=0.2, sigma_angular_velocity=0.0, imu_lag=0)
+    with pytest.raises(ValueError, match=rf"mode {mode} cannot use these filter settings: "
+                                         r"SmootherConfig.sigma_angular_velocity must be a positive number"):
+        run.run_smoother(tiny, mode, config, progress=False)

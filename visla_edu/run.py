@@ -328,6 +328,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
         raise ValueError(f"landmark_stride={config.landmark_stride} thins the map of the filters (mapping, vio, slam); "
                          f"mode {mode} uses every landmark: leave landmark_stride at 1")
     config = resolve_config(dataset, config or FilterConfig())
+    settings = smoother_config or _smoother_settings(config, mode)  # before the EKF: a bad model fails fast
     start = None
     if mode == SMOOTH:
         start = run_filter(dataset, SLAM, config, progress=progress, verbose=verbose, blas_threads=blas_threads)
@@ -336,12 +337,39 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
         imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
         if verbose and evidence:
             print(evidence)
-    settings = smoother_config or smoother.SmootherConfig.from_filter_config(config)
     if mode == SMOOTH:
         solved = smoother.smooth(dataset, start.world_T_imu, start.landmarks, imu_T_cam, settings, blas_threads)
     else:
         solved = smoother.smooth_window(dataset, None, imu_T_cam, settings, blas_threads)
     return _smoother_run_result(dataset, config, solved, start)
+
+
+def _smoother_settings(config, mode):
+    """The smoother's model from the filter's resolved settings, or a ValueError saying where it came from.
+
+    Parameters
+    ----------
+    config : visla_edu.filters.FilterConfig
+        Resolved.
+    mode : str
+        Names the mode in the message.
+
+    Returns
+    -------
+    visla_edu.smoother.SmootherConfig
+
+    Raises
+    ------
+    ValueError
+        A filter setting the smoother cannot take (e.g. a velocity noise of 0, which the
+        filters accept and the smoother's motion factors cannot weigh).
+    """
+    from visla_edu import smoother
+
+    try:
+        return smoother.SmootherConfig.from_filter_config(config)
+    except ValueError as err:
+        raise ValueError(f"mode {mode} cannot use these filter settings: {err}") from None
 
 
 #: Smoother observation status (:data:`visla_edu.smoother.STATUS_NAMES`) -> the filters' codes.
