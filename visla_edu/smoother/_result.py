@@ -35,8 +35,11 @@ class SmootherResult:
     landmark_cov : ndarray, shape (M, 3, 3)
         Marginal covariances of the landmarks (NaN where not estimated or not computed).
     history : dict of ndarray
-        One entry per iteration for each of :data:`HISTORY_FIELDS`: the rejection round, the
-        cost after the iteration, the step norm, whether the step was accepted, the damping.
+        One entry per iteration for each of :data:`HISTORY_FIELDS`: the rejection round (batch)
+        or the new frame ``k`` (sliding window: the cost is that frame's window problem's), the
+        cost after the iteration (a step not accepted leaves it, unless it dropped landmarks it
+        sent behind a camera: then the cost without them), the step norm, whether the step was
+        accepted, the damping.
     rejected : dict of int
         ``outliers`` (observations rejected by the chi-square test), ``nonpositive_disparity``
         and ``repeated_frame`` (observations never used), ``landmarks_no_position``,
