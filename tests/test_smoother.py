@@ -566,3 +566,16 @@ def test_marginalised_pose_prior_propagates_through_the_motion_jacobian():
                     np.zeros(6), 1e-6)
     information = prior.sqrt_information.T @ prior.sqrt_information
     assert rel(np.linalg.inv(information), F @ cov @ F.T + np.eye(6) / 9) < 1e-8
+
+
+def test_a_filter_config_or_a_dict_as_smoother_config_gets_a_clear_error(tiny):
+    """They used to fail deep inside (AttributeError: no attribute 'min_disparity', int('auto'))."""
+    T = tiny.ground_truth.world_T_imu
+    for call, name in ((lambda c: smoother.smooth(tiny, T, config=c), "smooth"),
+                       (lambda c: smoother.smooth_window(tiny, config=c), "smooth_window"),
+                       (lambda c: smoother.normal_equations(tiny, T, config=c), "normal_equations")):
+        with pytest.raises(TypeError, match=rf"{name}: config must be a SmootherConfig, got FilterConfig; "
+                                            r"smoother.SmootherConfig.from_filter_config"):
+            call(FilterConfig())
+        with pytest.raises(TypeError, match=rf"{name}: config must be a SmootherConfig, got dict"):
+            call({"window_size": 5})

@@ -26,7 +26,7 @@ from scipy import sparse
 from visla_edu.smoother import _normal
 from visla_edu._blas import limit_blas_threads
 from visla_edu.metrics import chi2_quantile
-from visla_edu.smoother._config import SmootherConfig
+from visla_edu.smoother._config import as_smoother_config
 from visla_edu.smoother._factors import motion_steps
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
                                          far_landmarks, observation_status, rig_camera, triangulate_landmarks)
@@ -280,8 +280,15 @@ def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None, bl
     Returns
     -------
     SmootherResult
+
+    Raises
+    ------
+    ValueError
+        A bad initial trajectory, map or calibration.
+    TypeError
+        ``config`` is not a :class:`SmootherConfig` (e.g. a ``FilterConfig``).
     """
-    config = config or SmootherConfig()
+    config = as_smoother_config(config, "smooth")
     with limit_blas_threads(blas_threads):
         return _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config)
 
@@ -379,8 +386,10 @@ def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, confi
     ValueError
         ``world_T_imu`` is not (T, 4, 4) or not finite, ``landmarks`` is not (M, 3) or has
         infinite entries, or ``imu_T_cam`` is not (4, 4).
+    TypeError
+        ``config`` is not a :class:`SmootherConfig` (e.g. a ``FilterConfig``).
     """
-    config = config or SmootherConfig()
+    config = as_smoother_config(config, "normal_equations")
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)
     landmarks = check_landmarks(landmarks, dataset.num_landmarks, dataset.name)
     problem, m, _, _ = _setup(dataset, world_T_imu, landmarks, rig_camera(dataset, imu_T_cam), config)

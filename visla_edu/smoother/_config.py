@@ -6,7 +6,7 @@ import numpy as np
 
 from visla_edu.filters._config import MAX_IMU_LAG
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES"]
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "as_smoother_config"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
 LOSSES = ("cauchy", "huber", "none")
@@ -171,6 +171,34 @@ class SmootherConfig:
     def to_dict(self):
         """Plain dict of the settings (for saving with results)."""
         return asdict(self)
+
+
+def as_smoother_config(config, caller):
+    """``config`` itself, :class:`SmootherConfig` defaults for None, or a TypeError.
+
+    Parameters
+    ----------
+    config : SmootherConfig or None
+    caller : str
+        Starts the error message (the public function's name).
+
+    Returns
+    -------
+    SmootherConfig
+
+    Raises
+    ------
+    TypeError
+        Anything else, e.g. the filters' ``FilterConfig`` (the message says how to convert it)
+        or a dict of settings.
+    """
+    if config is None:
+        return SmootherConfig()
+    if isinstance(config, SmootherConfig):
+        return config
+    hint = ("smoother.SmootherConfig.from_filter_config(run.resolve_config(dataset, config)) gives the smoother "
+            "the filter's model") if type(config).__name__ == "FilterConfig" else "e.g. SmootherConfig(window_size=10)"
+    raise TypeError(f"{caller}: config must be a SmootherConfig, got {type(config).__name__}; {hint}")
 
 
 def _is_number(value):

@@ -45,7 +45,7 @@ from visla_edu.smoother import _envelope, _normal
 from visla_edu.smoother._batch import levenberg_marquardt, motion_information
 from visla_edu._blas import limit_blas_threads
 from visla_edu.metrics import chi2_quantile
-from visla_edu.smoother._config import SmootherConfig
+from visla_edu.smoother._config import as_smoother_config
 from visla_edu.smoother._factors import motion_steps, reprojection, robust_loss
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, PosePrior,
                                          build_problem, observation_status, rig_camera)
@@ -263,8 +263,15 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_
         optimistic), from the factor of the frame's last Gauss-Newton step (the Hessian one
         step before the final estimate, with the Levenberg-Marquardt damping: a cheap
         approximation). Landmark covariances are not computed.
+
+    Raises
+    ------
+    ValueError
+        A bad first pose or calibration.
+    TypeError
+        ``config`` is not a :class:`SmootherConfig` (e.g. a ``FilterConfig``).
     """
-    config = config or SmootherConfig()
+    config = as_smoother_config(config, "smooth_window")
     first = np.eye(4) if world_T_imu0 is None else check_trajectory(np.asarray(world_T_imu0)[None], 1,
                                                                       dataset.name)[0]
     with limit_blas_threads(blas_threads):
