@@ -407,6 +407,35 @@ def test_save_load_round_trip_without_ground_truth(tmp_path):
         assert f["features"].shape == (4, M, T) and f["linear_velocity"].shape == (3, T)
 
 
+def _scale_rotations(poses):
+    poses[5, :3, :3] *= 2.0
+
+
+def _last_row(poses):
+    poses[7, 3] = [0.0, 0.0, 0.0, 0.0]
+
+
+def _millimetres(poses):
+    poses[:, :3, 3] *= 1000.0
+
+
+@pytest.mark.parametrize("change, pattern", [
+    (_scale_rotations, r"the pose of frame 5 is not a rigid transform \(max \|R\^T R - I\| = 3"),
+    (_last_row, r"the pose of frame 7 is not a rigid transform .*last row \[0.0, 0.0, 0.0, 0.0\]"),
+    (_millimetres, r"the ground-truth pose of frame \d+ is .* m from frame 0's.*looks like millimetres"),
+])
+def test_saved_ground_truth_poses_are_checked_when_loaded(tmp_path, change, pattern):
+    """Ground-truth poses a run cannot evaluate against are refused by the loader, not after the run."""
+    path = data.save(_dataset_with_ground_truth(), tmp_path / "saved.npz")
+    with np.load(path) as f:
+        arrays = {key: f[key] for key in f.files}
+    change(arrays["ground_truth_world_T_imu"])
+    write(tmp_path, arrays, "saved.npz")
+    with pytest.raises(ValueError, match=pattern) as err:
+        data.load(path)
+    assert "'ground_truth_world_T_imu'" in str(err.value) and str(path) in str(err.value)
+
+
 # --------------------------------------------------------------------------- data directory and names
 
 

@@ -98,6 +98,20 @@ def test_bad_pose_files_name_file_line_and_value(tmp_path, tiny, text, pattern):
     assert str(path) in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("scale, pattern", [
+    (1000.0, r"frame 1 is 643.3\d* m from frame 0's.* at most 55.9\d* m .*looks like millimetres"),
+    (1e200, r"frame 1 is 6.43\d*e\+199 m from frame 0's.* at most 55.9\d* m away"),
+])
+def test_poses_farther_than_the_drive_can_go_are_refused(tmp_path, tiny, scale, pattern):
+    """Positions in millimetres, or so large that the ATE overflows to inf, are refused when read."""
+    cam0_T_cam = data.kitti_poses_from_imu(tiny.ground_truth.world_T_imu, tiny.imu_T_cam)
+    cam0_T_cam[:, :3, 3] *= scale
+    path = trajectory.write_kitti(tmp_path / "poses.txt", cam0_T_cam)
+    with pytest.raises(ValueError, match=pattern) as err:
+        data.load_ground_truth(tiny, path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
 def test_missing_and_binary_files(tmp_path, tiny):
     with pytest.raises(FileNotFoundError, match="nothere.txt: KITTI poses.* file not found"):
         data.load_ground_truth(tiny, tmp_path / "nothere.txt")

@@ -17,6 +17,7 @@ import numpy as np
 
 from visla_edu.data._plausible import (
     check_calibration,
+    check_ground_truth_reach,
     check_time_stamps,
     check_velocities,
 )
@@ -42,6 +43,7 @@ __all__ = [
     "check_intrinsics",
     "check_baseline",
     "check_rigid",
+    "check_rigid_poses",
     "check_extras",
 ]
 
@@ -70,6 +72,9 @@ GROUND_TRUTH_KEYS = (
 TEXT_KEYS = ("name", "label")
 #: Tolerance on ``R^T R = I`` for the camera extrinsics.
 RIGID_TOL = 1e-6
+#: Tolerance on ``R^T R = I`` and the last row for ground-truth poses (what the KITTI reader and
+#: the ATE accept: ``visla_edu.trajectory.ORTHONORMAL_TOL``, ``visla_edu.metrics.RIGID_TOLERANCE``).
+GROUND_TRUTH_RIGID_TOL = 1e-3
 #: Most frames a course file may have: 28 hours at 10 Hz. Every per-frame array (and the
 #: filter's per-frame results, about 400 bytes a frame) is bounded by it before it is read.
 MAX_FRAMES = 1_000_000
@@ -411,13 +416,49 @@ def check_extras(arrays, T, M, path):
     ValueError
         Some ground-truth keys are present but not all; one is not numeric (boolean for
         ``ground_truth_outlier``), has the wrong shape (``(T, 4, 4)``, ``(M, 3)``, ``(T, 3)``,
-        ``(T, 3)``, ``(M,)``) or a non-finite entry; or ``name`` or ``label`` is not a single
-        string of at most 10,000 characters.
+        ``(T, 3)``, ``(M,)``) or a non-finite entry; a ground-truth pose is not rigid
+        (:func:`check_rigid_poses`) or lies farther from the first than the drive can go
+        (:func:`~._plausible.check_ground_truth_reach`, which needs ``arrays["time_stamps"]``);
+        or ``name`` or ``label`` is not a single string of at most 10,000 characters.
     """
     _check_extras_layout(arrays, T, M, path)
     for key in GROUND_TRUTH_KEYS:
         if key in arrays:
             check_finite(arrays[key], key, path)
+    poses_key = GROUND_TRUTH_KEYS[0]
+    if poses_key in arrays:
+        check_rigid_poses(arrays[poses_key], poses_key, path)
+        check_ground_truth_reach(arrays[poses_key], arrays["time_stamps"][0], f"key '{poses_key}'", path)
+
+
+def check_rigid_poses(poses, key, path, tolerance=GROUND_TRUTH_RIGID_TOL):
+    """Every pose of ``poses`` (n, 4, 4) in SE(3) to ``tolerance``; the message names the first frame that is not.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (n, 4, 4)
+        Finite (checked before).
+    key : str
+        Their key in the file, for the message.
+    path : pathlib.Path or str
+    tolerance : float
+        Largest entry of ``|R^T R - I|`` and of the last row's difference from ``[0, 0, 0, 1]``.
+
+    Raises
+    ------
+    ValueError
+        A pose's rotation is not orthonormal, has determinant -1, or its last row is not
+        ``[0, 0, 0, 1]`` (names the frame and the value).
+    """
+    R = poses[:, :3, :3]
+    orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2), initial=0.0)
+    bottom = np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1, initial=0.0)
+    bad = np.flatnonzero((orthogonality > tolerance) | (bottom > tolerance) | (np.linalg.det(R) < 0))
+    if bad.size:
+        t = int(bad[0])
+        raise ValueError(f"{path}: key '{key}': the pose of frame {t} is not a rigid transform (max |R^T R - I| = "
+                         f"{orthogonality[t]:.3g}, det R = {np.linalg.det(R[t]):.3g}, last row {poses[t, 3].tolist()}; "
+                         f"expected [[R, p], [0, 0, 0, 1]] with R a rotation, to {tolerance:g})")
 
 
 def _check_extras_layout(items, T, M, path):

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from visla_edu.data._plausible import check_ground_truth_reach
 from visla_edu.data._registry import ground_truth_files
 from visla_edu.dataset import Dataset, GroundTruth
 from visla_edu.trajectory import read_kitti, read_table
@@ -191,7 +192,8 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
     ValueError
         A bad file (see :func:`visla_edu.trajectory.read_kitti`), fewer than
         :data:`MIN_POSES` or more poses than frames, times not one per pose or not matching
-        the dataset's.
+        the dataset's, a pose farther from the first than the drive can go in its time
+        (:func:`~visla_edu.data._plausible.check_ground_truth_reach`: another unit, another drive).
     TypeError
         ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
     """
@@ -199,8 +201,10 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
         raise TypeError(f"load_ground_truth: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")
     cam0_T_cam = _read_checked_poses(dataset, poses_path, times_path, tolerance)
     cam0_T_cam = np.linalg.inv(cam0_T_cam[0]) @ cam0_T_cam
+    world_T_imu = imu_poses_from_kitti(cam0_T_cam, dataset.imu_T_cam)
+    check_ground_truth_reach(world_T_imu, dataset.time_stamps, "KITTI poses", poses_path)
     source = str(Path(poses_path).expanduser().resolve())
-    return GroundTruth(world_T_imu=imu_poses_from_kitti(cam0_T_cam, dataset.imu_T_cam), source=source)
+    return GroundTruth(world_T_imu=world_T_imu, source=source)
 
 
 def attach_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLERANCE):

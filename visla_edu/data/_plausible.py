@@ -25,6 +25,8 @@ largest frame step        <= max(10 s, 100      dead reckoning carries one veloc
                           median steps)         across a gap: 1e6 s at 10 m/s is 10,000 km
 speed                     <= 343 m/s            no vehicle carrying a stereo rig is supersonic
 angular rate              <= 35 rad/s           2000 deg/s, a MEMS gyro's full-scale range
+ground-truth position     <= 343 m/s x elapsed  the drive cannot outrun sound either (20 m of
+                          time + 20 m           slack for the camera-IMU lever arm)
 ========================  ====================  ============================================
 
 Every check raises ``ValueError`` naming the file, the key, the value and the plausible range;
@@ -51,6 +53,7 @@ __all__ = [
     "check_time_stamps",
     "check_velocities",
     "check_calibration",
+    "check_ground_truth_reach",
     "check_observations",
     "check_track_layout",
     "calibration_problems",
@@ -156,6 +159,43 @@ def check_velocities(linear, angular, keys, path):
             t = int(bad[0])
             raise ValueError(f"{path}: key '{key}' at frame {t} has magnitude {norms[t]:.6g} {unit}, more than "
                              f"the plausible {limit:g} {unit} ({hint})")
+
+
+def check_ground_truth_reach(world_T_imu, time_stamps, what, path):
+    """Each ground-truth position no farther from the first than :data:`MAX_SPEED` could carry it.
+
+    Refuses poses in another unit (millimetres) or overflowing ones (1e200 m), which would
+    otherwise give an ATE of inf or nonsense after the whole run.
+
+    Parameters
+    ----------
+    world_T_imu : ndarray, shape (n, 4, 4)
+        Finite poses of frames ``0 .. n - 1``.
+    time_stamps : ndarray, shape (T,)
+        The drive's time stamps (s), ``T >= n``.
+    what : str
+        The key or file the poses came from, for the message.
+    path : pathlib.Path or str
+
+    Raises
+    ------
+    ValueError
+        The first frame whose distance from frame 0 exceeds ``MAX_SPEED * (t_i - t_0) +``
+        :data:`MAX_EXTRINSIC_TRANSLATION` (a length that would fit in millimetres says so).
+    """
+    positions = np.asarray(world_T_imu, dtype=float)[:, :3, 3]
+    distance = magnitude(positions - positions[:1])
+    elapsed = np.asarray(time_stamps, dtype=float)[: len(positions)] - float(time_stamps[0])
+    reach = MAX_SPEED * elapsed + MAX_EXTRINSIC_TRANSLATION
+    bad = np.flatnonzero(distance > reach)
+    if not bad.size:
+        return
+    t = int(bad[0])
+    mm = " It looks like millimetres: divide the positions by 1000." if distance[t] / 1000 <= reach[t] else ""
+    raise ValueError(f"{path}: {what}: the ground-truth pose of frame {t} is {distance[t]:.6g} m from frame 0's, but "
+                     f"{elapsed[t]:.6g} s into the drive it can be at most {reach[t]:.6g} m away ({MAX_SPEED:g} m/s, "
+                     f"the speed of sound, plus {MAX_EXTRINSIC_TRANSLATION:g} m); is it the ground truth of another "
+                     f"drive, or in another unit?{mm}")
 
 
 def magnitude(vectors):
