@@ -192,6 +192,27 @@ def test_frames_runs_a_segment_against_its_own_ground_truth(real_like_drive, tmp
     assert result.evaluation["estimate_ate_raw"] == pytest.approx(metrics.ate(result.world_T_imu, truth, False))
 
 
+@pytest.mark.parametrize("value, kept", [("56:60", 0), ("53:60", 2), ("20:22", 2)])
+def test_frames_past_the_given_ground_truth_are_refused_before_the_run(real_like_drive, value, kept, capsys):
+    """--ground-truth with --frames where it keeps fewer than 3 poses: no silent drop, no ATE of 1-2 poses."""
+    path, poses, _, _ = real_like_drive
+    argv = ["run", str(path), "--ground-truth", str(poses), "--frames", value, "--mode", "deadreckon", "--quiet"]
+    assert cli.main(argv) == 2
+    captured = capsys.readouterr()
+    assert "mode deadreckon" not in captured.out  # refused before the run
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"--frames {value}: --ground-truth {poses}: the ground truth (poses.txt) covers frames 0..54" in err
+    assert f"keep {kept} of its poses and an ATE needs at least 3; give START <= 52" in err
+
+
+def test_frames_keeping_too_little_automatic_ground_truth_run_without_it(capsys):
+    assert cli.main(["run", "sim-tiny", "--frames", "0:2", "--mode", "deadreckon", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "note: --frames 0:2: the ground truth (simulated) covers frames 0..59, so frames 0..1 keep 2" in out
+    assert "running without ground truth (no ATE)" in out and "ATE against" not in out
+
+
 def test_frames_open_ends_and_info(capsys):
     assert cli.main(["run", "sim-tiny", "--frames", "50:", "--mode", "deadreckon", "--quiet"]) == 0
     assert "sim-tiny[50:60]: mode deadreckon, 10 frames" in capsys.readouterr().out

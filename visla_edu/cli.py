@@ -159,8 +159,29 @@ def _frames(text):
     return start, stop
 
 
-def _select_frames(dataset, frames):
-    """``dataset`` cut to ``--frames`` (:meth:`~visla_edu.dataset.Dataset.segment`), or unchanged."""
+def _select_frames(dataset, frames, truth_option=None):
+    """``dataset`` cut to ``--frames`` (:meth:`~visla_edu.dataset.Dataset.segment`), or unchanged.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+    frames : (int, int or None) or None
+        ``--frames``: ``(start, stop)``, ``stop`` None for the last frame.
+    truth_option : str, optional
+        The ``--ground-truth`` file, when the user gave one.
+
+    Returns
+    -------
+    visla_edu.dataset.Dataset
+        The segment, without ground truth when it keeps fewer poses than an ATE needs (a note
+        on stdout says so).
+
+    Raises
+    ------
+    ValueError
+        The range lies outside the drive, or ``truth_option`` was given and keeps fewer poses
+        than an ATE needs in the segment.
+    """
     if frames is None:
         return dataset
     start, stop = frames
@@ -168,7 +189,29 @@ def _select_frames(dataset, frames):
     if not start + 2 <= stop <= dataset.num_frames:
         raise ValueError(f"--frames {start}:{stop}: {dataset.name} has frames 0..{dataset.num_frames - 1}; give "
                          f"0 <= START, START + 2 <= STOP <= {dataset.num_frames} (STOP is excluded)")
-    return dataset.segment(start, stop)
+    return _segment_truth_checked(dataset, dataset.segment(start, stop), start, stop, truth_option)
+
+
+def _segment_truth_checked(dataset, segment, start, stop, truth_option):
+    """``segment``, refused (``--ground-truth`` given) or without its ground truth when it keeps too few poses."""
+    import dataclasses
+
+    from visla_edu.data._groundtruth import MIN_POSES
+
+    if dataset.ground_truth is None:
+        return segment
+    kept = 0 if segment.ground_truth is None else segment.ground_truth.num_frames
+    if kept >= MIN_POSES:
+        return segment
+    covered = dataset.ground_truth.num_frames
+    what = (f"the ground truth ({Path(dataset.ground_truth.source).name if dataset.ground_truth.source else 'simulated'}) "
+            f"covers frames 0..{covered - 1}, so frames {start}..{stop - 1} keep {kept} of its poses and an ATE "
+            f"needs at least {MIN_POSES}")
+    if truth_option:
+        raise ValueError(f"--frames {start}:{stop}: --ground-truth {truth_option}: {what}; give START <= "
+                         f"{covered - MIN_POSES} and STOP >= START + {MIN_POSES}, or leave out --ground-truth")
+    print(f"note: --frames {start}:{stop}: {what}; running without ground truth (no ATE)")
+    return dataclasses.replace(segment, ground_truth=None)
 
 
 def _integer_in(text, low, high, expected):
@@ -380,7 +423,7 @@ def _load_with_ground_truth(args):
     dataset = data.load(args.dataset, args.data_dir)
     if args.ground_truth:
         dataset = data.attach_ground_truth(dataset, args.ground_truth, args.ground_truth_times)
-    return _select_frames(dataset, args.frames)
+    return _select_frames(dataset, args.frames, args.ground_truth)
 
 
 def _print_evaluation(evaluations, ground_truth, mode):
