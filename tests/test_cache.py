@@ -20,6 +20,18 @@ def test_cache_dir_precedence(tmp_path, monkeypatch):
     assert cache.cache_dir() == tmp_path / "home" / ".cache" / "visla-edu"
 
 
+def test_a_cache_folder_of_an_unknown_user_is_skipped(tmp_path, monkeypatch):
+    """VISLA_EDU_CACHE=~nosuchuser/...: cache_dir names it; calibrate runs without the cache, creates nothing."""
+    from visla_edu import diagnostics, simulate
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("VISLA_EDU_CACHE", "~visla-edu-no-such-user-4711/cache")
+    with pytest.raises(ValueError, match=r"cannot expand '~visla-edu-no-such-user-4711': no such user"):
+        cache.cache_dir()
+    calibration = diagnostics.calibrate(simulate.simulate_drive("tiny", seed=0))
+    assert calibration.source == "computed" and not list(tmp_path.iterdir())
+
+
 def test_content_hash_follows_values_shapes_types_and_version():
     a = np.arange(12.0).reshape(3, 4)
     key = cache.content_hash({"a": a, "b": 0.5}, "v1")

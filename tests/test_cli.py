@@ -60,6 +60,28 @@ def test_an_empty_path_is_refused_not_ignored(option, capsys):
     assert f"argument {option}: empty path" in err and len(err.strip().splitlines()) == 1
 
 
+_NO_USER = "~visla-edu-no-such-user-4711"
+
+
+@pytest.mark.parametrize("argv, env", [
+    (["run", "sim-tiny", "--out", f"{_NO_USER}/r.npz"], {}),
+    (["run", "sim-tiny", "--plot", f"{_NO_USER}/r.png"], {}),
+    (["run", "sim-tiny", "--trajectory-out", f"{_NO_USER}/r.tum"], {}),
+    (["run", "sim-tiny", "--ground-truth", f"{_NO_USER}/poses.txt"], {}),
+    (["info", f"{_NO_USER}/drive.npz"], {}),
+    (["info", "03", "--data-dir", _NO_USER], {}),
+    (["info", "03"], {"VISLA_EDU_DATA": f"{_NO_USER}/data"}),
+], ids=["out", "plot", "trajectory-out", "ground-truth", "dataset", "data-dir", "VISLA_EDU_DATA"])
+def test_a_path_of_an_unknown_user_is_bad_input_not_a_bug(argv, env, capsys, monkeypatch):
+    """``~name/...`` of no such user: Path.expanduser's RuntimeError was reported as an internal error (exit 3)."""
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    assert cli.main([*argv, "--quiet"] if argv[0] == "run" else [*argv, "--no-diagnostics"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"cannot expand '{_NO_USER}': no such user or home folder on this system; give the full path" in err
+
+
 def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert cli.main(["info", "03", "--data-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err

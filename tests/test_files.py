@@ -81,3 +81,13 @@ def test_a_folder_that_refuses_new_files_is_found_before_any_work(tmp_path, monk
     monkeypatch.setattr(tempfile, "NamedTemporaryFile", refuse)
     with pytest.raises(PermissionError, match=r"--out .*out.npz: cannot create a file in .* \(Read-only file system\)"):
         _files.check_output_path(tmp_path / "out.npz", (".npz",), "--out")
+
+
+def test_expand_user_names_an_unknown_user(monkeypatch, tmp_path):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert _files.expand_user("~/a.npz") == tmp_path / "a.npz" and _files.expand_user("b/c") == _files.Path("b/c")
+    with pytest.raises(ValueError, match=r"~visla-edu-no-such-user-4711/a.npz: cannot expand "
+                                         r"'~visla-edu-no-such-user-4711': no such user"):
+        _files.expand_user("~visla-edu-no-such-user-4711/a.npz")
+    with pytest.raises(ValueError, match="cannot expand"):  # every check of a path uses it
+        _files.check_output_path("~visla-edu-no-such-user-4711/a.npz", (".npz",), "--out")

@@ -28,7 +28,8 @@ import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind", "format_bytes"]
+__all__ = ["atomic_write", "check_output_path", "check_input_file", "same_file", "file_kind", "format_bytes",
+           "expand_user"]
 
 #: Bytes the temporary file's name adds to the target's: ``.`` + ``.<pid>.<8 hex>.tmp``.
 _TMP_EXTRA = 1 + 1 + 10 + 1 + 8 + 4
@@ -40,6 +41,31 @@ _KINDS = (
     (stat.S_ISCHR, "a character device"),
     (stat.S_ISBLK, "a block device"),
 )
+
+
+def expand_user(path):
+    """``Path(path)`` with a leading ``~`` or ``~user`` expanded, as :meth:`pathlib.Path.expanduser`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ValueError
+        ``~user`` names no user of this system, or ``~`` no home folder (``expanduser`` raises a
+        ``RuntimeError`` there, which would read as a bug); the message names the path.
+    """
+    try:
+        return Path(path).expanduser()
+    except RuntimeError:
+        head = Path(path).parts[0]
+        raise ValueError(f"{path}: cannot expand {head!r}: no such user or home folder on this system; "
+                         "give the full path (e.g. /home/NAME/...) instead") from None
 
 
 @contextlib.contextmanager
@@ -82,7 +108,7 @@ def atomic_write(path, mode="w", encoding="utf-8"):
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write: mode must be 'w' or 'wb', got {mode!r}")
-    path = Path(path).expanduser()
+    path = expand_user(path)
     folder = path.parent.resolve()
     if not folder.is_dir():
         raise FileNotFoundError(f"{path}: folder {folder} does not exist; create it or choose another path")
@@ -182,7 +208,7 @@ def check_input_file(path, what="data file"):
     ValueError
         A FIFO, socket or device: not a file on disk (visla-edu seeks in its inputs).
     """
-    path = Path(path).expanduser()
+    path = expand_user(path)
     kind = file_kind(path)
     if kind == "missing":
         raise FileNotFoundError(f"{what} {path}: not found")
@@ -214,7 +240,7 @@ def same_file(a, b):
         :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise
         (one is missing, or ``os.stat`` fails) whether both resolve to the same absolute path.
     """
-    a, b = Path(a).expanduser(), Path(b).expanduser()
+    a, b = expand_user(a), expand_user(b)
     with contextlib.suppress(OSError):
         return os.path.samefile(a, b)
     return a.resolve() == b.resolve()
@@ -252,7 +278,7 @@ def check_output_path(path, suffixes, option, inputs=(), others=()):
     PermissionError
         The folder is not writable.
     """
-    given = Path(path).expanduser()
+    given = expand_user(path)
     kind = file_kind(given)
     if kind == "a directory":
         raise IsADirectoryError(f"{option} {path}: is a directory; give a file name, "
@@ -273,7 +299,7 @@ def check_output_path(path, suffixes, option, inputs=(), others=()):
             raise ValueError(f"{option} {path}: is the input file {Path(source).resolve()}; writing there would "
                              "destroy it: choose another name")
     for other_option, other in others:
-        if other is not None and (same_file(target, other) or target == Path(other).expanduser().resolve()):
+        if other is not None and (same_file(target, other) or target == expand_user(other).resolve()):
             raise ValueError(f"{option} {path}: is also the {other_option} file; give them different names")
     return target
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from visla_edu._files import atomic_write
+from visla_edu._files import atomic_write, expand_user
 
 __all__ = ["ENV_VAR", "cache_dir", "content_hash", "load_json", "save_json"]
 
@@ -36,13 +36,18 @@ def cache_dir():
     pathlib.Path
         ``$VISLA_EDU_CACHE`` if set and not empty, else ``$XDG_CACHE_HOME/visla-edu``, else
         ``~/.cache/visla-edu``.
+
+    Raises
+    ------
+    ValueError
+        The folder starts with ``~user`` of no user, or ``~`` and there is no home folder
+        (:func:`visla_edu._files.expand_user`); callers then skip the cache.
     """
     explicit = os.environ.get(ENV_VAR, "").strip()
     if explicit:
-        return Path(explicit).expanduser()
+        return expand_user(explicit)
     xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
-    return base / "visla-edu"
+    return expand_user(xdg or "~/.cache") / "visla-edu"
 
 
 def content_hash(arrays, version):

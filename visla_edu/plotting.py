@@ -11,11 +11,10 @@ line style, so they stay apart in greyscale and for every kind of colour blindne
 palette, with a different line style per series, for the notebooks' own plots.
 """
 
-from pathlib import Path
 
 import numpy as np
 
-from visla_edu._files import atomic_write
+from visla_edu._files import atomic_write, expand_user
 from visla_edu.codes import DEADRECKON, OBS_GATED
 
 __all__ = ["PALETTE", "STYLES", "SERIES_COLORS", "SERIES_LINESTYLES", "series_style", "course_style",
@@ -68,7 +67,7 @@ def save_figure(fig, path, dpi=120):
     ValueError
         ``path`` is a folder, or matplotlib does not know the suffix's format.
     """
-    path = Path(path).expanduser()
+    path = expand_user(path)
     with atomic_write(path, "wb") as f:
         fig.savefig(f, dpi=dpi, format=path.suffix.lstrip(".").lower() or "png")
     return path.resolve()

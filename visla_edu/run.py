@@ -20,14 +20,13 @@ True
 import contextlib
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from visla_edu import data, diagnostics, filters, metrics, motion
 from visla_edu._blas import check_blas_threads as _check_blas_threads
 from visla_edu._blas import limit_blas_threads
-from visla_edu._files import atomic_write, format_bytes
+from visla_edu._files import atomic_write, expand_user, format_bytes
 from visla_edu.camera import StereoCamera
 from visla_edu.codes import (DEADRECKON, MAPPING, MODES, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED, SLAM, SMOOTH,
                              SMOOTHER_MODES, STATUS_NAMES, VIO, WINDOW)
@@ -518,7 +517,7 @@ def save_result(result, path):
     pathlib.Path
         The absolute path written.
     """
-    path = Path(path).expanduser()
+    path = expand_user(path)
     if path.suffix.lower() != ".npz":
         path = path.with_name(path.name + ".npz")
     arrays = {k: v for k, v in vars(result).items() if k not in ("config", "evaluation") and v is not None}

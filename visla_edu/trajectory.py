@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from visla_edu._files import atomic_write, file_kind, format_bytes
+from visla_edu._files import atomic_write, expand_user, file_kind, format_bytes
 
 __all__ = ["FORMATS", "ORTHONORMAL_TOL", "trajectory_format", "read_table", "read_kitti", "write_kitti", "read_tum",
            "write_tum", "read_trajectory", "write_trajectory"]
@@ -94,7 +94,7 @@ def read_table(path, allowed_columns, what):
         A FIFO or device, larger than :data:`MAX_TEXT_BYTES`, empty, not text, a row with
         another column count, a value that is not a finite number.
     """
-    path = Path(path).expanduser()
+    path = expand_user(path)
     _check_text_file(path, what)
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -303,7 +303,7 @@ def _write_rows(path, rows):
     with atomic_write(path) as f:
         for row in rows.tolist():
             f.write(" ".join(map(repr, row)) + "\n")
-    return Path(path).expanduser().resolve()
+    return expand_user(path).resolve()
 
 
 def write_kitti(path, poses):

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from visla_edu._files import expand_user
 from visla_edu.data._plausible import check_ground_truth_reach
 from visla_edu.data._registry import ground_truth_files
 from visla_edu.dataset import Dataset, GroundTruth
@@ -203,7 +204,7 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
     cam0_T_cam = np.linalg.inv(cam0_T_cam[0]) @ cam0_T_cam
     world_T_imu = imu_poses_from_kitti(cam0_T_cam, dataset.imu_T_cam)
     check_ground_truth_reach(world_T_imu, dataset.time_stamps, "KITTI poses", poses_path)
-    source = str(Path(poses_path).expanduser().resolve())
+    source = str(expand_user(poses_path).resolve())
     return GroundTruth(world_T_imu=world_T_imu, source=source)
 
 

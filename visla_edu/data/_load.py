@@ -3,7 +3,7 @@
 import os
 from pathlib import Path
 
-from visla_edu._files import file_kind
+from visla_edu._files import expand_user, file_kind
 from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
 from visla_edu.data._registry import (COURSE_NAMES, ENV_VAR, REGISTRY, SIMULATED, STANDIN_INPUTS, ground_truth_files,
@@ -85,7 +85,7 @@ def input_files(name_or_path, data_dir=None):
         ground-truth file in the folder of each of them.
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
-        given = Path(name_or_path).expanduser()
+        given = expand_user(name_or_path)
         directory = resolve_dir(data_dir)[0]
         candidates = [given] if given.is_absolute() else [given, directory / given]
     elif isinstance(name_or_path, str) and name_or_path.strip() in COURSE_NAMES:
@@ -146,7 +146,7 @@ def _check_data_dir(directory, how):
 
 def _find_file(path, data_dir):
     """A path as given if anything is there, else relative to the data directory (load_npz checks its kind)."""
-    given = Path(path).expanduser()
+    given = expand_user(path)
     if os.path.lexists(given):
         return given
     directory, how = resolve_dir(data_dir)

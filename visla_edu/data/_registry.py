@@ -7,6 +7,7 @@ The data directory, the names :func:`~visla_edu.data.load` answers, the known co
 import os
 from pathlib import Path
 
+from visla_edu._files import expand_user
 from visla_edu.data._format import FORMAT_2019, FORMAT_2021
 
 __all__ = [
@@ -88,10 +89,10 @@ def resolve_dir(path=None):
         E.g. ``"VISLA_EDU_DATA=/data"``, for error messages.
     """
     if path is not None:
-        return Path(path).expanduser().resolve(), "the data_dir argument"
+        return expand_user(path).resolve(), "the data_dir argument"
     env = os.environ.get(ENV_VAR, "").strip()
     if env:
-        return Path(env).expanduser().resolve(), f"{ENV_VAR}={env}"
+        return expand_user(env).resolve(), f"{ENV_VAR}={env}"
     return (Path.cwd() / "data").resolve(), f"the default ./data ({ENV_VAR} is not set)"
 
 

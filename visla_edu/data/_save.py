@@ -1,10 +1,9 @@
 """Write a Dataset as a course file that :func:`~visla_edu.data.load` reads back exactly."""
 
-from pathlib import Path
 
 import numpy as np
 
-from visla_edu._files import atomic_write
+from visla_edu._files import atomic_write, expand_user
 from visla_edu.data._format import GROUND_TRUTH_KEYS
 
 __all__ = ["save"]
@@ -29,7 +28,7 @@ def save(dataset, path):
     pathlib.Path
         The absolute path written. :func:`~visla_edu.data.load` on it gives back identical arrays.
     """
-    path = Path(path).expanduser()
+    path = expand_user(path)
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
     arrays = _course_arrays(dataset)

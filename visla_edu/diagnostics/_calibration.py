@@ -327,10 +327,23 @@ def cache_path(dataset):
         In :func:`visla_edu.cache.cache_dir`, with the 64-hex-digit
         :func:`visla_edu.cache.content_hash` of the dataset's arrays; neither the folder nor the
         file is created.
+
+    Raises
+    ------
+    ValueError
+        The cache folder's name cannot be expanded (:func:`visla_edu.cache.cache_dir`).
     """
     key = user_cache.content_hash({name: getattr(dataset, name) for name in CACHED_ARRAYS},
                                   f"visla-edu calibration {CALIBRATION_VERSION}")
     return user_cache.cache_dir() / f"calibration-{key}.json"
+
+
+def _cache_path_or_none(dataset):
+    """:func:`cache_path`, or None when the cache folder's name cannot be expanded (the cache never fails a run)."""
+    try:
+        return cache_path(dataset)
+    except ValueError:
+        return None
 
 
 def _load(path):
@@ -372,7 +385,7 @@ def calibrate(dataset, cache=True):
     _check_inputs(dataset)
     if "calibration" in dataset.extra:
         return dataset.extra["calibration"]
-    path = cache_path(dataset) if cache else None
+    path = _cache_path_or_none(dataset) if cache else None
     calibration = _load(path) if path is not None else None
     if calibration is None:
         calibration = _compute(dataset)

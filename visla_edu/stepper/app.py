@@ -61,8 +61,9 @@ def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None,
     env = dict(os.environ)
     if data_dir is not None:
         from visla_edu import data
+        from visla_edu._files import expand_user
 
-        env[data.ENV_VAR] = str(Path(data_dir).expanduser().resolve())
+        env[data.ENV_VAR] = str(expand_user(data_dir).resolve())
     if dataset is not None:
         env["VISLA_EDU_STEPPER_DATASET"] = str(dataset)
     if mode is not None:
