@@ -259,6 +259,37 @@ def test_corrupt_cache_file_is_recomputed(small_drive, content):
     assert calibrate(_fresh(small_drive)).source == f"cache {path}"  # rewritten, readable again
 
 
+def _edit(key, value, inner=None):
+    def change(stored):
+        (stored[inner] if inner else stored)[key] = value
+    return change
+
+
+@pytest.mark.parametrize("change", [
+    _edit("imu_lag", 10**6), _edit("imu_lag", "x"), _edit("imu_lag", True), _edit("imu_lag", 1.5),
+    _edit("sigma_linear_velocity", [0.0, 0.0, 0.0]), _edit("sigma_angular_velocity", [-1.0, 0.1, 0.1]),
+    _edit("white_noise", [-1.0] * 6), _edit("reasons", None), _edit("reasons", {"imu_lag": 3}),
+    _edit("outliers", "x"), _edit("outliers", {"epipolar": 2.0}), _edit("repeated_frames", [1e9]),
+    _edit("repeated_frames", None), _edit("seconds", "x"), _edit("rotation_slope", None, inner="vo"),
+    _edit("lag_residual", None, inner="vo"),
+], ids=["lag-huge", "lag-text", "lag-bool", "lag-float", "sigma-zero", "sigma-negative", "white-negative",
+        "reasons-none", "reason-number", "outliers-text", "outliers-partial", "repeated-float", "repeated-none",
+        "seconds-text", "vo-slope-none", "vo-residual-none"])
+def test_a_cache_file_with_edited_values_is_recomputed(small_drive, change):
+    """Valid JSON with values calibrate never writes: recomputed, never used by the filter or the report."""
+    computed = calibrate(_fresh(small_drive), cache=False)
+    path = diagnostics.cache_path(small_drive)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stored = computed.to_dict()
+    change(stored)
+    path.write_text(json.dumps({"version": _calibration.CALIBRATION_VERSION, "calibration": stored}))
+    cal = calibrate(_fresh(small_drive))
+    assert cal.source == "computed" and cal.imu_lag == computed.imu_lag
+    np.testing.assert_array_equal(cal.sigma_linear_velocity, computed.sigma_linear_velocity)
+    assert "the filter will use" in cal.report()
+    assert calibrate(_fresh(small_drive)).source == f"cache {path}"  # rewritten, readable again
+
+
 def test_unwritable_cache_folder_never_fails(small_drive, tmp_path, monkeypatch):
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")

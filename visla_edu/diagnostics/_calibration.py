@@ -176,9 +176,35 @@ class Calibration:
             fields["vo"] = VoEvidence(**fields["vo"])
             if fields["extrinsic_correction"] not in CORRECTIONS:
                 raise ValueError(f"unknown extrinsic_correction {fields['extrinsic_correction']!r}")
+            _check_decisions(fields)
             return cls(**fields, source=source)
         except (KeyError, TypeError, AttributeError) as err:
             raise ValueError(f"Calibration.from_dict: malformed calibration ({type(err).__name__}: {err})") from None
+
+
+def _check_decisions(fields):
+    """Raise a ValueError unless the lag, the noise and the report's fields are what :func:`calibrate` writes.
+
+    A cache file that is valid JSON but edited or damaged (a lag of 10**6, a noise below the
+    floors, a reason that is not text) must read as no entry, not drive the filter or break
+    ``visla-edu info``.
+    """
+    lag = fields["imu_lag"]
+    if type(lag) is not int or lag not in LAGS:
+        raise ValueError(f"imu_lag must be one of {LAGS}, got {lag!r}")
+    for key, floor in (("sigma_linear_velocity", MIN_SIGMA_LINEAR), ("sigma_angular_velocity", MIN_SIGMA_ANGULAR)):
+        if not np.all(fields[key] >= floor):
+            raise ValueError(f"{key} must be at least {floor:g} (the floor), got {fields[key].tolist()}")
+    if not (np.all(fields["white_noise"] >= 0) and np.all(fields["hold_noise"] >= 0)):
+        raise ValueError("white_noise and hold_noise must not be negative")
+    reasons, outliers, repeated = fields["reasons"], fields["outliers"], fields["repeated_frames"]
+    if not all(isinstance(reasons.get(k, ""), str) for k in ("extrinsic_correction", "imu_lag", "noise")):
+        raise ValueError(f"reasons must be text, got {reasons!r}")
+    shares = [outliers[k] for k in ("non_positive_disparity", "epipolar", "vo_rejected")]
+    if not all(type(x) in (int, float) and 0 <= x <= 1 for x in shares):
+        raise ValueError(f"outliers must be shares in [0, 1], got {outliers!r}")
+    if not all(type(t) is int and t >= 0 for t in repeated):
+        raise ValueError(f"repeated_frames must be frame indices, got {repeated!r}")
 
 
 def _noise_reason(noise, samples):
@@ -347,14 +373,20 @@ def _cache_path_or_none(dataset):
 
 
 def _load(path):
-    """The calibration cached at ``path``, or None (missing, unreadable, corrupt or another version)."""
+    """The calibration cached at ``path``, or None (missing, unreadable, corrupt or another version).
+
+    Corrupt includes evidence its report cannot show (``visla-edu info`` prints it), e.g. a
+    slope table that is not a table.
+    """
     stored = user_cache.load_json(path)
     if stored is None or stored.get("version") != CALIBRATION_VERSION:
         return None
     try:
-        return Calibration.from_dict(stored.get("calibration"), source=f"cache {path}")
-    except ValueError:
+        calibration = Calibration.from_dict(stored.get("calibration"), source=f"cache {path}")
+        calibration.report()
+    except (ValueError, TypeError, KeyError, AttributeError, IndexError):
         return None
+    return calibration
 
 
 def calibrate(dataset, cache=True):
