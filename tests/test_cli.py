@@ -82,6 +82,18 @@ def test_a_path_of_an_unknown_user_is_bad_input_not_a_bug(argv, env, capsys, mon
     assert f"cannot expand '{_NO_USER}': no such user or home folder on this system; give the full path" in err
 
 
+def test_a_result_file_given_as_the_dataset_is_named_as_such(tmp_path, capsys):
+    """It was 'looks like the 2021+ course format but is missing key(s) [...]' and 40 keys."""
+    out = tmp_path / "r.npz"
+    assert cli.main(["run", "sim-tiny", "--mode", "deadreckon", "--quiet", "--out", str(out)]) == 0
+    capsys.readouterr()
+    for command in (["info", str(out), "--no-diagnostics"], ["run", str(out), "--quiet"]):
+        assert cli.main(command) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "course format" not in err
+        assert f"{out}: is a result file of 'visla-edu run --out'" in err and "run.load_result" in err
+
+
 def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert cli.main(["info", "03", "--data-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -186,6 +186,10 @@ def _detect_format(members, path):
     for fmt, required in FORMAT_KEYS.items():
         if set(required) <= present:
             return fmt
+    if {"world_T_imu", "mode"} <= present and "features" not in present:
+        raise ValueError(f"{path}: is a result file of 'visla-edu run --out' (keys world_T_imu, landmarks, mode, "
+                         "...), not a course file; give the course file the run read, or read this one with "
+                         "visla_edu.run.load_result")
     markers = {FORMAT_2021: {"angular_velocity", "imu_T_cam"}, FORMAT_2019: {"rotational_velocity", "cam_T_imu"}}
     candidates = [fmt for fmt, keys in markers.items() if keys & present]
     found = f"found keys {sorted(present)}"
