@@ -38,6 +38,37 @@ def test_bad_setting_names_the_problem():
         cli.main(["run", "sim-tiny", "--set", "sigma_pixel=big"])
 
 
+
+def test_smoother_settings_reach_the_smoother_and_the_result_file(tmp_path, capsys):
+    out = tmp_path / "r.npz"
+    argv = ["run", "sim-tiny", "--mode", "window", "--smoother-set", "window_size=5", "--smoother-set",
+            "loss=Huber", "--out", str(out), "--quiet"]
+    assert cli.main(argv) == 0
+    result = run.load_result(out)
+    assert result.config["smoother_window_size"] == 5 and result.config["smoother_loss"] == "huber"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--mode", "slam", "--smoother-set", "window_size=5"], "smoother settings need --mode smooth or window"),
+    (["--mode", "window", "--smoother-set", "window_size=5", "--smoother-set", "window_size=6"],
+     "window_size is given twice"),
+])
+def test_smoother_settings_are_refused_where_they_cannot_apply(argv, message, capsys):
+    assert cli.main(["run", "sim-tiny", *argv, "--quiet"]) == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value, message", [
+    ("window_size=1", "window_size must be >= 2"),
+    ("window_size=big", "expected an integer"),
+    ("sigma_pixel=2", "comes from the filter's settings: use --set"),
+    ("windowsize=5", "'windowsize' is not a smoother setting"),
+])
+def test_a_bad_smoother_setting_is_an_argparse_error(value, message, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["run", "sim-tiny", "--mode", "window", "--smoother-set", value])
+    assert message in capsys.readouterr().err
+
 @pytest.mark.parametrize("value", ["none", "None", "2"])
 def test_blas_threads_option(value, capsys):
     assert cli.main(["run", "sim-tiny", "--mode", "deadreckon", "--blas-threads", value, "--quiet"]) == 0

@@ -101,3 +101,20 @@ def test_a_filter_setting_the_smoother_cannot_take_is_refused_before_the_ekf_run
     with pytest.raises(ValueError, match=rf"mode {mode} cannot use these filter settings: "
                                          r"SmootherConfig.sigma_angular_velocity must be a positive number"):
         run.run_smoother(tiny, mode, config, progress=False)
+
+
+def test_smoother_settings_of_its_own_change_the_run(tiny):
+    """``smoother_settings`` reach the smoother (a window of 3 frames is not the default's 20)
+    over the filter's model; a filter setting, a bad value or both ways at once are refused."""
+    r = run.run_smoother(tiny, "window", CFG, progress=False, smoother_settings={"window_size": 3})
+    default = run.run_smoother(tiny, "window", CFG, progress=False)
+    assert r.config["smoother_window_size"] == 3 and r.config["smoother_sigma_pixel"] == CFG.sigma_pixel
+    assert not np.allclose(r.world_T_imu, default.world_T_imu)
+    with pytest.raises(ValueError, match=r"\['sigma_pixel'\] are not the smoother's own settings"):
+        run.run_smoother(tiny, "window", CFG, progress=False, smoother_settings={"sigma_pixel": 2.0})
+    with pytest.raises(ValueError, match="SmootherConfig.window_size must be >= 2"):
+        run.run_smoother(tiny, "window", CFG, progress=False, smoother_settings={"window_size": 1})
+    from visla_edu import smoother
+    with pytest.raises(ValueError, match="not both"):
+        run.run_smoother(tiny, "window", CFG, smoother_config=smoother.SmootherConfig(), progress=False,
+                         smoother_settings={"window_size": 3})

@@ -5,6 +5,8 @@ perturbation ``T = mu exp(delta^)``; motion residual ``e_t = log(exp(-tau u^) T_
 Every analytic Jacobian is checked against finite differences (tests/fdiff.py).
 """
 
+import re
+
 import numpy as np
 import pytest
 from scipy.sparse import linalg as sparse_linalg
@@ -381,6 +383,27 @@ def test_config_rejects_bad_values_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"SmootherConfig.{field}"):
         smoother.SmootherConfig(**{field: value})
 
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("window_size=40", ("window_size", 40)), (" loss = Huber ", ("loss", "huber")),
+    ("pose_covariance=false", ("pose_covariance", False)), ("loss_scale=2", ("loss_scale", 2.0)),
+    ("window_mode=marginalize", ("window_mode", "marginalize")),
+])
+def test_parse_setting_reads_a_value_as_its_setting_type(text, expected):
+    name, value = smoother.parse_setting(text)
+    assert (name, value) == expected and type(value) is type(expected[1])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("window_size", "expected NAME=VALUE"), ("window_size=2.5", "expected an integer"),
+    ("pose_covariance=yes", "expected true or false"), ("loss_scale=nan", "SmootherConfig.loss_scale"),
+    ("window_mode=drop", "SmootherConfig.window_mode"), ("imu_lag=1", "comes from the filter's settings"),
+    ("blas_threads=2", "'blas_threads' is not a smoother setting"),
+])
+def test_parse_setting_names_what_is_wrong(text, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        smoother.parse_setting(text)
 
 def test_bad_initial_values_get_a_clear_error(tiny):
     T = tiny.ground_truth.world_T_imu

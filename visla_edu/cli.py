@@ -124,6 +124,8 @@ def _add_run_parser(sub, common):
     run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
                      help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
                           "booleans are true/false, ranges are enforced")
+    run.add_argument("--smoother-set", action="append", default=[], type=_smoother_setting, metavar="NAME=VALUE",
+                     help="with --mode smooth or window: a smoother setting of its own, e.g. window_size=40 (repeatable)")
     run.add_argument("--out", default=None, type=_path, help="save the result (.npz)")
     run.add_argument("--plot", default=None, type=_path,
                      help="save a top-down figure of trajectory and map (.png, .pdf, .svg)")
@@ -265,6 +267,16 @@ def _setting(text):
     return name, value
 
 
+def _smoother_setting(text):
+    """``--smoother-set NAME=VALUE``: ``(name, value)`` (:func:`visla_edu.smoother.parse_setting`)."""
+    from visla_edu import smoother
+
+    try:
+        return smoother.parse_setting(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def _stride(text):
     """``--landmark-stride N``: as ``--set landmark_stride=N``."""
     return _setting(f"landmark_stride={text}")[1]
@@ -301,7 +313,7 @@ def _cmd_run(args):
         progress = False if args.quiet else None
         if args.mode in SMOOTHER_MODES:
             result = run.run_smoother(dataset, args.mode, config, progress=progress, verbose=True,
-                                      blas_threads=args.blas_threads)
+                                      blas_threads=args.blas_threads, smoother_settings=dict(args.smoother_set))
         else:
             result = run.run_filter(dataset, args.mode, config, dense=args.dense, progress=progress,
                                     verbose=True, blas_threads=args.blas_threads)
@@ -328,6 +340,11 @@ def _run_config(args):
 
     if args.dense and args.mode != SLAM:
         raise ValueError(f"--dense is the textbook joint filter and needs --mode slam, got --mode {args.mode}")
+    names = [name for name, _ in args.smoother_set]
+    if names and args.mode not in SMOOTHER_MODES:
+        raise ValueError(f"--smoother-set {names[0]}: smoother settings need --mode smooth or window, got --mode {args.mode}")
+    if len(set(names)) < len(names):
+        raise ValueError(f"--smoother-set: {max(names, key=names.count)} is given twice; give each setting once")
     settings = {}
     pairs = list(args.set) + ([("landmark_stride", args.landmark_stride)] if args.landmark_stride else [])
     for name, value in pairs:

@@ -290,7 +290,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
 
 
 def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progress=None, verbose=False,
-                 blas_threads=1):
+                 blas_threads=1, smoother_settings=None):
     """Run a smoother over the whole dataset, into the same :class:`RunResult` as the filters.
 
     ``"smooth"``: the batch smoother (:func:`visla_edu.smoother.smooth`) started from the joint
@@ -310,6 +310,9 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
         Default: :meth:`~visla_edu.smoother.SmootherConfig.from_filter_config` of ``config``.
     progress, verbose, blas_threads
         As in :func:`run_filter` (the progress bar is the EKF's).
+    smoother_settings : dict, optional
+        Smoother settings of its own (:data:`visla_edu.smoother.OWN_SETTINGS`, e.g.
+        ``{"window_size": 40}``) over the default model; not with ``smoother_config``.
 
     Returns
     -------
@@ -326,8 +329,10 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     if config is not None and config.landmark_stride != 1:
         raise ValueError(f"landmark_stride={config.landmark_stride} thins the map of the filters (mapping, vio, slam); "
                          f"mode {mode} uses every landmark: leave landmark_stride at 1")
+    if smoother_config is not None and smoother_settings:
+        raise ValueError("run_smoother: give smoother_config or smoother_settings, not both")
     config = resolve_config(dataset, config or FilterConfig())
-    settings = smoother_config or _smoother_settings(config, mode)  # before the EKF: a bad model fails fast
+    settings = smoother_config or _smoother_settings(config, mode, smoother_settings)  # before the EKF: fail fast
     start = None
     if mode == SMOOTH:
         start = run_filter(dataset, SLAM, config, progress=progress, verbose=verbose, blas_threads=blas_threads)
@@ -343,7 +348,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     return _smoother_run_result(dataset, config, solved, start)
 
 
-def _smoother_settings(config, mode):
+def _smoother_settings(config, mode, own=None):
     """The smoother's model from the filter's resolved settings, or a ValueError saying where it came from.
 
     Parameters
@@ -352,6 +357,8 @@ def _smoother_settings(config, mode):
         Resolved.
     mode : str
         Names the mode in the message.
+    own : dict, optional
+        Settings of the smoother's own (:data:`visla_edu.smoother.OWN_SETTINGS`).
 
     Returns
     -------
@@ -361,12 +368,18 @@ def _smoother_settings(config, mode):
     ------
     ValueError
         A filter setting the smoother cannot take (e.g. a velocity noise of 0, which the
-        filters accept and the smoother's motion factors cannot weigh).
+        filters accept and the smoother's motion factors cannot weigh), or an ``own`` name
+        that is not one of the smoother's own settings.
     """
     from visla_edu import smoother
 
+    unknown = sorted(set(own or ()) - set(smoother.OWN_SETTINGS))
+    if unknown:
+        raise ValueError(f"smoother_settings: {unknown} are not the smoother's own settings; they are "
+                         f"{', '.join(smoother.OWN_SETTINGS)} (noise and lag come from the filter's config)")
+    smoother.SmootherConfig(**(own or {}))  # a bad value of its own is named as the smoother's
     try:
-        return smoother.SmootherConfig.from_filter_config(config)
+        return smoother.SmootherConfig.from_filter_config(config, **(own or {}))
     except ValueError as err:
         raise ValueError(f"mode {mode} cannot use these filter settings: {err}") from None
 

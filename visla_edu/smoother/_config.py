@@ -6,12 +6,18 @@ import numpy as np
 
 from visla_edu.filters._config import MAX_IMU_LAG
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "as_smoother_config"]
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "as_smoother_config", "parse_setting"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
 LOSSES = ("cauchy", "huber", "none")
 #: What the sliding window does with the states that leave it.
 WINDOW_MODES = ("fix", "marginalize")
+#: The settings only the smoothers have (``visla-edu run --smoother-set``); the others (noise,
+#: lag, far points, repeated frames) come from the filter's settings
+#: (:meth:`SmootherConfig.from_filter_config`).
+OWN_SETTINGS = ("loss", "loss_scale", "max_iterations", "function_tolerance", "step_tolerance", "initial_damping",
+                "rejection_probability", "rejection_rounds", "min_observations", "min_depth",
+                "pose_covariance", "landmark_covariance", "window_size", "window_iterations", "window_mode")
 
 
 @dataclass
@@ -199,6 +205,56 @@ def as_smoother_config(config, caller):
     hint = ("smoother.SmootherConfig.from_filter_config(run.resolve_config(dataset, config)) gives the smoother "
             "the filter's model") if type(config).__name__ == "FilterConfig" else "e.g. SmootherConfig(window_size=10)"
     raise TypeError(f"{caller}: config must be a SmootherConfig, got {type(config).__name__}; {hint}")
+
+
+def parse_setting(pair):
+    """``"NAME=VALUE"`` -> ``(name, value)`` for one of :data:`OWN_SETTINGS`, checked as a SmootherConfig would.
+
+    The value is read by the type of the setting's default: an integer, a number, ``true`` /
+    ``false``, or a word (lower case).
+
+    Parameters
+    ----------
+    pair : str
+        ``"NAME=VALUE"``, split at the first ``=``; spaces around either part are ignored.
+
+    Returns
+    -------
+    name : str
+    value : int, float, bool or str
+
+    Raises
+    ------
+    ValueError
+        No ``=``, a name that is not one of :data:`OWN_SETTINGS` (a filter setting gets a
+        pointer to ``--set``), or a value that does not parse or that :class:`SmootherConfig`
+        refuses.
+    """
+    name, sep, text = (part.strip() for part in pair.partition("="))
+    if not sep or name not in OWN_SETTINGS:
+        what = "expected NAME=VALUE" if not sep else f"{name!r} is not a smoother setting"
+        if sep and name in SmootherConfig.__dataclass_fields__:
+            what += " of its own (it comes from the filter's settings: use --set)"
+        raise ValueError(f"{pair!r}: {what}; the smoother's settings are {', '.join(OWN_SETTINGS)}")
+    value = _parse_like(name, text, SmootherConfig.__dataclass_fields__[name].default)
+    SmootherConfig(**{name: value})  # the range checks, with their messages
+    return name, value
+
+
+def _parse_like(name, text, default):
+    """``text`` read as the type of ``default`` (bool, int, float or str), or a ValueError naming ``name``."""
+    words = {"true": True, "false": False}
+    try:
+        if isinstance(default, bool):
+            return words[text.lower()]
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            return float(text)
+    except (KeyError, ValueError):
+        kind = "true or false" if isinstance(default, bool) else "an integer" if isinstance(default, int) else "a number"
+        raise ValueError(f"{name}={text!r}: expected {kind}") from None
+    return text.lower()
 
 
 def _is_number(value):
