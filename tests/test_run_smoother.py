@@ -118,3 +118,13 @@ def test_smoother_settings_of_its_own_change_the_run(tiny):
     with pytest.raises(ValueError, match="not both"):
         run.run_smoother(tiny, "window", CFG, smoother_config=smoother.SmootherConfig(), progress=False,
                          smoother_settings={"window_size": 3})
+
+
+def test_dead_reckoning_beside_a_smoother_uses_the_smoothers_lag(tiny):
+    """A smoother_config with its own lag: the dead reckoning in the result follows that lag,
+    not the filter settings' (the two were compared as if they used the same velocities)."""
+    from visla_edu import motion, smoother
+
+    settings = smoother.SmootherConfig.from_filter_config(run.resolve_config(tiny, CFG), imu_lag=1)
+    r = run.run_smoother(tiny, "window", CFG, smoother_config=settings, progress=False)
+    np.testing.assert_allclose(r.dead_reckoning, motion.dead_reckon(tiny.time_stamps, tiny.twists, lag=1))

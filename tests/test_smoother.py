@@ -514,6 +514,7 @@ def test_window_time_per_frame_leaves_out_the_held_first_frame(tiny):
 @pytest.mark.parametrize("field,value", [
     ("imu_lag", 100), ("imu_lag", -3), ("sigma_pixel", True), ("min_depth", False),
     ("rejection_probability", True), ("rejection_probability", "0.5"), ("initial_damping", np.True_),
+    ("sigma_linear_velocity", True), ("sigma_angular_velocity", (True, 0.1, 0.1)),
 ])
 def test_config_refuses_what_it_would_clip_or_read_as_a_number(field, value):
     """A lag beyond the filter's -2 .. 2 was clipped to the drive's ends by select_twists; a bool

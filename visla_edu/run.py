@@ -403,7 +403,7 @@ def _smoother_run_result(dataset, config, solved, start):
         name=dataset.name, mode=solved.mode, dense=False, time_stamps=dataset.time_stamps.copy(),
         world_T_imu=solved.world_T_imu, pose_cov=solved.pose_cov, landmarks=solved.landmarks,
         landmark_cov=solved.landmark_cov,
-        dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=config.imu_lag),
+        dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=solved.config["imu_lag"]),
         nis=np.full(T, np.nan), nis_dof=np.zeros(T, dtype=np.int64), status_counts=counts, step_seconds=seconds,
         config=settings, imu_T_cam=solved.imu_T_cam, start_world_T_imu=None if start is None else start.world_T_imu,
         notes="\n".join(solved.summary().splitlines()[2:]),

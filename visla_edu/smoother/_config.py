@@ -273,7 +273,9 @@ def _check_int(name, value, low, high=None):
 
 def _positive_per_axis(name, value):
     """A velocity noise: a positive number or three (one per body axis), as a float or a tuple."""
-    sigma = np.asarray(value, dtype=float) if not isinstance(value, str) else np.full(2, np.nan)
+    items = np.ravel(np.asarray(value, dtype=object))
+    numbers = not isinstance(value, str) and all(_is_number(x) for x in items)  # True is no noise level
+    sigma = np.asarray(value, dtype=float) if numbers else np.full(2, np.nan)
     if sigma.shape not in ((), (3,)) or not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
         raise ValueError(f"SmootherConfig.{name} must be a positive number or three of them (x, y, z), got {value!r}")
     return float(sigma) if sigma.ndim == 0 else tuple(float(x) for x in sigma)
