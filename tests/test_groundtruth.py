@@ -159,6 +159,15 @@ def test_times_are_checked_against_the_time_stamps(tmp_path, tiny):
         data.load_ground_truth(tiny, poses, times)
 
 
+
+def test_absolute_times_are_named_as_such(tmp_path, tiny):
+    """Unix times (or any offset) that match once the first is subtracted: say so, not 'another drive'."""
+    with pytest.raises(ValueError, match=r"x.txt: the times start at 1317384506.500000 s, not 0, .*\(subtract the "
+                                         r"first time"):
+        data.check_times(1317384506.5 + tiny.time_stamps - tiny.time_stamps[0], tiny.time_stamps, "x.txt")
+    with pytest.raises(ValueError, match=r"row 3 \(frame 3\)"):  # not an offset: the row that differs
+        data.check_times(np.r_[0, 0.1, 0.2, 0.9], np.arange(4) * 0.1, "x.txt")
+
 # ----------------------------------------------------------------------------- registry
 
 

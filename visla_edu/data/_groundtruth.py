@@ -137,6 +137,9 @@ def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE):
     relative = time_stamps[: len(times)] - time_stamps[0]
     error = np.abs(np.asarray(times, dtype=float) - relative)
     bad = np.flatnonzero(error > tolerance)
+    if len(bad) and np.all(np.abs(times - times[0] - relative) <= tolerance):
+        raise ValueError(f"{path}: the times start at {times[0]:.6f} s, not 0, and match the dataset's after "
+                         "subtracting that: KITTI's times count seconds from frame 0 (subtract the first time)")
     if len(bad):
         i = bad[0]
         raise ValueError(f"{path}: row {i} (frame {i}) has time {times[i]:.6f} s but the dataset's time_stamps[{i}] - "
