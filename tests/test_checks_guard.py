@@ -217,6 +217,49 @@ def test_changing_the_checks_while_they_run_fails_and_is_undone(reloaded_checks)
     assert _core.compare is compare
 
 
+def test_numpy_replaced_by_notebook_code_fails_the_check(monkeypatch):
+    """``np.allclose = lambda *a, **k: True`` in an answer cell would pass every wrong answer."""
+    monkeypatch.setattr(np, "allclose", _notebook_function("def allclose(*a, **k):\n    return True\n", "allclose"))
+    err = _failure(checks.check_hat, lambda w: np.zeros((3, 3)))
+    assert _first_line(err) == "numpy.allclose was replaced by code from this notebook"
+    monkeypatch.undo()
+    monkeypatch.setattr(np.linalg, "solve", lambda a, b: b)
+    assert _first_line(_failure(checks.check_nees, A.nees)) == "numpy.linalg.solve was replaced by code from this notebook"
+
+
+def test_replaced_builtin_fails_the_check(monkeypatch):
+    import builtins
+
+    class AlwaysTrue(int):
+        def __new__(cls, x=False):
+            return True
+
+    monkeypatch.setattr(builtins, "bool", AlwaysTrue)  # bool(np.allclose(...)) would always be True
+    err = _failure(checks.check_hat, lambda w: np.zeros((3, 3)))
+    assert _first_line(err) == "Python's built-in bool was replaced by code from this notebook"
+
+
+def test_changing_numpy_or_builtins_while_the_check_runs_fails_and_is_undone():
+    import builtins
+
+    allclose, real_float = np.allclose, builtins.float
+
+    def sneaky_hat(w):
+        np.allclose = lambda *args, **kwargs: True
+        return np.zeros((3, 3))
+
+    def sneaky_so3_exp(w):
+        builtins.float = lambda x: 0.0  # every error measured by the check would be 0
+        return np.eye(3)
+
+    assert _first_line(_failure(checks.check_hat, sneaky_hat)) == "your hat changed numpy while the check ran"
+    assert np.allclose is allclose
+    err = _failure(checks.check_so3_exp, sneaky_so3_exp)
+    assert _first_line(err) == "your so3_exp changed builtins while the check ran"
+    assert builtins.float is real_float
+    checks.check_hat(A.hat)
+
+
 def test_reloading_the_library_inside_the_answer_fails():
     def reloading_hat(w):
         importlib.reload(lie)  # a fresh, unhidden lie.hat

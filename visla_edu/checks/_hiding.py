@@ -10,21 +10,33 @@ While a check calls the student's function:
 * the **library and the checks must stay as shipped**: before and after each call every
   function of every loaded ``visla_edu`` module is checked to come from the package's files
   (not from a notebook cell), and a module attribute the call reassigned (``importlib.reload``,
-  ``checks._core.compare = ...``) is put back and reported.
+  ``checks._core.compare = ...``) is put back and reported;
+* so must **what the checks' verdicts rest on**: numpy's and numpy.linalg's functions (an
+  ``np.allclose = lambda *a, **k: True`` would pass every wrong answer) and the builtins the
+  checks call (``bool``, ``float``...), checked and restored the same way.
 
 The checks compute every expected value after the call, with nothing hidden.
 """
 
+import builtins
 import functools
 import os
 import sys
 import types
 from contextlib import contextmanager
 
-__all__ = ["LibraryFunctionHidden", "label", "hidden_message", "hide", "guard", "verify_library"]
+import numpy
+import numpy.linalg
+
+__all__ = ["LibraryFunctionHidden", "label", "hidden_message", "hide", "guard", "verify_library",
+           "verify_foundations"]
 
 #: The ``visla_edu`` package folder: library code must come from files under it.
 PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+
+#: The builtins the checks' verdicts use (``bool(np.allclose(...))``, ``float(error) <= tol``...).
+TRUSTED_BUILTINS = ("abs", "all", "any", "bool", "float", "int", "isinstance", "len", "list", "max", "min",
+                    "range", "tuple", "zip")
 
 #: Longest line of a failure message (``nbgrader validate`` cuts lines at 87 characters).
 MAX_FIRST_LINE = 79
@@ -188,6 +200,52 @@ def verify_library(modules=None):
                     "installed: restart the kernel and run the notebook without assigning to visla_edu.")
 
 
+def _numpy_impostor(value):
+    """True if ``value``, an attribute of numpy, is callable but not numpy's own."""
+    return callable(value) and not str(getattr(value, "__module__", None) or "").startswith("numpy")
+
+
+def _builtin_impostor(name, value):
+    """True if ``builtins.<name>`` is no longer Python's own type or function of that name."""
+    if isinstance(value, type):
+        return value.__module__ != "builtins" or value.__name__ != name
+    return not (isinstance(value, types.BuiltinFunctionType) and value.__name__ == name
+                and getattr(value, "__self__", None) is builtins)
+
+
+def verify_foundations():
+    """Fail if a numpy function or a builtin the checks use was replaced (e.g. by notebook code).
+
+    Every callable attribute of ``numpy`` and ``numpy.linalg`` must come from numpy (its
+    ``__module__`` starts with ``numpy``), and each of :data:`TRUSTED_BUILTINS` must be Python's
+    own type or built-in function of that name.
+
+    Raises
+    ------
+    AssertionError
+        Naming the first replaced function.
+    """
+    for module in (numpy, numpy.linalg):
+        for attr, value in list(vars(module).items()):
+            if _numpy_impostor(value):
+                raise AssertionError(
+                    f"{module.__name__}.{attr} was replaced by code from this notebook\n"
+                    "The checks compare numbers with numpy, so numpy must stay as installed: restart the "
+                    "kernel and run the notebook without assigning to numpy.")
+    for name in TRUSTED_BUILTINS:
+        if _builtin_impostor(name, getattr(builtins, name, None)):
+            raise AssertionError(
+                f"Python's built-in {name} was replaced by code from this notebook\n"
+                "The checks rely on Python's built-in functions: restart the kernel and run the notebook "
+                "without assigning to builtins.")
+
+
+def _foundation_snapshot():
+    """``(name, module, saved namespace)`` of numpy, numpy.linalg and the trusted builtins."""
+    return [("numpy", numpy, dict(vars(numpy))), ("numpy.linalg", numpy.linalg, dict(vars(numpy.linalg))),
+            ("builtins", builtins, {name: getattr(builtins, name) for name in TRUSTED_BUILTINS})]
+
+
 def _restore_changes(snapshot):
     """Put back what was reassigned since ``snapshot``; return the names that changed."""
     changed = []
@@ -208,10 +266,11 @@ def guard(functions, exercise):
     """Verify the library, hide ``functions``, run the block, restore and verify again.
 
     Before the block every ``visla_edu`` module but the checks must hold only the package's own
-    functions (:func:`verify_library`), and the namespaces of all loaded ``visla_edu`` modules
-    (the checks included) are copied. Within the block ``functions`` are hidden (:func:`hide`).
-    After it, whatever the block reassigned in those namespaces (or in ``sys.modules``) is put
-    back, and the library is verified again.
+    functions (:func:`verify_library`), numpy and the builtins the checks use must be their own
+    (:func:`verify_foundations`), and the namespaces of all loaded ``visla_edu`` modules (the
+    checks included), of numpy and numpy.linalg and those builtins are copied. Within the block
+    ``functions`` are hidden (:func:`hide`). After it, whatever the block reassigned in those
+    namespaces (or in ``sys.modules``) is put back, and the library is verified again.
 
     Parameters
     ----------
@@ -223,22 +282,25 @@ def guard(functions, exercise):
     Raises
     ------
     AssertionError
-        The library was replaced before the block (or after it, when the block completed), or
-        the block reassigned an attribute of a ``visla_edu`` module (put back first; this error
-        replaces any exception of the block).
+        The library, numpy or a trusted builtin was replaced before the block (or the library
+        after it, when the block completed), or the block reassigned an attribute of a
+        ``visla_edu`` module, of numpy or a trusted builtin (put back first; this error replaces
+        any exception of the block).
     """
     modules = _visla_modules()
     library = [module for name, module in modules if not name.startswith("visla_edu.checks")]
     verify_library(library)
-    snapshot = [(name, module, dict(vars(module))) for name, module in modules]
+    verify_foundations()
+    snapshot = [(name, module, dict(vars(module))) for name, module in modules] + _foundation_snapshot()
     try:
         with hide(functions, exercise):
             yield
     finally:
         changed = _restore_changes(snapshot)
         if changed:
+            what = "visla_edu" if any(n.startswith("visla_edu") for n in changed) else changed[0].split(".")[0]
             raise AssertionError(
-                f"your {exercise} changed visla_edu while the check ran\n"
+                f"your {exercise} changed {what} while the check ran\n"
                 f"It reassigned {', '.join(changed[:5])}; the check put them back. A solution must "
-                "compute its result, not modify the library or the checks.")
+                "compute its result, not modify the library, the checks, numpy or Python's builtins.")
     verify_library(library)
