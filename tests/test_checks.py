@@ -466,6 +466,18 @@ def test_correct_code_that_updates_its_inputs_in_place_passes(capsys):
     _passes(checks.check_schur_reduce, _schur_reduce_in_place, capsys)
 
 
+def test_single_precision_and_complex_results_are_named(capsys):
+    """float32 is not blamed on the math ("no small-angle series"); imaginary parts are not dropped."""
+    _fails(checks.check_so3_exp, lambda w: A.so3_exp(w).astype(np.float32), "float32 (single precision)")
+    _fails(checks.check_project, lambda *a: A.project(*a).astype(np.float32), "float32 (single precision)")
+    _fails(checks.check_pose_update, lambda *a: (A.pose_update(*a)[0], A.pose_update(*a)[1].astype(np.float32)),
+           "float32 (single precision)")
+    _fails(checks.check_hat, lambda w: A.hat(w) + 1e-3j, "complex: it has imaginary parts")
+    _fails(checks.check_so3_exp, lambda w: A.so3_exp(w) + 0.5j * np.eye(3), "complex")
+    _passes(checks.check_so3_exp, lambda w: A.so3_exp(w) + 1e-17j, capsys)  # rounding noise of an eig or expm
+    _passes(checks.check_hat, lambda w: A.hat(w).tolist(), capsys)
+
+
 def _landmark_update_by_kalman(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var):
     from visla_edu import kalman
 

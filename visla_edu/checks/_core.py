@@ -191,13 +191,33 @@ def _materialize(out, name):
     if isinstance(out, tuple):
         return tuple(_materialize(item, name) for item in out)
     try:
-        return np.array(out, dtype=float)
+        return _float64(np.array(out), name)
     except _hiding.LibraryFunctionHidden as err:
         raise fail("", str(err)) from None
     except (TypeError, ValueError) as err:
         if isinstance(out, list):
             return [_materialize(item, name) for item in out]
         raise fail(name, f"the result is not a numeric array ({type(out).__name__})", str(err)) from None
+
+
+def _float64(arr, name):
+    """``arr`` as float64, or a failure if it is complex (not rounding noise) or single precision.
+
+    ``np.array(out, dtype=float)`` alone would drop imaginary parts (with a warning only) and
+    would hide that a float32 result kept 7 digits, which the checks then blame on the math.
+    """
+    if arr.dtype.kind in "fc" and np.finfo(arr.dtype).eps > np.finfo(float).eps:
+        raise fail(name, f"the result is {arr.dtype} (single precision): compute in float64",
+                   f"{arr.dtype} keeps about {np.finfo(arr.dtype).precision} digits; the checks compare "
+                   "to 1e-7 or better. Leave out dtype=np.float32 (numpy's default is float64).")
+    if arr.dtype.kind == "c":
+        imag, real = np.abs(arr.imag), np.abs(arr.real)
+        if np.max(imag, initial=0.0) > 1e-9 * max(1.0, float(np.max(real, initial=0.0))):
+            raise fail(name, "the result is complex: it has imaginary parts",
+                       f"the largest is {np.max(imag):.3g}; the result must be real (an expm, eig or "
+                       "sqrt of a negative number may have made it complex).")
+        arr = arr.real
+    return arr.astype(float)
 
 
 class _Student:
