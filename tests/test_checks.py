@@ -305,6 +305,37 @@ def test_jacobian_checks(capsys):
 # --------------------------------------------------------------------------- 04 mapping
 
 
+def _without_dpi(J_dpi):
+    """A Jacobian written with ``J_dpi(q)`` in place of ``dpi/dq(q)``: (pose, landmark) answers."""
+
+    def pose(Ks, cam_T_imu, mu, m):
+        s = A.se3_inv(mu) @ np.r_[m, 1.0]
+        return -Ks @ J_dpi(cam_T_imu @ s) @ cam_T_imu @ A.odot(s)
+
+    def landmark(Ks, cam_T_imu, world_T_imu, m):
+        imu_T_world = A.se3_inv(world_T_imu)
+        return Ks @ J_dpi(cam_T_imu @ imu_T_world @ np.r_[m, 1.0]) @ cam_T_imu @ imu_T_world[:, :3]
+
+    return pose, landmark
+
+
+@pytest.mark.parametrize("J_dpi", [lambda q: np.eye(4), lambda q: np.eye(4) / q[2]], ids=["identity", "1/q3"])
+def test_jacobians_without_the_projection_derivative_are_named(J_dpi):
+    pose, landmark = _without_dpi(J_dpi)
+    _fails(checks.check_pose_jacobian, pose, "the derivative of the projection dpi/dq is missing")
+    _fails(checks.check_landmark_jacobian, landmark, "the derivative of the projection dpi/dq is missing")
+
+
+def test_pose_jacobian_with_the_odot_sign_flipped_is_named():
+    def flipped(Ks, cam_T_imu, mu, m):
+        s = A.se3_inv(mu) @ np.r_[m, 1.0]
+        odot = A.odot(s)
+        odot[:3, 3:] *= -1
+        return -Ks @ A.projection_jacobian(cam_T_imu @ s) @ cam_T_imu @ odot
+
+    _fails(checks.check_pose_jacobian, flipped, "odot has the wrong sign of its hat block")
+
+
 def test_mapping_checks(capsys):
     _passes(checks.check_landmark_jacobian, A.landmark_jacobian, capsys)
     _passes(checks.check_init_landmark, A.init_landmark, capsys)

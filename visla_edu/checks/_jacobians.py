@@ -203,10 +203,20 @@ def _pose_jacobian_with(Ks, cam_T_imu, imu_T_world, m):
     return -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(s)
 
 
+_NO_DPI_HINT = ("the derivative of the projection dpi/dq is missing\nz = Ks pi(q) with pi(q) = q / q3, so the "
+                "chain rule puts dpi/dq(q) right after Ks (dividing by q3 alone is not its derivative)")
+
+
+def _no_dpi_variants(Ks, q, rest):
+    """``Ks D rest`` with ``D = I`` and ``D = I / q3`` in place of ``dpi/dq(q)``: (hint, callable) pairs."""
+    return [(_NO_DPI_HINT, lambda D=D: Ks @ D @ rest) for D in (np.eye(4), np.eye(4) / q[2])]
+
+
 def _pose_jacobian_variants(camera, mu, m, ref):
     imu_T_world = lie.se3_inv(mu)
     Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
-    q = cam_T_imu @ imu_T_world @ np.r_[m, 1.0]
+    s = imu_T_world @ np.r_[m, 1.0]
+    q = cam_T_imu @ s
     transposed = [lambda W=W: _pose_jacobian_with(Ks, cam_T_imu, W, m) for W in wrong_inverses(mu)]
     transposed.append(lambda: _pose_jacobian_with(Ks, rotation_transposed(cam_T_imu), imu_T_world, m))
     return [
@@ -220,7 +230,9 @@ def _pose_jacobian_variants(camera, mu, m, ref):
         ("odot acts on the IMU-frame point mu^-1 m, not on the world point m\nthe Jacobian is "
          "-Ks dpi/dq o_T_i (mu^-1 m)^odot",
          lambda: -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(np.r_[m, 1.0])),
-    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+        ("odot has the wrong sign of its hat block\ns^odot = [[I, -hat(s)], [0, 0]] for s = mu^-1 m",
+         lambda: -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ (lie.odot(s) * np.r_[1.0, 1, 1, -1, -1, -1])),
+    ] + _no_dpi_variants(-Ks, q, cam_T_imu @ lie.odot(s)) + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
 @exercise_check
@@ -231,8 +243,9 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
     in view at 2 to 60 m (hidden: up to 200 m); compares with
     :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``, ``atol=1e-8``), i.e.
     ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``. Recognises a missing minus sign, the columns
-    ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point, and
-    transposed rotations. Hides ``StereoCamera.jacobian_pose`` and
+    ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point or with the
+    wrong sign of its hat block, ``dpi/dq`` left out (or replaced by ``1/q3``), and transposed
+    rotations. Hides ``StereoCamera.jacobian_pose`` and
     ``StereoCamera.predict_with_jacobians``.
 
     Parameters
@@ -290,7 +303,7 @@ def _landmark_jacobian_variants(camera, T, m, ref):
         ("Ks is missing: z = Ks pi(q), so the Jacobian starts with Ks dpi/dq",
          lambda: cam.projection_jacobian(q) @ cam_T_imu @ imu_T_world[:, :3]),
         ("the sign is flipped: the landmark enters with a plus sign", lambda: -ref),
-    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+    ] + _no_dpi_variants(Ks, q, cam_T_imu @ imu_T_world[:, :3]) + [(TRANSPOSED_R_HINT, v) for v in transposed]
 
 
 @exercise_check
@@ -301,7 +314,8 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     in view at 2 to 60 m (hidden: up to 200 m); a 4x4 result fails at once. Compares with
     :meth:`visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``, ``atol=1e-9``),
     i.e. ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``. Recognises ``world_T_imu`` without its
-    inverse, a missing ``Ks``, a flipped sign and transposed rotations. Hides
+    inverse, a missing ``Ks``, a flipped sign, ``dpi/dq`` left out (or replaced by ``1/q3``) and
+    transposed rotations. Hides
     ``StereoCamera.jacobian_landmark`` and ``StereoCamera.predict_with_jacobians``.
 
     Parameters
