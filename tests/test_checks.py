@@ -381,6 +381,17 @@ def test_pose_checks(capsys):
     _fails(checks.check_pose_update, _pose_update_twist_swapped, "twist order")
 
 
+@pytest.mark.parametrize("noise", [lambda r: 4.0, lambda r: r ** 2, np.sqrt], ids=["fixed 4", "squared", "root"])
+@pytest.mark.parametrize("hidden", [False, True], ids=["visible", "hidden"])
+def test_pose_update_must_use_its_noise_variance(noise, hidden):
+    """The cases change noise_var: an update with a fixed 4 px^2 (the old cases' value) fails, named."""
+    def answer(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var):
+        return A.pose_update(mu, Sigma, z, p_world, Ks, cam_T_imu, noise(noise_var))
+
+    with pytest.raises(AssertionError, match="the pixel noise is not the argument noise_var"):
+        checks.check_pose_update(answer, hidden=hidden)
+
+
 def test_curly_hat_success_line_claims_only_the_comparison(capsys):
     checks.check_curly_hat(A.curly_hat)
     out = capsys.readouterr().out

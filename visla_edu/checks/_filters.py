@@ -137,6 +137,13 @@ def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_wor
     return mu_new, (np.eye(_POSE_DIM) - gain @ H) @ Sigma
 
 
+#: ``noise_var`` of the pose-update cases: a function that ignores its argument fails.
+_POSE_NOISE_VARS = (4.0, 1.0, 9.0, 2.25, 0.25)
+
+_NOISE_HINT = ("the pixel noise is not the argument noise_var\nS = H Sigma H^T + noise_var I: noise_var is "
+               "already a variance (do not square it or take its root), and it changes from call to call")
+
+
 def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
     args = (mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, noise_var)
     transposed = [lambda W=W: _pose_update_with(*args, imu_T_world=W)[0] for W in wrong_inverses(mu)]
@@ -153,7 +160,9 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
         ("the pose did not move", lambda: mu),
         ("wrong twist order: the correction K r is [v; w] (linear first), as se3_exp expects",
          lambda: _pose_update_with(*args, swap=True)[0]),
-    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+    ] + [(_NOISE_HINT, lambda r=r: _pose_update_with(*args[:-1], r)[0])
+         for r in (noise_var ** 2, np.sqrt(noise_var), 4.0) if r != noise_var
+         ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
 @exercise_check
@@ -162,12 +171,14 @@ def check_pose_update(pose_update, hidden=False):
 
     With the simulator's rig, 3 cases (hidden: 5, the first with a single observation): 8
     landmarks in view at 4 to 40 m observed with 1 px noise, a random pose covariance and a
-    mean drawn from it around the true pose; ``noise_var = 4``. Compares with the EKF update
+    mean drawn from it around the true pose; ``noise_var`` 4, 1 and 9 (hidden: then 2.25 and
+    0.25), so a function that ignores it fails. Compares with the EKF update
     written out in the checks (``H`` stacked over the observations,
     ``K = Sigma H^T (H Sigma H^T + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``;
     mean ``rtol=1e-6``, ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the
     correction applied on the left, its sign, a pose that does not move, the twist order,
-    transposed rotations, a result that is not a pose and a covariance that does not change.
+    transposed rotations, a noise variance other than ``noise_var`` (squared, its square root or
+    a fixed 4), a result that is not a pose and a covariance that does not change.
     Hides ``ekf.pose_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
     ``kalman.update``.
 
@@ -199,7 +210,7 @@ def check_pose_update(pose_update, hidden=False):
     imu_T_cam = camera.imu_T_cam
     call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update,
                                                          kalman.update])
-    for trial in range(5 if hidden else 3):
+    for trial, noise_var in enumerate(_POSE_NOISE_VARS[:5 if hidden else 3]):
         k = 1 if hidden and trial == 0 else 8
         T_true = random_pose(generator)
         p_world = points_in_view(generator, T_true, imu_T_cam, k, depth=(4.0, 40.0))
@@ -207,10 +218,12 @@ def check_pose_update(pose_update, hidden=False):
         A = generator.normal(size=(6, 6)) * 0.05
         Sigma = A @ A.T + 1e-3 * np.eye(6)
         mu = T_true @ lie.se3_exp(generator.multivariate_normal(np.zeros(6), Sigma))
-        out = _pair(call(mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, 4.0), name, "(mu_new, Sigma_new)")
-        mu_ref, S_ref = _pose_update_with(mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, 4.0)
-        compare(name, as_array(out[0], name, (4, 4), "pose"), mu_ref, f"(pose mean, {k} observations)",
-                _pose_mean_variants(mu, Sigma, z, p_world, camera, 4.0), rtol=1e-6, atol=1e-7,
+        args = (mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, noise_var)
+        out = _pair(call(*args), name, "(mu_new, Sigma_new)")
+        mu_ref, S_ref = _pose_update_with(*args)
+        compare(name, as_array(out[0], name, (4, 4), "pose"), mu_ref,
+                f"(pose mean, {k} observations, noise_var = {noise_var})",
+                _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var), rtol=1e-6, atol=1e-7,
                 extra=not_se3)
         compare(name, as_array(out[1], name, (6, 6), "covariance"), S_ref, "(covariance)", [
             ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
