@@ -224,7 +224,8 @@ def test_numpy_replaced_by_notebook_code_fails_the_check(monkeypatch):
     assert _first_line(err) == "numpy.allclose was replaced by code from this notebook"
     monkeypatch.undo()
     monkeypatch.setattr(np.linalg, "solve", lambda a, b: b)
-    assert _first_line(_failure(checks.check_nees, A.nees)) == "numpy.linalg.solve was replaced by code from this notebook"
+    err = _failure(checks.check_nees, A.nees)
+    assert _first_line(err) == "numpy.linalg.solve was replaced by code from this notebook"
 
 
 def test_replaced_builtin_fails_the_check(monkeypatch):
@@ -330,6 +331,34 @@ def test_checks_with_fixed_cases_draw_more_hidden_cases_from_the_teachers_seed(c
     with pytest.raises(AssertionError):  # ...not the teacher's
         check(memorised, hidden=True)
     check(answer, hidden=True)
+
+
+def _rig_answers():
+    """Answers that take the calibration from the notebooks' rig (``rig = ds.camera``), not their arguments."""
+    rig = cam.StereoCamera(*default_rig())
+    return {
+        "check_project": lambda Ks, o, T, p: A.project(rig.Ks, rig.cam_T_imu, T, p),
+        "check_pose_jacobian": lambda Ks, o, mu, m: A.pose_jacobian(rig.Ks, rig.cam_T_imu, mu, m),
+        "check_landmark_jacobian": lambda Ks, o, T, m: A.landmark_jacobian(rig.Ks, rig.cam_T_imu, T, m),
+        "check_init_landmark": lambda z, K, b, i_T_c, T: A.init_landmark(z, rig.K, rig.b, rig.imu_T_cam, T),
+        "check_landmark_update": lambda m, S, z, T, Ks, o, r: A.landmark_update(
+            m, S, z, T, rig.Ks, rig.cam_T_imu, r),
+        "check_pose_update": lambda mu, S, z, p, Ks, o, r: A.pose_update(mu, S, z, p, rig.Ks, rig.cam_T_imu, r),
+        "check_capstone_landmarks": lambda parts, T, S, z, K, b, i_T_c, C: A.capstone_landmarks(
+            parts, T, S, z, rig.K, rig.b, rig.imu_T_cam, C),
+        "check_capstone_slam": lambda parts, T, S, p, slots, z, Ks, o, r: A.capstone_slam(
+            parts, T, S, p, slots, z, rig.Ks, rig.cam_T_imu, r),
+    }
+
+
+@pytest.mark.parametrize("name", list(_rig_answers()))
+def test_the_hidden_cases_use_another_rig(name, capsys):
+    """The visible cases use the notebooks' simulated rig; an answer that ignores its calibration fails hidden."""
+    check, answer = getattr(checks, name), _rig_answers()[name]
+    check(answer)  # the notebook's rig is the visible cases' rig...
+    err = _failure(check, answer, hidden=True)  # ...not the hidden cases'
+    if "capstone" not in name:
+        assert "the notebook's rig was used, not the calibration arguments" in _first_line(err)
 
 
 def test_hidden_seed_comes_from_the_environment(monkeypatch, capsys):

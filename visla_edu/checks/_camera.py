@@ -5,8 +5,8 @@ import numpy as np
 from visla_edu import camera as cam
 from visla_edu import ekf, lie
 from visla_edu.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, project_with, random_pose, rig,
-                                      rotation_transposed, stereo_camera, wrong_inverses)
+from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, project_with,
+                                      random_pose, rig, rotation_transposed, stereo_camera, wrong_inverses)
 
 __all__ = ["check_stereo_matrix", "check_project", "check_triangulate", "check_init_landmark"]
 
@@ -90,12 +90,13 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
 def check_project(project, hidden=False):
     """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``.
 
-    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), 12
-    points in view at depths of 2 to 60 m (up to 300 m at the fourth pose; hidden: a single
-    point at the second); compares with :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``,
-    ``atol=1e-6`` px). Recognises ``world_T_imu`` used without its inverse, ``imu_T_cam`` for
-    ``cam_T_imu``, a division by ``q4`` and a transposed rotation. Hides
-    ``StereoCamera.predict``, ``predict_with_jacobians`` and ``points_in_camera``.
+    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
+    (hidden: 5), 12 points in view at depths of 2 to 60 m (up to 300 m at the fourth pose;
+    hidden: a single point at the second); compares with
+    :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``, ``atol=1e-6`` px). Recognises
+    ``world_T_imu`` used without its inverse, ``imu_T_cam`` for ``cam_T_imu``, a division by
+    ``q4`` and a transposed rotation. Hides ``StereoCamera.predict``, ``predict_with_jacobians``
+    and ``points_in_camera``.
 
     Parameters
     ----------
@@ -119,7 +120,7 @@ def check_project(project, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "project"
-    generator, camera = rng(hidden), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(project, name, hide=[cam.StereoCamera.predict, cam.StereoCamera.predict_with_jacobians,
                                         cam.StereoCamera.points_in_camera])
@@ -130,7 +131,8 @@ def check_project(project, hidden=False):
         p_world = points_in_view(generator, world_T_imu, imu_T_cam, M, depth=(2.0, 300.0 if far else 60.0))
         got = as_array(call(camera.Ks, camera.cam_T_imu, world_T_imu, p_world), name, (M, 4))
         compare(name, got, camera.predict(world_T_imu, p_world), f"for a random pose and {M} points in view",
-                _project_variants(camera.Ks, camera.cam_T_imu, imu_T_cam, world_T_imu, p_world),
+                _project_variants(camera.Ks, camera.cam_T_imu, imu_T_cam, world_T_imu, p_world)
+                + notebook_rig_variant(hidden, lambda: stereo_camera().predict(world_T_imu, p_world)),
                 rtol=1e-7, atol=1e-6)
     ok(f"{name}: pixels agree with StereoCamera.predict at 4 poses, points from 2 m to 300 m", hidden)
 
@@ -207,10 +209,10 @@ def _init_variants(p_cam, imu_T_cam, T):
 def check_init_landmark(init_landmark, hidden=False):
     """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point.
 
-    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), one
-    landmark in view at 2 to 60 m (hidden: up to 200 m) observed without noise; compares with
-    the true landmark (``rtol=atol=1e-6``). Recognises a point left in the camera or IMU frame,
-    ``cam_T_imu`` or ``inv(world_T_imu)`` used, and a transposed rotation. Hides
+    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
+    (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m) observed without noise;
+    compares with the true landmark (``rtol=atol=1e-6``). Recognises a point left in the camera
+    or IMU frame, ``cam_T_imu`` or ``inv(world_T_imu)`` used, and a transposed rotation. Hides
     ``StereoCamera.triangulate`` and ``ekf.initialize_landmarks``.
 
     Parameters
@@ -235,7 +237,7 @@ def check_init_landmark(init_landmark, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "init_landmark"
-    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(), stereo_camera()
+    generator, (K, b, imu_T_cam), camera = rng(hidden), rig(hidden), stereo_camera(hidden)
     call = student(init_landmark, name, hide=[cam.StereoCamera.triangulate, ekf.initialize_landmarks])
     for trial in range(6 if hidden else 4):
         T = np.eye(4) if trial == 0 else random_pose(generator)
@@ -243,5 +245,7 @@ def check_init_landmark(init_landmark, hidden=False):
         z = camera.predict(T, m[None])[0]
         got = as_array(call(z, K, b, imu_T_cam, T), name, (3,))
         p_cam = cam.triangulate_disparity(z, K, b)
-        compare(name, got, m, f"for z = {fmt(z)}", _init_variants(p_cam, imu_T_cam, T), rtol=1e-6, atol=1e-6)
+        compare(name, got, m, f"for z = {fmt(z)}", _init_variants(p_cam, imu_T_cam, T) + notebook_rig_variant(
+            hidden, lambda: (T @ rig()[2] @ np.r_[cam.triangulate_disparity(z, *rig()[:2]), 1.0])[:3]),
+            rtol=1e-6, atol=1e-6)
     ok(f"{name}: triangulated points land on the true landmarks in the world frame", hidden)

@@ -234,8 +234,8 @@ def check_capstone_predict(predict, hidden=False):
 
 
 # ---------------------------------------------------------------- exercise 2: add_landmarks
-def _landmark_case(generator, n, k):
-    c = stereo_camera()
+def _landmark_case(generator, n, k, hidden=False):
+    c = stereo_camera(hidden)
     T = random_pose(generator)
     m = points_in_view(generator, T, c.imu_T_cam, k, depth=(4.0, 30.0))
     z = c.predict(T, m) + generator.normal(scale=0.5, size=(k, 4))
@@ -277,17 +277,17 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
     """Exercise 09.2: ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
     -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``.
 
-    With the simulator's rig, for 3 states (``n`` landmarks in the state, ``k`` new ones):
-    (0, 2), (3, 1) and (2, 3) (hidden: (0, 1), (4, 3) and (1, 2)), the new observations with
-    0.5 px noise. The result must be a tuple; the means must be ``parts.init_landmark`` of
-    each observation and the covariance ``Sigma`` augmented with the new block
-    ``G Sigma_pp G^T + C_pixels`` (one (3k, 3k) block) and the cross-covariance ``G Sigma_px``,
-    where ``G = (world_T_imu @ parts.odot(s))[:3]`` for the new point ``s`` in the IMU frame
-    (``rtol=1e-8``; ``atol=1e-8`` for the means, 1e-12 for the covariance). Recognises the
-    means not triangulated at ``world_T_imu``, a missing cross-covariance, independent new
-    landmarks, the left perturbation's or an unrotated ``G``, and a missing pixel or pose
-    part. The function must call ``parts.init_landmark`` and ``parts.odot``. No loop is run.
-    Hides ``ekf.initialize_landmarks`` and the reference's helpers.
+    With the simulator's rig (hidden: another one), for 3 states (``n`` landmarks in the state,
+    ``k`` new ones): (0, 2), (3, 1) and (2, 3) (hidden: (0, 1), (4, 3) and (1, 2)), the new
+    observations with 0.5 px noise. The result must be a tuple; the means must be
+    ``parts.init_landmark`` of each observation and the covariance ``Sigma`` augmented with the
+    new block ``G Sigma_pp G^T + C_pixels`` (one (3k, 3k) block) and the cross-covariance ``G
+    Sigma_px``, where ``G = (world_T_imu @ parts.odot(s))[:3]`` for the new point ``s`` in the
+    IMU frame (``rtol=1e-8``; ``atol=1e-8`` for the means, 1e-12 for the covariance). Recognises
+    the means not triangulated at ``world_T_imu``, a missing cross-covariance, independent new
+    landmarks, the left perturbation's or an unrotated ``G``, and a missing pixel or pose part.
+    The function must call ``parts.init_landmark`` and ``parts.odot``. No loop is run. Hides
+    ``ekf.initialize_landmarks`` and the reference's helpers.
 
     Parameters
     ----------
@@ -317,7 +317,7 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
     call = student(add_landmarks, name, hide=[ekf.initialize_landmarks, _reference_add_landmarks,
                                                _sensitivities, _augmented])
     for n, k in ([(0, 1), (4, 3), (1, 2)] if hidden else [(0, 2), (3, 1), (2, 3)]):
-        c, T, Sigma, z, C_pixels = _landmark_case(generator, n, k)
+        c, T, Sigma, z, C_pixels = _landmark_case(generator, n, k, hidden)
         out = call(spy.parts, T, Sigma, z, c.K, c.b, c.imu_T_cam, C_pixels)
         if not isinstance(out, tuple) or len(out) != 2:
             raise fail(name, "must return a tuple (p_new, Sigma)")
@@ -335,8 +335,8 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
 
 
 # ---------------------------------------------------------------- exercise 3: slam_update
-def _slam_case(generator, n, observed):
-    c = stereo_camera()
+def _slam_case(generator, n, observed, hidden=False):
+    c = stereo_camera(hidden)
     T_true = random_pose(generator)
     m_true = points_in_view(generator, T_true, c.imu_T_cam, n, depth=(4.0, 30.0))
     Sigma = random_covariance(generator, 6 + 3 * n) * 0.01
@@ -359,20 +359,20 @@ def check_capstone_slam(slam_update, hidden=False):
 
     Then the joint SLAM loop with it, against the library's ``slam_error="right"`` filter.
 
-    With the simulator's rig, for states of 4 landmarks with 2 observed and 6 with all 6
-    observed (hidden: 2 of 5, 1 of 1 and 5 of 8), ``noise_var = 4``. The result must be a tuple
-    of three; compared with the joint EKF update through ``parts`` (``H`` from
+    With the simulator's rig (hidden: another one), for states of 4 landmarks with 2 observed
+    and 6 with all 6 observed (hidden: 2 of 5, 1 of 1 and 5 of 8), ``noise_var = 4``. The result
+    must be a tuple of three; compared with the joint EKF update through ``parts`` (``H`` from
     ``parts.slam_jacobian``, ``K = Sigma H^T S^-1``, the pose corrected on the right by
     ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - K H) Sigma``
     symmetrised): pose ``rtol=1e-7``, ``atol=1e-8``; covariance ``rtol=1e-6``, ``atol=1e-10``;
     landmarks ``rtol=1e-7``, ``atol=1e-8``. Recognises the correction on the left, its sign, a
-    covariance that does not change, and the landmarks left in place. The function must
-    call ``parts.project``, ``parts.pose_jacobian``, ``parts.landmark_jacobian``,
-    ``parts.slam_jacobian`` and ``parts.se3_exp``. Then
-    :func:`visla_edu.capstone.run_capstone` (joint SLAM) on the drive of
-    :func:`check_capstone_predict` must stay within :data:`LOOP_TOLERANCE` of
-    ``run.run_filter(ds, "slam", config)`` with ``slam_error="right"``. Hides the library's
-    joint and pose updates, the camera's Jacobians and the reference's update.
+    covariance that does not change, and the landmarks left in place. The function must call
+    ``parts.project``, ``parts.pose_jacobian``, ``parts.landmark_jacobian``,
+    ``parts.slam_jacobian`` and ``parts.se3_exp``. Then :func:`visla_edu.capstone.run_capstone`
+    (joint SLAM) on the drive of :func:`check_capstone_predict` must stay within
+    :data:`LOOP_TOLERANCE` of ``run.run_filter(ds, "slam", config)`` with
+    ``slam_error="right"``. Hides the library's joint and pose updates, the camera's Jacobians
+    and the reference's update.
 
     Parameters
     ----------
@@ -402,7 +402,7 @@ def check_capstone_slam(slam_update, hidden=False):
     call = student(slam_update, name, hide=_SLAM_HIDDEN)
     library = capstone.library_parts()
     for n, k in ([(5, 2), (1, 1), (8, 5)] if hidden else [(4, 2), (6, 6)]):
-        c, T, Sigma, p_active, slots, z = _slam_case(generator, n, k)
+        c, T, Sigma, p_active, slots, z = _slam_case(generator, n, k, hidden)
         args = (T, Sigma, p_active, slots, z, c.Ks, c.cam_T_imu, 4.0)
         out = call(spy.parts, *args)
         if not isinstance(out, tuple) or len(out) != 3:

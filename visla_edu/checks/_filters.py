@@ -5,8 +5,9 @@ import numpy as np
 from visla_edu import camera as cam
 from visla_edu import ekf, kalman, lie
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, points_in_view, random_covariance, random_pose,
-                                      rotation_transposed, stereo_camera, wrong_inverses)
+from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, notebook_rig_variant, points_in_view,
+                                      random_covariance, random_pose, rotation_transposed, stereo_camera,
+                                      wrong_inverses)
 
 __all__ = [
     "check_landmark_update",
@@ -70,13 +71,14 @@ def _pair(out, name, what):
 def check_landmark_update(landmark_update, hidden=False):
     """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``.
 
-    With the simulator's rig, 4 cases (hidden: 6): a random pose, a landmark at 4 to 40 m
-    observed with 2 px noise per coordinate, a prior mean 1 m off (normal) and a random prior
-    covariance; ``noise_var = 4`` (hidden: 1). Compares with :func:`visla_edu.ekf.landmark_update`
-    (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``, ``atol=1e-8``). Recognises a flipped
-    innovation, a mean or covariance that does not change, ``(I + K H) Sigma``, the pixel noise
-    missing from ``S`` and transposed rotations. Hides ``ekf.landmark_update``,
-    ``ekf.joint_update``, ``ekf.cholesky_update`` and ``kalman.update``.
+    With the simulator's rig (hidden: another one), 4 cases (hidden: 6): a random pose, a
+    landmark at 4 to 40 m observed with 2 px noise per coordinate, a prior mean 1 m off (normal)
+    and a random prior covariance; ``noise_var = 4`` (hidden: 1). Compares with
+    :func:`visla_edu.ekf.landmark_update` (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``,
+    ``atol=1e-8``). Recognises a flipped innovation, a mean or covariance that does not change,
+    ``(I + K H) Sigma``, the pixel noise missing from ``S`` and transposed rotations. Hides
+    ``ekf.landmark_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
+    ``kalman.update``.
 
     Parameters
     ----------
@@ -101,7 +103,7 @@ def check_landmark_update(landmark_update, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "landmark_update"
-    generator, camera = rng(hidden), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(landmark_update, name, hide=[ekf.landmark_update, ekf.joint_update, ekf.cholesky_update,
                                                                  kalman.update])
@@ -116,7 +118,9 @@ def check_landmark_update(landmark_update, hidden=False):
         out = _pair(call(m, Sigma, z, T, camera.Ks, camera.cam_T_imu, noise_var), name, "(m_new, Sigma_new)")
         m_ref, S_ref = _landmark_update_reference(m, Sigma, z, T, camera, noise_var)
         compare(name, as_array(out[0], name, (3,), "mean"), m_ref, "(mean)",
-                _landmark_mean_variants(m, Sigma, z, T, camera, noise_var), rtol=1e-6, atol=1e-6)
+                _landmark_mean_variants(m, Sigma, z, T, camera, noise_var) + notebook_rig_variant(
+                    hidden, lambda: _landmark_update_reference(m, Sigma, z, T, stereo_camera(), noise_var)[0]),
+                rtol=1e-6, atol=1e-6)
         compare(name, as_array(out[1], name, (3, 3), "covariance"), S_ref, "(covariance)",
                 _landmark_covariance_variants(m, Sigma, T, camera, noise_var), rtol=1e-6, atol=1e-8)
     ok(f"{name}: mean and covariance agree with ekf.landmark_update", hidden)
@@ -169,18 +173,17 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
 def check_pose_update(pose_update, hidden=False):
     """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``.
 
-    With the simulator's rig, 3 cases (hidden: 5, the first with a single observation): 8
-    landmarks in view at 4 to 40 m observed with 1 px noise, a random pose covariance and a
-    mean drawn from it around the true pose; ``noise_var`` 4, 1 and 9 (hidden: then 2.25 and
-    0.25), so a function that ignores it fails. Compares with the EKF update
-    written out in the checks (``H`` stacked over the observations,
-    ``K = Sigma H^T (H Sigma H^T + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``;
-    mean ``rtol=1e-6``, ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the
-    correction applied on the left, its sign, a pose that does not move, the twist order,
-    transposed rotations, a noise variance other than ``noise_var`` (squared, its square root or
-    a fixed 4), a result that is not a pose and a covariance that does not change.
-    Hides ``ekf.pose_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
-    ``kalman.update``.
+    With the simulator's rig (hidden: another one), 3 cases (hidden: 5, the first with a single
+    observation): 8 landmarks in view at 4 to 40 m observed with 1 px noise, a random pose
+    covariance and a mean drawn from it around the true pose; ``noise_var`` 4, 1 and 9 (hidden:
+    then 2.25 and 0.25), so a function that ignores it fails. Compares with the EKF update
+    written out in the checks (``H`` stacked over the observations, ``K = Sigma H^T (H Sigma H^T
+    + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``; mean ``rtol=1e-6``,
+    ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the correction applied
+    on the left, its sign, a pose that does not move, the twist order, transposed rotations, a
+    noise variance other than ``noise_var`` (squared, its square root or a fixed 4), a result
+    that is not a pose and a covariance that does not change. Hides ``ekf.pose_update``,
+    ``ekf.joint_update``, ``ekf.cholesky_update`` and ``kalman.update``.
 
     Parameters
     ----------
@@ -206,7 +209,7 @@ def check_pose_update(pose_update, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "pose_update"
-    generator, camera = rng(hidden), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update,
                                                          kalman.update])
@@ -223,8 +226,9 @@ def check_pose_update(pose_update, hidden=False):
         mu_ref, S_ref = _pose_update_with(*args)
         compare(name, as_array(out[0], name, (4, 4), "pose"), mu_ref,
                 f"(pose mean, {k} observations, noise_var = {noise_var})",
-                _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var), rtol=1e-6, atol=1e-7,
-                extra=not_se3)
+                _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var) + notebook_rig_variant(
+                    hidden, lambda c=stereo_camera(): _pose_update_with(*args[:4], c.Ks, c.cam_T_imu, noise_var)[0]),
+                rtol=1e-6, atol=1e-7, extra=not_se3)
         compare(name, as_array(out[1], name, (6, 6), "covariance"), S_ref, "(covariance)", [
             ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
         ], rtol=1e-6, atol=1e-10)

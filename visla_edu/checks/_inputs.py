@@ -14,6 +14,7 @@ __all__ = [
     "random_pose",
     "rig",
     "stereo_camera",
+    "notebook_rig_variant",
     "points_in_view",
     "random_covariance",
     "swap_twist",
@@ -115,10 +116,18 @@ def random_pose(rng, scale=10.0):
     return lie.se3_exp(u)
 
 
-def rig():
-    """A KITTI-like stereo rig (the simulator's): K, b, imu_T_cam.
+def rig(hidden=False):
+    """A KITTI-like stereo rig: the simulator's, or another one for the hidden cases.
 
-    What :func:`visla_edu.simulate.default_rig` returns.
+    The visible cases use what :func:`visla_edu.simulate.default_rig` returns, the rig of the
+    notebooks' simulated drives. The hidden cases use KITTI odometry's focal lengths (``fsv``
+    slightly off ``fsu``) and baseline and a camera mounted elsewhere, so a function that
+    takes the notebook's rig (``rig.Ks``, ``rig.cam_T_imu``) instead of its arguments fails.
+
+    Parameters
+    ----------
+    hidden : bool
+        Return the hidden cases' rig.
 
     Returns
     -------
@@ -131,18 +140,54 @@ def rig():
     """
     from visla_edu.simulate import default_rig
 
-    return default_rig()
+    K, b, imu_T_cam = default_rig()
+    if not hidden:
+        return K, b, imu_T_cam
+    moved = np.eye(4)
+    moved[:3, :3] = imu_T_cam[:3, :3] @ lie.so3_exp(np.array([0.03, -0.05, 0.04]))
+    moved[:3, 3] = [0.8, -0.3, 1.2]
+    return np.array([[721.5, 0.0, 609.6], [0.0, 716.0, 172.9], [0.0, 0.0, 1.0]]), 0.54, moved
 
 
-def stereo_camera():
+def stereo_camera(hidden=False):
     """The :class:`~visla_edu.camera.StereoCamera` of :func:`rig`.
+
+    Parameters
+    ----------
+    hidden : bool
+        The hidden cases' camera.
 
     Returns
     -------
     visla_edu.camera.StereoCamera
         A new camera object, ``StereoCamera(K, b, imu_T_cam)``.
     """
-    return cam.StereoCamera(*rig())
+    return cam.StereoCamera(*rig(hidden))
+
+
+#: The hint of a function that used the notebook's rig instead of its calibration arguments.
+NOTEBOOK_RIG_HINT = (
+    "the notebook's rig was used, not the calibration arguments\n"
+    "the hidden cases pass another camera: compute with the arguments (Ks, cam_T_imu or K, b, imu_T_cam), "
+    "not with rig.Ks, rig.cam_T_imu or other variables of the notebook")
+
+
+def notebook_rig_variant(hidden, variant):
+    """The mistake "used the notebook's rig" as a list of variants for :func:`~visla_edu.checks._core.compare`.
+
+    Parameters
+    ----------
+    hidden : bool
+        Only the hidden cases' rig differs from the notebook's (:func:`rig`).
+    variant : callable
+        The output computed with the visible rig, ``stereo_camera()``, on the case's inputs.
+
+    Returns
+    -------
+    list of (str, callable)
+        ``[(NOTEBOOK_RIG_HINT, variant)]`` if ``hidden``, else empty.
+    """
+    return [(NOTEBOOK_RIG_HINT, variant)] if hidden else []
 
 
 def points_in_view(rng, world_T_imu, imu_T_cam, n, depth=(2.0, 60.0)):

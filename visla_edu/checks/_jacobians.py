@@ -5,8 +5,8 @@ import numpy as np
 from visla_edu import camera as cam
 from visla_edu import lie, numdiff
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, points_in_view, random_pose, rotation_transposed,
-                                      stereo_camera, wrong_inverses)
+from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, random_pose,
+                                      rotation_transposed, stereo_camera, wrong_inverses)
 
 __all__ = [
     "reference_numerical_jacobian",
@@ -239,14 +239,13 @@ def _pose_jacobian_variants(camera, mu, m, ref):
 def check_pose_jacobian(pose_jacobian, hidden=False):
     """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``.
 
-    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), one landmark
-    in view at 2 to 60 m (hidden: up to 200 m); compares with
+    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
+    (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m); compares with
     :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``, ``atol=1e-8``), i.e.
     ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``. Recognises a missing minus sign, the columns
     ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point or with the
     wrong sign of its hat block, ``dpi/dq`` left out (or replaced by ``1/q3``), and transposed
-    rotations. Hides ``StereoCamera.jacobian_pose`` and
-    ``StereoCamera.predict_with_jacobians``.
+    rotations. Hides ``StereoCamera.jacobian_pose`` and ``StereoCamera.predict_with_jacobians``.
 
     Parameters
     ----------
@@ -271,7 +270,7 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "pose_jacobian"
-    generator, camera = rng(hidden), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(pose_jacobian, name, hide=[cam.StereoCamera.jacobian_pose,
                                               cam.StereoCamera.predict_with_jacobians])
@@ -280,7 +279,8 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
         m = points_in_view(generator, mu, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
         got = as_array(call(camera.Ks, camera.cam_T_imu, mu, m), name, (4, 6))
         ref = camera.jacobian_pose(mu, m[None])[0]
-        compare(name, got, ref, f"for a random pose and m = {fmt(m)}", _pose_jacobian_variants(camera, mu, m, ref),
+        compare(name, got, ref, f"for a random pose and m = {fmt(m)}", _pose_jacobian_variants(camera, mu, m, ref)
+                + notebook_rig_variant(hidden, lambda: stereo_camera().jacobian_pose(mu, m[None])[0]),
                 rtol=1e-6, atol=1e-8)
     ok(f"{name}: agrees with the library (and so with finite differences of mu exp(delta^))", hidden)
 
@@ -310,13 +310,13 @@ def _landmark_jacobian_variants(camera, T, m, ref):
 def check_landmark_jacobian(landmark_jacobian, hidden=False):
     """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``.
 
-    With the simulator's rig, at the identity and at 3 random poses (hidden: 5), one landmark
-    in view at 2 to 60 m (hidden: up to 200 m); a 4x4 result fails at once. Compares with
-    :meth:`visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``, ``atol=1e-9``),
-    i.e. ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``. Recognises ``world_T_imu`` without its
-    inverse, a missing ``Ks``, a flipped sign, ``dpi/dq`` left out (or replaced by ``1/q3``) and
-    transposed rotations. Hides
-    ``StereoCamera.jacobian_landmark`` and ``StereoCamera.predict_with_jacobians``.
+    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
+    (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m); a 4x4 result fails at
+    once. Compares with :meth:`visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``,
+    ``atol=1e-9``), i.e. ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``. Recognises
+    ``world_T_imu`` without its inverse, a missing ``Ks``, a flipped sign, ``dpi/dq`` left out
+    (or replaced by ``1/q3``) and transposed rotations. Hides ``StereoCamera.jacobian_landmark``
+    and ``StereoCamera.predict_with_jacobians``.
 
     Parameters
     ----------
@@ -340,7 +340,7 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "landmark_jacobian"
-    generator, camera = rng(hidden), stereo_camera()
+    generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(landmark_jacobian, name, hide=[cam.StereoCamera.jacobian_landmark,
                                                   cam.StereoCamera.predict_with_jacobians])
@@ -353,6 +353,7 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
                        "the landmark has 3 coordinates (its homogeneous 1 is not a variable)")
         got = as_array(out, name, (4, 3))
         ref = camera.jacobian_landmark(T, m[None])[0]
-        compare(name, got, ref, f"for m = {fmt(m)}", _landmark_jacobian_variants(camera, T, m, ref),
+        compare(name, got, ref, f"for m = {fmt(m)}", _landmark_jacobian_variants(camera, T, m, ref)
+                + notebook_rig_variant(hidden, lambda: stereo_camera().jacobian_landmark(T, m[None])[0]),
                 rtol=1e-6, atol=1e-9)
     ok(f"{name}: agrees with the library at 4 poses", hidden)
