@@ -151,6 +151,10 @@ def _slam_jacobian(J_pose, J_landmark, slots, n_landmarks):
     return H.reshape(4 * k, -1)
 
 
+def _marginalize(Sigma, keep):
+    return Sigma[np.ix_(keep, keep)]
+
+
 def library_parts():
     """The library's versions of the notebooks' exercises, as :class:`Parts`.
 
@@ -166,7 +170,7 @@ def library_parts():
     return Parts(se3_exp=lie.se3_exp, pose_transition=motion.pose_transition, project=_project,
                  pose_jacobian=_pose_jacobian, landmark_jacobian=_landmark_jacobian,
                  init_landmark=_init_landmark, odot=lie.odot, pose_update=_pose_update,
-                 slam_jacobian=_slam_jacobian, marginalize=lambda Sigma, keep: Sigma[np.ix_(keep, keep)])
+                 slam_jacobian=_slam_jacobian, marginalize=_marginalize)
 
 
 # ---------------------------------------------------------------- the loop skeleton

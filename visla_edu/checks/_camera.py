@@ -3,7 +3,8 @@
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import ekf, lie
+from visla_edu import capstone, ekf, lie
+from visla_edu.smoother import _factors
 from visla_edu.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, project_with,
                                       random_pose, rig, rotation_transposed, stereo_camera, wrong_inverses)
@@ -96,7 +97,8 @@ def check_project(project, hidden=False):
     :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``, ``atol=1e-6`` px). Recognises
     ``world_T_imu`` used without its inverse, ``imu_T_cam`` for ``cam_T_imu``, a division by
     ``q4`` and a transposed rotation. Hides ``StereoCamera.predict``, ``predict_with_jacobians``
-    and ``points_in_camera``.
+    and ``points_in_camera``, and the same computation in ``capstone.library_parts()`` and
+    ``smoother.reprojection``.
 
     Parameters
     ----------
@@ -123,7 +125,7 @@ def check_project(project, hidden=False):
     generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(project, name, hide=[cam.StereoCamera.predict, cam.StereoCamera.predict_with_jacobians,
-                                        cam.StereoCamera.points_in_camera])
+                                        cam.StereoCamera.points_in_camera, capstone._project, _factors.reprojection])
     for trial in range(6 if hidden else 4):
         world_T_imu = np.eye(4) if trial == 0 else random_pose(generator)
         M = 1 if hidden and trial == 1 else 12
@@ -213,7 +215,8 @@ def check_init_landmark(init_landmark, hidden=False):
     (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m) observed without noise;
     compares with the true landmark (``rtol=atol=1e-6``). Recognises a point left in the camera
     or IMU frame, ``cam_T_imu`` or ``inv(world_T_imu)`` used, and a transposed rotation. Hides
-    ``StereoCamera.triangulate`` and ``ekf.initialize_landmarks``.
+    ``StereoCamera.triangulate``, ``ekf.initialize_landmarks`` and the ``init_landmark`` of
+    ``capstone.library_parts()``.
 
     Parameters
     ----------
@@ -238,7 +241,8 @@ def check_init_landmark(init_landmark, hidden=False):
     """
     name = "init_landmark"
     generator, (K, b, imu_T_cam), camera = rng(hidden), rig(hidden), stereo_camera(hidden)
-    call = student(init_landmark, name, hide=[cam.StereoCamera.triangulate, ekf.initialize_landmarks])
+    call = student(init_landmark, name, hide=[cam.StereoCamera.triangulate, ekf.initialize_landmarks,
+                                              capstone._init_landmark])
     for trial in range(6 if hidden else 4):
         T = np.eye(4) if trial == 0 else random_pose(generator)
         m = points_in_view(generator, T, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]

@@ -3,7 +3,7 @@
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import ekf, kalman, lie
+from visla_edu import capstone, ekf, kalman, lie
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, notebook_rig_variant, points_in_view,
                                       random_covariance, random_pose, rotation_transposed, stereo_camera,
@@ -183,7 +183,8 @@ def check_pose_update(pose_update, hidden=False):
     on the left, its sign, a pose that does not move, the twist order, transposed rotations, a
     noise variance other than ``noise_var`` (squared, its square root or a fixed 4), a result
     that is not a pose and a covariance that does not change. Hides ``ekf.pose_update``,
-    ``ekf.joint_update``, ``ekf.cholesky_update`` and ``kalman.update``.
+    ``ekf.joint_update``, ``ekf.cholesky_update``, ``kalman.update`` and the ``pose_update`` of
+    ``capstone.library_parts()``.
 
     Parameters
     ----------
@@ -212,7 +213,7 @@ def check_pose_update(pose_update, hidden=False):
     generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update,
-                                                         kalman.update])
+                                            kalman.update, capstone._pose_update])
     for trial, noise_var in enumerate(_POSE_NOISE_VARS[:5 if hidden else 3]):
         k = 1 if hidden and trial == 0 else 8
         T_true = random_pose(generator)
@@ -256,7 +257,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
     exactly the matrix with rows ``4 i .. 4 i + 3`` holding ``J_pose[i]`` in columns 0-5 and
     ``J_landmark[i]`` in columns ``6 + 3 slots[i] .. 6 + 3 slots[i] + 2``, zero elsewhere.
     Recognises the state ordered ``[landmarks; pose]`` and landmark columns without the
-    offset 6. Hides ``ekf.slot_columns``.
+    offset 6. Hides ``ekf.slot_columns`` and the ``slam_jacobian`` of ``capstone.library_parts()``.
 
     Parameters
     ----------
@@ -281,7 +282,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
     """
     name = "slam_jacobian"
     generator = rng(hidden)
-    call = student(slam_jacobian, name, hide=[ekf.slot_columns])
+    call = student(slam_jacobian, name, hide=[ekf.slot_columns, capstone._slam_jacobian])
     cases = [(5, [3, 0]), (9, [8, 2, 5, 6]), (1, [0])]
     if hidden:
         cases = [(12, [11, 0, 4]), (3, [2, 1, 0]), (20, [19])]
@@ -400,7 +401,8 @@ def check_marginalize(marginalize, hidden=False):
     For 3 random covariances and index sets (hidden: 4); compares with
     ``Sigma[np.ix_(keep, keep)]`` (default tolerances of
     :func:`~visla_edu.checks._core.compare`). Recognises the Schur complement (the conditional,
-    not the marginal) and a detour through the information matrix. Hides nothing.
+    not the marginal) and a detour through the information matrix. Hides the ``marginalize`` of
+    ``capstone.library_parts()``.
 
     Parameters
     ----------
@@ -425,7 +427,7 @@ def check_marginalize(marginalize, hidden=False):
     """
     name = "marginalize"
     generator = rng(hidden)
-    call = student(marginalize, name)
+    call = student(marginalize, name, hide=[capstone._marginalize])
     for D, keep in _marginal_cases(hidden):
         Sigma = random_covariance(generator, D)
         got = as_array(call(Sigma, keep), name, (len(keep), len(keep)))

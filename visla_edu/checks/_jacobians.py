@@ -3,7 +3,8 @@
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import lie, numdiff
+from visla_edu import capstone, lie, numdiff
+from visla_edu.smoother import _factors
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, random_pose,
                                       rotation_transposed, stereo_camera, wrong_inverses)
@@ -245,7 +246,8 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
     ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``. Recognises a missing minus sign, the columns
     ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point or with the
     wrong sign of its hat block, ``dpi/dq`` left out (or replaced by ``1/q3``), and transposed
-    rotations. Hides ``StereoCamera.jacobian_pose`` and ``StereoCamera.predict_with_jacobians``.
+    rotations. Hides ``StereoCamera.jacobian_pose`` and ``StereoCamera.predict_with_jacobians``,
+    and the same computation in ``capstone.library_parts()`` and ``smoother.reprojection``.
 
     Parameters
     ----------
@@ -272,8 +274,8 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
-    call = student(pose_jacobian, name, hide=[cam.StereoCamera.jacobian_pose,
-                                              cam.StereoCamera.predict_with_jacobians])
+    call = student(pose_jacobian, name, hide=[cam.StereoCamera.jacobian_pose, cam.StereoCamera.predict_with_jacobians,
+                                              capstone._pose_jacobian, _factors.reprojection])
     for trial in range(6 if hidden else 4):
         mu = np.eye(4) if trial == 0 else random_pose(generator)
         m = points_in_view(generator, mu, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
@@ -316,7 +318,8 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     ``atol=1e-9``), i.e. ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``. Recognises
     ``world_T_imu`` without its inverse, a missing ``Ks``, a flipped sign, ``dpi/dq`` left out
     (or replaced by ``1/q3``) and transposed rotations. Hides ``StereoCamera.jacobian_landmark``
-    and ``StereoCamera.predict_with_jacobians``.
+    and ``StereoCamera.predict_with_jacobians``, and the same computation in
+    ``capstone.library_parts()`` and ``smoother.reprojection``.
 
     Parameters
     ----------
@@ -343,7 +346,8 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(landmark_jacobian, name, hide=[cam.StereoCamera.jacobian_landmark,
-                                                  cam.StereoCamera.predict_with_jacobians])
+                                                  cam.StereoCamera.predict_with_jacobians,
+                                                  capstone._landmark_jacobian, _factors.reprojection])
     for trial in range(6 if hidden else 4):
         T = np.eye(4) if trial == 0 else random_pose(generator)
         m = points_in_view(generator, T, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
