@@ -143,6 +143,13 @@ def test_library_copies_of_an_exercise_are_hidden_too(index):
     assert _first_line(err).startswith("write your own") and hidden_name in str(err), str(err)
 
 
+def test_kalman_predict_cannot_take_its_covariance_from_the_pose_prediction():
+    """motion.predict_pose_covariance(P, F, Q) is F P F^T + Q for any size: the exercise's formula."""
+    err = _failure(checks.check_kalman_predict, lambda x, P, F, Q: (
+        np.asarray(F) @ np.asarray(x), motion.predict_pose_covariance(np.asarray(P), np.asarray(F), np.asarray(Q))))
+    assert _first_line(err).startswith("write your own kalman_predict") and "motion.predict_pose_covariance" in str(err)
+
+
 def test_reference_jacobian_bound_before_a_reload_is_still_hidden():
     reference = checks.reference_numerical_jacobian  # bound in an answer cell
     fresh = importlib.reload(visla_edu.checks)

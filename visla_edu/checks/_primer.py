@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from visla_edu import ekf, kalman
+from visla_edu import ekf, kalman, motion
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import random_covariance
 
@@ -121,7 +121,8 @@ def check_kalman_predict(kalman_predict, hidden=False):
     states (hidden: 1, 3 and 5), ``F`` not symmetric; compares mean and covariance with
     :func:`visla_edu.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Recognises a mean that
     does not move, ``F.T @ x``, a missing ``Q``, ``F.T P F``, a missing or untransposed right
-    factor, and ``F (P + Q) F^T``. Hides ``kalman.predict``.
+    factor, and ``F (P + Q) F^T``. Hides ``kalman.predict`` and ``motion.predict_pose_covariance``
+    (``F P F^T + W`` for any size).
 
     Parameters
     ----------
@@ -145,7 +146,7 @@ def check_kalman_predict(kalman_predict, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "kalman_predict"
-    call = student(kalman_predict, name, hide=[kalman.predict])
+    call = student(kalman_predict, name, hide=[kalman.predict, motion.predict_pose_covariance])
     for x, P, F, Q in _predict_cases(hidden):
         n = len(x)
         first, second = _pair(call(x, P, F, Q), name, "(mean, covariance)")
