@@ -14,6 +14,7 @@ import importlib
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 import answers as A  # tests/answers.py
 import visla_edu.checks
@@ -102,6 +103,8 @@ def test_library_hat_is_hidden_under_every_name(how):
     (checks.check_kalman_update_1d, lambda m, v, z, r: tuple(
         np.ravel(a)[0] for a in kalman.update([m], [[v]], [z - m], [[1.0]], [[r]])), "kalman.update"),
     (checks.check_kalman_predict, lambda x, P, F, Q: kalman.predict(x, P, F, Q), "kalman.predict"),
+    (checks.check_so3_exp, lambda w: scipy.linalg.expm(lie.hat(w)), "scipy.linalg.expm"),
+    (checks.check_se3_exp, lambda u: scipy.linalg.expm(lie.twist_hat(u)), "scipy.linalg.expm"),
 ])
 def test_library_versions_are_hidden(check, answer, hidden_name):
     err = _failure(check, answer)

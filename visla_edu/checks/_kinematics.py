@@ -1,6 +1,7 @@
 """Checks of notebooks 01 and 05 (SE(3) kinematics): hat, exponentials, dead reckoning, curly-hat, F."""
 
 import numpy as np
+import scipy.linalg
 
 from visla_edu import lie, motion
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
@@ -146,8 +147,8 @@ def check_so3_exp(so3_exp, hidden=False):
     series. Recognises ``R^T``, an unnormalised axis, a flipped second-order term, NaN near 0
     and a result that is not a rotation.
 
-    Hides ``lie.so3_exp``, ``lie.se3_exp`` and the library's sin(t)/t and (1 - cos t)/t^2;
-    ``lie.hat`` stays.
+    Hides ``lie.so3_exp``, ``lie.se3_exp``, the library's sin(t)/t and (1 - cos t)/t^2 and
+    ``scipy.linalg.expm`` (the exercise is the closed form); ``lie.hat`` stays.
 
     Parameters
     ----------
@@ -172,7 +173,7 @@ def check_so3_exp(so3_exp, hidden=False):
     name = "so3_exp"
     generator = rng(hidden)
     call = student(so3_exp, name, hide=[lie.so3_exp, lie.se3_exp, lie._sin_over_theta,
-                                        lie._one_minus_cos_over_theta2])
+                                        lie._one_minus_cos_over_theta2, scipy.linalg.expm])
     for w in rotation_vectors(generator, hidden):
         got = as_array(call(w), name, (3, 3))
         ref = lie.so3_exp(w)
@@ -217,8 +218,8 @@ def check_se3_exp(se3_exp, hidden=False):
     the inverse pose, the translation ``v`` instead of ``V v``, a transposed rotation block, NaN
     near 0 and a result that is not a pose.
 
-    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3 and the smoother's SE(3) right
-    Jacobian and its inverse; ``lie.so3_exp`` and ``lie.hat`` stay.
+    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the smoother's SE(3) right
+    Jacobian and its inverse and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
 
     Parameters
     ----------
@@ -243,7 +244,7 @@ def check_se3_exp(se3_exp, hidden=False):
     name = "se3_exp"
     generator = rng(hidden)
     call = student(se3_exp, name, hide=[lie.se3_exp, lie._theta_minus_sin_over_theta3,
-                                         *_se3_jacobians()])
+                                         *_se3_jacobians(), scipy.linalg.expm])
     for u in twists(generator, hidden):
         got = as_array(call(u), name, (4, 4))
         ref = lie.se3_exp(u)
