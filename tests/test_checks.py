@@ -472,6 +472,31 @@ def test_consistency_checks(capsys):
            lambda dof, n, p=0.95: tuple(stats.chi2.ppf([(1 - p) / 2, (1 + p) / 2], dof)), "n * dof")
 
 
+
+def test_average_nees_bounds_in_the_wrong_order_are_named():
+    _fails(checks.check_average_nees_bounds,
+           lambda dof, n, p=0.95: tuple(stats.chi2.ppf([(1 + p) / 2, (1 - p) / 2], dof * n) / n), "swapped")
+
+
+def _se3_translation(u, V):
+    T = A.se3_exp(u)
+    T[:3, 3] = V @ u[:3]
+    return T
+
+
+def _series_v(w, swap):
+    t = np.linalg.norm(w)
+    a, b = ((1 - np.cos(t)) / t**2, (t - np.sin(t)) / t**3) if t > 1e-3 else (0.5 - t**2 / 24, 1 / 6 - t**2 / 120)
+    W = A.hat(w)
+    return np.eye(3) + (b * W + a * W @ W if swap else a * W + b * W @ W)
+
+
+def test_se3_exp_translation_mistakes_are_named():
+    """R v instead of V v, V's coefficients exchanged, and V transposed (the right Jacobian)."""
+    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, A.so3_exp(u[3:])), "translation is R v")
+    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=True)), "coefficients are swapped")
+    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "V is transposed")
+
 # --------------------------------------------------------------------------- 08 smoothing
 
 
@@ -678,3 +703,16 @@ def test_the_reference_fallbacks_agree_with_independent_answers():
     start = truth @ lie.se3_exp(0.1 * rng.normal(size=6))
     np.testing.assert_allclose(checks.reference_gauss_newton_step(start, p_body, q_world),
                                A.gauss_newton_step(start, p_body, q_world), atol=1e-9)
+
+
+def test_among_mistakes_that_match_the_closest_one_is_named():
+    """At an input too small to tell two mistakes apart within the tolerance, the one the answer
+    equals is named, not the first in the list (se3_exp at 1e-6 rad: V = I and a swapped V)."""
+    from visla_edu.checks import _core
+
+    expected = np.array([1.0, 2.0, 3.0])
+    got = expected + 4e-7
+    variants = [("first, close only by the tolerance", lambda: expected + 1e-6),
+                ("the very mistake", lambda: got.copy())]
+    assert _core._matching_variant(got, variants, 1e-7, 1e-9, expected) == "the very mistake"
+    assert _core._matching_variant(got, variants[:1], 1e-7, 1e-9, expected) == "first, close only by the tolerance"

@@ -164,5 +164,6 @@ def check_average_nees_bounds(average_nees_bounds, hidden=False):
             ("you forgot to divide the quantiles of the sum by n",
              lambda: np.array(metrics.chi2_quantile([tail, 1 - tail], dof * n))),
             ("two-sided: put (1 - p) / 2 in each tail", lambda: np.array(metrics.chi2_quantile([1 - p, p], dof * n)) / n),
+            ("the bounds are swapped: return (lower, upper)", lambda: ref[::-1]),
         ], rtol=1e-6)
     ok(f"{name}: chi-square bounds of the average NEES", hidden)

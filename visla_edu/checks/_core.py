@@ -348,16 +348,30 @@ def close(a, b, rtol, atol):
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=rtol, atol=atol, equal_nan=True))
 
 
-def _matching_variant(got, variants, rtol, atol):
-    """The hint of the first deliberate mistake whose output equals ``got`` (or None)."""
+def _matching_variant(got, variants, rtol, atol, expected=None):
+    """The hint of the deliberate mistake whose output equals ``got`` (or None).
+
+    Where several match within the tolerance (at inputs too small to tell them apart, e.g. a
+    rotation of 1e-6 rad), the first one that ``got`` is at least ten times closer to than to
+    ``expected`` wins; else the first one that matches.
+    """
+    matched = []
     for hint, variant in variants:
         try:
             wrong = variant()
         except Exception:  # noqa: BLE001 - a variant that cannot be computed just does not match
             continue
         if close(got, wrong, max(rtol, 1e-6), max(atol, 1e-8)):
-            return hint
-    return None
+            if expected is None or _distance(got, wrong) <= 0.1 * _distance(got, expected):
+                return hint
+            matched.append(hint)
+    return matched[0] if matched else None
+
+
+def _distance(a, b):
+    """Largest entry of ``|a - b|`` (NaN entries ignored), for arrays of one shape."""
+    difference = np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))
+    return float(np.nanmax(difference)) if np.any(np.isfinite(difference)) else 0.0
 
 
 def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_hint="", extra=None):
@@ -403,7 +417,7 @@ def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_h
     expected = np.asarray(expected, dtype=float)
     if not np.all(np.isfinite(got)) and np.all(np.isfinite(expected)):
         raise fail(name, f"NaN or inf {nan_hint or 'in the result'}", where)
-    hint = _matching_variant(got, variants, rtol, atol) or (extra(got) if extra is not None else "")
+    hint = _matching_variant(got, variants, rtol, atol, expected) or (extra(got) if extra is not None else "")
     if hint:
         raise fail(name, hint, where)
     raise fail(name, "wrong values (no known mistake matches)", where,

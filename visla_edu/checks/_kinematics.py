@@ -190,9 +190,22 @@ def check_so3_exp(so3_exp, hidden=False):
 
 
 def _se3_no_jacobian(u):
+    return _se3_with_translation(u, u[:3])
+
+
+def _se3_with_translation(u, translation):
+    """``se3_exp(u)`` with its translation replaced by ``translation`` (a mistake's V v)."""
     T = lie.se3_exp(u)
-    T[:3, 3] = u[:3]
+    T[:3, 3] = translation
     return T
+
+
+def _swapped_v(w, swap=True):
+    """``V`` of SO(3) with (swap=True) its two coefficients exchanged: the mistake; swap=False: V itself."""
+    t = np.linalg.norm(w)
+    a, b = ((1 - np.cos(t)) / t**2, (t - np.sin(t)) / t**3) if t > 1e-3 else (0.5 - t**2 / 24, 1 / 6 - t**2 / 120)
+    W = lie.hat(w)
+    return np.eye(3) + (b * W + a * W @ W if swap else a * W + b * W @ W)
 
 
 def _check_tiny_twist(name, T, u):
@@ -254,6 +267,12 @@ def check_se3_exp(se3_exp, hidden=False):
             ("you returned the inverse pose exp(-u^)\ncheck the signs", lambda: lie.se3_exp(-u)),
             ("the translation is v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + "
              "(t - sin t)/t^3 hat(w)^2 (the left Jacobian of SO(3))", lambda: _se3_no_jacobian(u)),
+            ("the translation is R v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
+             lambda: _se3_with_translation(u, ref[:3, :3] @ u[:3])),
+            ("V's two coefficients are swapped\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
+             lambda: _se3_with_translation(u, _swapped_v(u[3:]) @ u[:3])),
+            ("V is transposed (the right Jacobian of SO(3)): use V = I + (1 - cos t)/t^2 hat(w) + ...",
+             lambda: _se3_with_translation(u, _swapped_v(u[3:], swap=False).T @ u[:3])),
             ("the rotation block is transposed (R^T instead of R)",
              lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
         ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_se3)
