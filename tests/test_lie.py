@@ -458,6 +458,24 @@ def test_so3_log_derivative_is_inverse_right_jacobian(theta):
         assert maxabs(J, _so3_right_jacobian_inverse(w)) < TOL * 10
 
 
+@pytest.mark.parametrize("theta", [0.0, 1e-7, 0.05, 0.0999, 0.1001, 0.7, 2.5])
+def test_so3_left_jacobian_matches_finite_differences(theta):
+    """exp((w + d)^) ~ exp((J_l(w) d)^) exp(w^), on both sides of the series switch; and J_l(w) v is
+    the translation of se3_exp([v; w]) (the V of the closed form)."""
+    rng = np.random.default_rng(43)
+    for a in unit(rng, (3,)):
+        w = theta * a
+        R = lie.so3_exp(w)
+        fd = fd_jacobian(lambda d: lie.so3_log(lie.so3_exp(w + d) @ R.T), np.zeros(3), 1e-5)
+        J_l = lie.so3_left_jacobian(w)
+        assert maxabs(J_l, fd) < 1e-9
+        v = rng.normal(size=3)
+        assert maxabs(J_l @ v, lie.se3_exp(np.r_[v, w])[:3, 3]) < 1e-12
+    # batched input: one Jacobian per rotation vector
+    W = unit(rng, (4,)) * np.array([0.0, 0.05, 0.7, 2.5])[:, None]
+    assert maxabs(lie.so3_left_jacobian(W), np.stack([lie.so3_left_jacobian(w) for w in W])) == 0.0
+
+
 # ----------------------------------------------------------------------------- batches and errors
 
 
