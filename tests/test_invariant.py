@@ -113,6 +113,71 @@ def test_invariant_landmark_covariances_are_those_of_the_landmark_error():
     np.testing.assert_array_equal(RightForm.landmark_covs(Sigma, cols, means), Sigma[cols[:, :, None], cols[:, None, :]])
 
 
+def _invariant_errors(mu, means, T, m):
+    """The invariant errors ``[xi; e_j]`` of a true state (T, m) about the mean (mu, means).
+
+    ``T = exp(xi^) mu`` and ``m_j = exp(theta^) mu_j + e_j``, ``xi = [p; theta]`` (world frame).
+    """
+    xi = lie.se3_log(T @ lie.se3_inv(mu))
+    e = m - means @ lie.so3_exp(xi[3:]).T
+    return np.r_[xi, e.ravel()]
+
+
+def test_invariant_noise_factor_is_the_jacobian_of_the_errors_in_the_step_noise():
+    """B = d[xi; e_j]/dn L for a step that ends at mu exp(n^) (n ~ N(0, W), W = L L^T), landmarks fixed."""
+    rng = np.random.default_rng(5)
+    for trial in range(3):
+        _, mu, means = _pose_and_points(rng, 3)
+        sigmas = rng.uniform(0.01, 0.5, 6)
+        W = np.diag(sigmas**2)
+        if trial == 2:  # a full (correlated) noise covariance takes the Cholesky branch
+            A = rng.normal(size=(6, 6))
+            W = A @ A.T / 6 + 0.01 * np.eye(6)
+        L = np.linalg.cholesky(W)
+        B = motion.invariant_noise_factor(mu, means, W)
+        assert B.shape == (6 + 3 * len(means), 6)
+        J = fd_jacobian(lambda n: _invariant_errors(mu, means, mu @ lie.se3_exp(n), means), np.zeros(6), 1e-5)
+        np.testing.assert_allclose(B, J @ L, rtol=1e-7, atol=1e-7 * np.abs(B).max())
+
+
+def test_invariant_landmark_sensitivity_is_the_jacobian_of_a_new_landmarks_error():
+    """A landmark placed from the true pose exp(xi^) mu at the IMU-frame point p_imu has the error
+    e = m - exp(theta^) mu p_imu, whose derivative in xi is [I, 0] (right form: G_pose)."""
+    rng = np.random.default_rng(6)
+    cam, mu, points = _pose_and_points(rng, 4)
+    p_imu = (lie.se3_inv(mu) @ np.c_[points, np.ones(len(points))].T).T[:, :3]
+    G_right = rng.normal(size=(len(points), 3, 6))  # only its length is used
+    G = InvariantForm.landmark_sensitivity(G_right)
+    np.testing.assert_array_equal(RightForm.landmark_sensitivity(G_right), G_right)
+    for j, p in enumerate(p_imu):
+        def error(xi, p=p):
+            m_true = (lie.se3_exp(xi) @ mu @ np.r_[p, 1.0])[:3]
+            return m_true - lie.so3_exp(xi[3:]) @ (mu @ np.r_[p, 1.0])[:3]
+        np.testing.assert_allclose(G[j], fd_jacobian(error, np.zeros(6), 1e-5), atol=1e-8)
+
+
+def test_invariant_covariances_convert_through_the_jacobian_of_the_error_change():
+    """pose_cov and landmark_covs are M Sigma M^T with M = d[delta; m - mu_m]/d[xi; e] by finite
+    differences (delta = log(mu^-1 T), the right perturbation the library reports)."""
+    rng = np.random.default_rng(7)
+    for _ in range(2):
+        _, mu, means = _pose_and_points(rng, 3)
+        n = len(means)
+
+        def right_errors(x):
+            T = lie.se3_exp(x[:6]) @ mu
+            m = means @ lie.so3_exp(x[3:6]).T + x[6:].reshape(n, 3)
+            return np.r_[lie.se3_log(lie.se3_inv(mu) @ T), (m - means).ravel()]
+
+        M = fd_jacobian(right_errors, np.zeros(6 + 3 * n), 1e-5)
+        Sigma = _random_spd(rng, 6 + 3 * n)
+        right = M @ Sigma @ M.T
+        np.testing.assert_allclose(InvariantForm.pose_cov(Sigma[:6, :6], mu), right[:6, :6], rtol=1e-7, atol=1e-9)
+        cols = ekf.slot_columns(np.arange(n))
+        np.testing.assert_allclose(InvariantForm.landmark_covs(Sigma, cols, means),
+                                   right[cols[:, :, None], cols[:, None, :]], rtol=1e-7, atol=1e-9)
+
+
 def _mean_nees(form, seeds, **sim):
     values = []
     for seed in seeds:
