@@ -94,6 +94,36 @@ def test_transfer_jacobian_matches_finite_differences_and_the_camera_model():
     assert np.allclose(J, J_model, rtol=1e-12, atol=1e-9)
 
 
+def test_transfer_jacobian_of_a_batch_of_motions_matches_finite_differences():
+    """The RANSAC refinement calls transfer_pixels with (pairs, hypotheses) of motions at once."""
+    rng = np.random.default_rng(10)
+    motions = lie.se3_exp(rng.normal(size=(2, 3, 6)) * [0.3, 0.3, 1.0, 0.05, 0.05, 0.05])
+    p_next = np.stack([np.column_stack([rng.uniform(-10, 10, 4), rng.uniform(-2, 2, 4), rng.uniform(4, 50, 4)])
+                       for _ in range(6)]).reshape(2, 3, 4, 3)
+    _, J = odometry.transfer_pixels(motions, p_next, KS_RIG)
+    assert J.shape == (2, 3, 4, 4, 6)
+    for a in range(2):
+        for h in range(3):
+            J_fd = fd_jacobian(lambda d, a=a, h=h: odometry.transfer_pixels(
+                motions[a, h] @ lie.se3_exp(d), p_next[a, h], KS_RIG, jacobian=False), np.zeros(6), 1e-5)
+            assert np.linalg.norm(J[a, h] - J_fd) < 1e-7 * np.linalg.norm(J_fd)
+
+
+def test_transfer_information_carries_the_next_frames_pixel_noise_by_finite_differences():
+    """W = (I + A A^T)^-1 with A = d z_pred / d z_next, the next frame's pixels seen through
+    triangulation and the transfer: A from finite differences of the whole chain."""
+    rng = np.random.default_rng(11)
+    p_next = np.column_stack([rng.uniform(-10, 10, 5), rng.uniform(-2, 2, 5), rng.uniform(4, 50, 5)])
+    z_next = camera.projection(np.c_[p_next, np.ones(5)]) @ KS_RIG.T
+    W = odometry._transfer_information(MOTION, z_next, p_next, K_RIG, B_RIG, KS_RIG)
+    assert W.shape == (5, 4, 4)
+    for i in range(5):
+        A = fd_jacobian(lambda z: odometry.transfer_pixels(
+            MOTION, camera.triangulate_disparity(z, K_RIG, B_RIG)[None], KS_RIG, jacobian=False)[0],
+            z_next[i], 1e-4)
+        np.testing.assert_allclose(W[i], np.linalg.inv(np.eye(4) + A @ A.T), rtol=1e-7, atol=1e-9)
+
+
 def test_align_triples_recovers_a_rigid_motion_and_flags_collinear_triples():
     rng = np.random.default_rng(1)
     p_next = rng.normal(size=(50, 3, 3)) * [5.0, 2.0, 20.0]
