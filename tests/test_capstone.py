@@ -5,7 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from visla_edu import capstone, checks, data, lie, run
+from fdiff import fd_jacobian  # tests/fdiff.py
+from visla_edu import capstone, checks, data, lie, run, simulate
+from visla_edu.camera import StereoCamera
 from visla_edu.filters import FilterConfig, StepRecord
 from visla_edu.stepper import Stepper
 
@@ -20,6 +22,34 @@ STEPS = capstone.Steps(predict, add_landmarks, slam_update)
 def tiny():
     ds = data.load("sim-tiny")
     return ds, run.resolve_config(ds, FilterConfig(slam_error="right"))
+
+
+def test_the_library_parts_jacobians_match_finite_differences():
+    """pose_jacobian (right perturbation mu exp(delta^)), landmark_jacobian, and the new-landmark
+    sensitivity G of the reference add_landmarks, at random poses, against finite differences."""
+    from visla_edu.checks import _capstone
+
+    parts = capstone.library_parts()
+    camera = StereoCamera(*simulate.default_rig())
+    Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
+    rng = np.random.default_rng(8)
+    for _ in range(3):
+        mu = lie.se3_exp(np.r_[rng.normal(0, 10, 3), rng.normal(0, 0.5, 3)])
+        p_cam = np.r_[rng.uniform(-5, 5), rng.uniform(-2, 2), rng.uniform(4, 50)]
+        m = (mu @ camera.imu_T_cam @ np.r_[p_cam, 1.0])[:3]
+        J_pose = fd_jacobian(lambda d: parts.project(Ks, cam_T_imu, mu @ lie.se3_exp(d), m[None])[0],
+                             np.zeros(6), 1e-5)
+        J_lm = fd_jacobian(lambda x: parts.project(Ks, cam_T_imu, mu, x[None])[0], m, 1e-4)
+        np.testing.assert_allclose(parts.pose_jacobian(Ks, cam_T_imu, mu, m), J_pose, rtol=1e-6,
+                                   atol=1e-6 * np.abs(J_pose).max())
+        np.testing.assert_allclose(parts.landmark_jacobian(Ks, cam_T_imu, mu, m), J_lm, rtol=1e-6,
+                                   atol=1e-6 * np.abs(J_lm).max())
+        z = camera.predict(mu, m[None])
+        p_new, G = _capstone._sensitivities(parts, mu, z, camera.K, camera.b, camera.imu_T_cam)
+        G_fd = fd_jacobian(lambda d: parts.init_landmark(z[0], camera.K, camera.b, camera.imu_T_cam,
+                                                         mu @ lie.se3_exp(d)), np.zeros(6), 1e-5)
+        np.testing.assert_allclose(p_new[0], m, atol=1e-8)
+        np.testing.assert_allclose(G[0], G_fd, rtol=1e-7, atol=1e-7 * np.abs(G_fd).max())
 
 
 def test_the_skeleton_with_correct_steps_is_the_library_right_perturbation_filter(tiny):
