@@ -716,3 +716,19 @@ def test_among_mistakes_that_match_the_closest_one_is_named():
                 ("the very mistake", lambda: got.copy())]
     assert _core._matching_variant(got, variants, 1e-7, 1e-9, expected) == "the very mistake"
     assert _core._matching_variant(got, variants[:1], 1e-7, 1e-9, expected) == "first, close only by the tolerance"
+
+
+def test_the_reference_gauss_newton_jacobian_matches_finite_differences():
+    """J_i = R [I, -p_i^] of reference_gauss_newton_step is d r / d delta for T <- T exp(delta^)."""
+    from fdiff import fd_jacobian  # tests/fdiff.py
+    from visla_edu.checks import _smoothing
+
+    rng = np.random.default_rng(6)
+    for n in (1, 4):
+        T = lie.se3_exp(rng.normal(size=6))
+        p_body, q_world = rng.normal(scale=5.0, size=(n, 3)), rng.normal(scale=5.0, size=(n, 3))
+        r, J = _smoothing._residual_and_jacobian(T, p_body, q_world)
+        assert r.shape == (3 * n,) and J.shape == (3 * n, 6)
+        J_fd = fd_jacobian(lambda d: _smoothing._residual_and_jacobian(T @ lie.se3_exp(d), p_body, q_world)[0],
+                           np.zeros(6), 1e-5)
+        np.testing.assert_allclose(J, J_fd, rtol=1e-8, atol=1e-8)
