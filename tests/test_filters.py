@@ -600,6 +600,36 @@ def test_mapping_motion_noise_switch_widens_the_gate():
     assert gated[0] * 5 < gated[1], gated
 
 
+def test_mapping_motion_noise_is_the_noise_added_since_the_first_sighting(tiny):
+    """Q = Sigma_t - Phi Sigma_t0 Phi^T with Phi = d delta_t / d delta_t0 (finite differences of the
+    noise-free dead reckoning from t0 to t) equals the covariance predicted from t0 with zero
+    initial covariance: only the noise of the steps since the landmark's first sighting."""
+    from fdiff import fd_jacobian  # tests/fdiff.py
+    from visla_edu import lie
+
+    flt = run.make_filter(tiny, "mapping", FilterConfig(extrinsic_correction="none"))
+    for _ in range(20):
+        flt.step()
+    t = flt.t  # the last frame processed (its pose and covariance are the current ones)
+    # first seen after the start (Sigma_t0 > 0, so Phi matters) and a few steps before t
+    lm = np.flatnonzero((flt.init_frame >= 5) & (flt.init_frame < t - 3))[:3]
+    assert len(lm) and flt.config.mapping_motion_noise
+    assert np.abs(flt.pose_cov_history[flt.init_frame[lm]]).max() > 1e-3 * np.abs(flt.pose_cov).max()
+    Q = flt._pose_noise(lm, np.broadcast_to(np.eye(6), (len(lm), 6, 6)))  # J_pose = I gives Q itself
+    T = flt.pose_history
+    for i, t0 in enumerate(flt.init_frame[lm]):
+        Phi = fd_jacobian(lambda d, t0=t0: lie.se3_log(lie.se3_inv(T[t]) @ T[t0] @ lie.se3_exp(d) @ lie.se3_inv(T[t0])
+                                                       @ T[t]), np.zeros(6), 1e-6)
+        np.testing.assert_allclose(Q[i], flt.pose_cov - Phi @ flt.pose_cov_history[t0] @ Phi.T,
+                                   rtol=1e-6, atol=1e-8 * np.abs(Q[i]).max())
+        P = np.zeros((6, 6))
+        for k in range(t0, t):
+            step, F, W = motion.imu_step(flt.step_twists[k], flt.taus[k], flt.config.sigma_linear_velocity,
+                                         flt.config.sigma_angular_velocity)
+            P = F @ P @ F.T + W
+        np.testing.assert_allclose(Q[i], P, rtol=1e-6, atol=1e-9 * np.abs(P).max())
+
+
 def test_vio_refine_landmarks_switch(tiny):
     """By default VIO keeps landmarks where they were triangulated; the switch re-estimates them."""
     first = {}
