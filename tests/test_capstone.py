@@ -52,6 +52,30 @@ def test_the_library_parts_jacobians_match_finite_differences():
         np.testing.assert_allclose(G[0], G_fd, rtol=1e-7, atol=1e-7 * np.abs(G_fd).max())
 
 
+def test_the_pose_updates_written_out_equal_the_library_update():
+    """capstone's parts.pose_update and the pose-update check's reference build H from the formula
+    -Ks dpi/dq o_T_i (mu^-1 m)^odot; their updates equal ekf.pose_update, whose Jacobians are
+    checked against finite differences (tests/test_camera.py)."""
+    from visla_edu import ekf
+    from visla_edu.checks import _filters
+
+    parts = capstone.library_parts()
+    camera = StereoCamera(*simulate.default_rig())
+    rng = np.random.default_rng(9)
+    for k in (1, 6):
+        mu = lie.se3_exp(np.r_[rng.normal(0, 10, 3), rng.normal(0, 0.5, 3)])
+        p_cam = np.c_[rng.uniform(-5, 5, k), rng.uniform(-2, 2, k), rng.uniform(4, 40, k)]
+        p_world = (np.c_[p_cam, np.ones(k)] @ (mu @ camera.imu_T_cam).T)[:, :3]
+        z = camera.predict(mu @ lie.se3_exp(rng.normal(0, 0.05, 6)), p_world) + rng.normal(0, 1.0, (k, 4))
+        A = rng.normal(0, 0.05, (6, 6))
+        Sigma = A @ A.T + 1e-4 * np.eye(6)
+        T_ref, S_ref, _ = ekf.pose_update(mu, Sigma, p_world, z, camera, 4.0)
+        for update in (parts.pose_update, _filters._pose_update_with):
+            T_new, S_new = update(mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, 4.0)
+            np.testing.assert_allclose(T_new, T_ref, atol=1e-10)
+            np.testing.assert_allclose(0.5 * (S_new + S_new.T), S_ref, atol=1e-12)
+
+
 def test_the_skeleton_with_correct_steps_is_the_library_right_perturbation_filter(tiny):
     ds, config = tiny
     poses, covs, landmarks = capstone.run_capstone(ds, config, capstone.library_parts(), STEPS)
