@@ -217,7 +217,9 @@ def triangulation_jacobian(z, K, b):
     Returns
     -------
     ndarray, shape (..., 3, 4)
-        NaN where the disparity is not positive.
+        Where the disparity is not positive, every entry that depends on the depth is NaN
+        (the entries that are always zero, such as the ``vR`` column, stay 0), so the
+        covariance ``J J^T`` is NaN throughout.
     """
     z = _check_pixels(z, "triangulation_jacobian")
     K = np.asarray(K, dtype=float)
