@@ -572,6 +572,36 @@ def test_gradient_with_pose_and_landmark_priors_matches_finite_differences(tiny)
         assert rel(2 * lin.g_m[j], fd_jacobian(landmark_cost, np.zeros(3), 1e-4)[0]) < 1e-6
 
 
+def test_held_frame_landmark_prior_is_the_linearised_observation_cost():
+    """``_WindowState.hold``: the folded prior m^T Lambda m - 2 m^T eta + c has the observations'
+    cost sum w |r(m)|^2 and its gradient (finite differences) at the linearisation point m0."""
+    from visla_edu.smoother import _window
+
+    ds = simulate.simulate_drive("tiny", 1)
+    config = smoother.SmootherConfig(loss="none")
+    camera = _problem.rig_camera(ds)
+    state = _window._WindowState(ds, ds.ground_truth.world_T_imu[0], camera, config)
+    state.world_T_imu[:] = ds.ground_truth.world_T_imu
+    rng = np.random.default_rng(14)
+    state.landmarks[:] = ds.ground_truth.landmarks + rng.normal(0, 0.3, ds.ground_truth.landmarks.shape)
+    v = 5
+    state.hold(v)
+    idx = np.arange(ds.frame_ptr[v], ds.frame_ptr[v + 1])
+    idx = idx[state.status[idx] == _window.USED]
+    ids = ds.obs_ids[idx]
+    assert len(ids) > 3 and np.all(state.held_count[ids] == 1)
+    for i, j in zip(idx[:4], ids[:4]):
+        m0 = state.landmarks[j]
+
+        def observed_cost(m, i=i):
+            z = smoother.reprojection(camera.Ks, camera.cam_T_imu, state.world_T_imu[v][None], m[None], False)[0]
+            return np.array([np.sum((z[0] - ds.obs_z[i]) ** 2) / config.sigma_pixel**2])
+
+        Lam, eta, c = state.prior_info[j], state.prior_eta[j], state.prior_const[j]
+        assert m0 @ Lam @ m0 - 2 * m0 @ eta + c == pytest.approx(observed_cost(m0)[0], rel=1e-6)
+        assert rel(2 * (Lam @ m0 - eta), fd_jacobian(observed_cost, m0, 1e-4)[0]) < 1e-6
+
+
 def test_marginalised_pose_prior_propagates_through_the_motion_jacobian():
     """``_next_prior``: ``F = Ad(exp(-tau u^))`` is the Jacobian of ``log(mean^{-1} T_v exp(a) exp(tau u^))``."""
     import types
