@@ -239,7 +239,8 @@ def invariant_noise_factor(world_T_imu, p_landmarks, W):
     """``B`` with ``B B^T`` the noise one IMU step adds to the invariant errors, (6 + 3n, 6).
 
     The invariant joint filter's errors are ``xi`` of the pose (``T = exp(hat(xi)) mu``, world
-    frame, ``xi = [p; theta]``) and ``e_j = m_j - exp(hat(theta)) mu_j`` of each landmark. A
+    frame, ``xi = [p; theta]``) and ``e_j = m_j - exp(hat(theta)) mu_j`` of each landmark (to first order:
+    :func:`visla_edu.lie.invariant_retract` applies the group exponential). A
     noise ``n ~ N(0, W)`` on the step's twist (body frame) moves them by ``Ad(mu) n`` and
     ``hat(mu_j) R n_w`` (``R`` the rotation of ``mu``, ``n_w`` the angular part), so::
 

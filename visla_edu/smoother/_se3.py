@@ -121,7 +121,6 @@ def _q_right(x):
     R = lie.hat(-x[..., :3])
     PR, RP = P @ R, R @ P
     PRP = PR @ P
-    P2 = P @ P
     return (0.5 * R + c1[..., None, None] * (PR + RP + PRP)
             + c2[..., None, None] * (P @ PR + RP @ P - 3 * PRP)
             + c3[..., None, None] * (PRP @ P + P @ PRP))
