@@ -634,6 +634,10 @@ def test_stub_raises_not_implemented(check, hidden):
         check(_stub, hidden=hidden)
     # nbgrader validate shows "    NotImplementedError: <first line>" and cuts it at 87 characters
     assert len(f"    NotImplementedError: {_first_line(info.value)}") <= 87
+    # and every later line indented by 4: wrapped at 79, they show whole (TEACHING.md, "Feedback")
+    lines = str(info.value).split("\n")
+    assert all(len(line) <= 79 for line in lines), lines
+    assert lines[-1].endswith("then run this check again")
 
 
 @pytest.mark.parametrize("check", ALL_CHECKS, ids=lambda c: c.__name__)

@@ -231,6 +231,7 @@ def test_replaced_library_function_fails_the_check(monkeypatch):
     monkeypatch.setattr(lie, "hat", fake)  # the reference would now agree with a wrong answer
     err = _failure(checks.check_hat, fake)
     assert _first_line(err) == "visla_edu's lie.hat was replaced by code from this notebook"
+    assert all(len(line) <= 79 for line in str(err).split("\n")), str(err)  # nbgrader validate shows them whole
 
 
 def test_swapped_library_code_fails_the_check(monkeypatch):
@@ -258,6 +259,7 @@ def test_changing_the_checks_while_they_run_fails_and_is_undone(reloaded_checks)
 
     err = _failure(checks.check_hat, sneaky_hat)
     assert _first_line(err) == "your hat changed visla_edu while the check ran"
+    assert all(len(line) <= 79 for line in str(err).split("\n")), str(err)
     assert _core.compare is compare
 
 

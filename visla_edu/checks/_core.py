@@ -23,6 +23,7 @@ __all__ = [
     "ok",
     "fmt",
     "fail",
+    "wrap_message",
     "student",
     "as_array",
     "close",
@@ -55,8 +56,9 @@ def exercise_check(check):
     callable
         ``run(fn, hidden=False)`` with ``check``'s name and docstring (:func:`functools.wraps`):
         it returns what ``check`` returns; an ``AssertionError`` or ``NotImplementedError``
-        without a ``__cause__`` is raised again as a new exception of the same type and message
-        (``from None``); one with a cause, and any other exception, propagates unchanged.
+        without a ``__cause__`` is raised again as a new exception of the same type, its message
+        wrapped by :func:`wrap_message` (``from None``); one with a cause, and any other
+        exception, propagates unchanged.
     """
 
     @functools.wraps(check)
@@ -66,7 +68,7 @@ def exercise_check(check):
         except (AssertionError, NotImplementedError) as err:
             if err.__cause__ is not None:
                 raise
-            raise type(err)(str(err)) from None
+            raise type(err)(wrap_message(str(err))) from None
 
     return run
 
@@ -155,6 +157,28 @@ def _split_first_line(text):
         cut = cut if cut > limit // 2 else limit
         first, rest = first[:cut].rstrip(), (first[cut:].strip() + ("\n" + rest if rest else ""))
     return first, rest
+
+
+def wrap_message(text):
+    """``text`` with its first line at most 79 characters and every later line wrapped at 79.
+
+    The shape of every failure message (see the module docstring); a message already in that
+    shape is returned unchanged.
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    str
+    """
+    first, rest = _split_first_line(text)
+    lines = [first]
+    for line in rest.split("\n") if rest else ():
+        short = len(line) <= _hiding.MAX_FIRST_LINE
+        lines.extend([line] if short else textwrap.wrap(line, _hiding.MAX_FIRST_LINE, break_on_hyphens=False))
+    return "\n".join(lines)
 
 
 def fail(name, hint, *details):
