@@ -1,7 +1,8 @@
 """The package's shape, as the maintainers' rules state it (README, "For maintainers").
 
-No import cycle between the package's modules, no module over 600 lines, no function over 60
-lines of code, and the slow scipy.stats import kept out of the drivers' import path.
+No import cycle between the package's modules, imports that follow the README's layers (each
+module listed in one, importing nothing of a later one), no module over 600 lines, no function
+over 60 lines of code, and the slow scipy.stats import kept out of the drivers' import path.
 """
 
 import ast
@@ -93,6 +94,50 @@ def test_graph_sees_the_package_imports():
 def test_no_import_cycle():
     cycle = find_cycle(import_graph())
     assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def readme_layers():
+    """``{module: layer number}`` of the README's "For maintainers" list, packages as ``visla_edu.data``.
+
+    Each numbered item (``1. **Math** ...``) names its modules in backticks: ``lie``,
+    ``smoother/_se3``, ``data/``; backticked words that are not modules of the package (a
+    package's submodules in parentheses, functions) are skipped.
+    """
+    import re
+
+    text = (PACKAGE.parent / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("## For maintainers"):]
+    modules = _modules()
+    layers = {}
+    for number, body in re.findall(r"^(\d)\. \*\*.*?\*\*(.*?)(?=^\d\. \*\*|^$)", section, flags=re.M | re.S):
+        for token in re.findall(r"`([\w/]+)`", body):
+            name = "visla_edu." + token.strip("/").replace("/", ".")
+            if name in modules:
+                layers.setdefault(name, int(number))
+    return layers
+
+
+def _layer(module, layers):
+    """The layer of ``module``: that of the longest listed name it is or lies under (None if unlisted)."""
+    owners = [name for name in layers if module == name or module.startswith(name + ".")]
+    return layers[max(owners, key=len)] if owners else None
+
+
+def test_every_module_is_in_a_readme_layer():
+    layers = readme_layers()
+    unlisted = [name for name in _modules() if name.count(".") == 1 and not name.endswith("__main__")
+                and _layer(name, layers) is None]
+    assert not unlisted, f"modules missing from the README's layers (For maintainers): {unlisted}"
+
+
+def test_imports_go_downwards_only():
+    """The README's rule: a module imports only modules of its own layer or of the layers above it in the list."""
+    layers = readme_layers()
+    upward = [f"{module} (layer {_layer(module, layers)}) imports {target} (layer {_layer(target, layers)})"
+              for module, targets in sorted(import_graph().items()) for target in sorted(targets)
+              if None not in (_layer(module, layers), _layer(target, layers))
+              and _layer(target, layers) > _layer(module, layers)]
+    assert not upward, "imports against the README's layers: " + "; ".join(upward)
 
 
 @pytest.mark.parametrize("name, path", sorted(_modules().items()))
