@@ -138,6 +138,43 @@ def test_info_prints_summary_and_diagnostics(capsys):
         assert word in text
 
 
+def _help(capsys, *command):
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main([*command, "--help"])
+    assert exit_info.value.code == 0
+    return " ".join(capsys.readouterr().out.split())  # argparse's line breaks undone
+
+
+def test_run_help_names_every_mode_and_every_setting_with_its_default(capsys):
+    """What the README and the error lines ("see visla-edu run --help") send a user to."""
+    import dataclasses
+
+    from visla_edu import smoother
+    from visla_edu.codes import RUN_MODES
+    from visla_edu.filters import FilterConfig
+
+    def shown(value):  # as --set would take it
+        if isinstance(value, bool):
+            return str(value).lower()
+        return f"{value:g}" if isinstance(value, (int, float)) else str(value)
+
+    text = _help(capsys, "run")
+    for mode in RUN_MODES:
+        assert f"{mode} (" in text, mode
+    assert "slam (joint EKF, the default)" in text and cli.build_parser().parse_args(["run", "x"]).mode == "slam"
+    filter_defaults, smoother_defaults = FilterConfig(), smoother.SmootherConfig()
+    for name in [field.name for field in dataclasses.fields(FilterConfig)]:
+        assert f"{name}={shown(getattr(filter_defaults, name))}" in text, name
+    for name in smoother.OWN_SETTINGS:
+        assert f"{name}={shown(getattr(smoother_defaults, name))}" in text, name
+    assert "every N-th landmark only (default 1" in text
+
+
+def test_stepper_help_states_the_default_port(capsys):
+    assert "(default 8866)" in _help(capsys, "stepper")
+    assert cli.build_parser().parse_args(["stepper"]).port == 8866
+
+
 def test_python_dash_m_works():
     done = subprocess.run([sys.executable, "-m", "visla_edu", "--help"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and "info" in done.stdout and "run" in done.stdout

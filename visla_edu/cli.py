@@ -1,16 +1,6 @@
 """Command line: ``visla-edu {info,run,stepper,release} ...`` (also ``python -m visla_edu``).
 
-Examples::
-
-    visla-edu info 03                       # summary and diagnostics of a course file
-    visla-edu run sim --plot sim.png        # joint SLAM on the built-in simulated drive
-    visla-edu run 03 --mode mapping --out map.npz
-    visla-edu run 03 --dense --landmark-stride 20
-    visla-edu run 03 --blas-threads none      # leave numpy's BLAS threads alone (default: 1)
-    visla-edu run 0020                      # ATE and drift against its KITTI ground truth (found beside it)
-    visla-edu run X --ground-truth poses.txt --ground-truth-times times.txt --trajectory-out slam.tum
-    visla-edu stepper --port 8866           # the filter stepper page (Voila)
-    visla-edu release                       # regenerate notebooks/ from solutions/
+Examples: the README's "Command line" section; every option: ``visla-edu COMMAND --help``.
 
 Errors: :func:`main` is the one error boundary. Whatever a user can get wrong is reported
 as ONE line on stderr that names the file, key, value, setting or frame and what to try,
@@ -37,7 +27,7 @@ import traceback
 import warnings
 from pathlib import Path
 
-from visla_edu.codes import RUN_MODES, SLAM, SMOOTHER_MODES
+from visla_edu.codes import RUN_MODES, RUN_MODES_HELP, SLAM, SMOOTHER_MODES
 
 __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
 
@@ -67,6 +57,11 @@ class _Parser(argparse.ArgumentParser):
         line = _one_line(f"{self.prog}: error: {message} (see {self.prog} --help)")
         print(line, file=sys.stderr)
         raise _UsageExit(line)
+
+    def format_help(self):
+        if callable(self.epilog):  # run's list of settings: imports the filters, so only when asked
+            self.epilog = self.epilog()
+        return super().format_help()
 
 
 def build_parser():
@@ -103,7 +98,7 @@ def build_parser():
     _add_run_parser(sub, common)
 
     stepper = sub.add_parser("stepper", parents=[common], help="serve the interactive filter stepper with Voila")
-    stepper.add_argument("--port", type=_port, default=8866)
+    stepper.add_argument("--port", type=_port, default=8866, help="TCP port of the page (default 8866)")
     stepper.add_argument("--open", action="store_true", help="open a browser")
 
     release = sub.add_parser("release", parents=[debug], help="generate the student notebooks from the solutions")
@@ -114,13 +109,14 @@ def build_parser():
 
 
 def _add_run_parser(sub, common):
-    run = sub.add_parser("run", parents=[common], help="run a filter over a dataset")
+    run = sub.add_parser("run", parents=[common], help="run a filter over a dataset", epilog=_settings_help)
     run.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
-    run.add_argument("--mode", default=SLAM, choices=RUN_MODES)
+    run.add_argument("--mode", default=SLAM, choices=RUN_MODES, help=RUN_MODES_HELP)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--force", action="store_true",
                      help="run even when the estimated memory or time exceeds the limits (2 GiB, 15 min)")
-    run.add_argument("--landmark-stride", type=_stride, default=None, metavar="N", help="use every N-th landmark only")
+    run.add_argument("--landmark-stride", type=_stride, default=None, metavar="N",
+                     help="use every N-th landmark only (default 1: all; as --set landmark_stride=N)")
     run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
                      help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
                           "booleans are true/false, ranges are enforced")
@@ -148,6 +144,12 @@ def _add_frames_option(parser):
     parser.add_argument("--frames", default=None, type=_frames, metavar="START:STOP",
                         help="use frames START..STOP-1 only, as a drive of their own (its ground truth starts at "
                              "frame START); either end may be left out, e.g. 0:300 or 500:")
+
+
+def _settings_help():
+    """The epilog of ``run --help`` (:func:`visla_edu.smoother.settings_help`), imported only when asked."""
+    from visla_edu.smoother import settings_help
+    return settings_help()
 
 
 def _frames(text):

@@ -32,6 +32,7 @@ __all__ = [
     "WINDOW",
     "SMOOTHER_MODES",
     "RUN_MODES",
+    "RUN_MODES_HELP",
 ]
 
 OBS_USED = 0  #: used in the update
@@ -57,3 +58,7 @@ WINDOW = "window"  #: fixed-lag sliding-window least squares, frame by frame
 SMOOTHER_MODES = (SMOOTH, WINDOW)
 #: Everything ``visla-edu run --mode`` takes: the filters, then the smoothers.
 RUN_MODES = MODES + SMOOTHER_MODES
+#: ``visla-edu run --mode``'s help: each mode in a few words.
+RUN_MODES_HELP = ("deadreckon (IMU only), mapping (landmarks on dead-reckoned poses), vio (pose EKF against "
+                  "fixed landmarks), slam (joint EKF, the default), smooth (batch smoother started from the EKF), "
+                  "window (sliding-window smoother)")

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SettingSpec", "setting", "spec_of", "check_settings", "parse_setting", "parse_settings"]
+__all__ = ["SettingSpec", "setting", "spec_of", "check_settings", "parse_setting", "parse_settings", "defaults_text"]
 
 #: Key of the :class:`SettingSpec` in a dataclass field's metadata.
 SPEC = "visla_edu.setting"
@@ -260,6 +260,31 @@ def parse_settings(cls, pairs):
             raise ValueError(f"{pair!r}: {name} is set twice")
         out[name] = value
     return out
+
+
+def defaults_text(cls, names=None):
+    """``"name=default, ..."`` of a dataclass's fields, as ``NAME=VALUE`` would set them (for ``--help``).
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass (:class:`~visla_edu.filters.FilterConfig`, :class:`~visla_edu.smoother.SmootherConfig`).
+    names : sequence of str, optional
+        The fields to list, in this order (default: every field, in declaration order).
+
+    Returns
+    -------
+    str
+        Booleans as ``true``/``false``, None as ``none``, numbers as short as they read.
+    """
+    defaults = {field.name: field.default for field in dataclasses.fields(cls)}
+
+    def text(value):
+        if isinstance(value, bool) or value is None:
+            return str(value).lower()
+        return _number(value) if isinstance(value, (int, float)) else str(value)
+
+    return ", ".join(f"{name}={text(defaults[name])}" for name in (defaults if names is None else names))
 
 
 def _shown(value):

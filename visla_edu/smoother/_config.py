@@ -6,7 +6,8 @@ import numpy as np
 
 from visla_edu.filters._config import MAX_IMU_LAG
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "as_smoother_config", "parse_setting"]
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "as_smoother_config", "parse_setting",
+           "settings_help"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
 LOSSES = ("cauchy", "huber", "none")
@@ -279,3 +280,19 @@ def _positive_per_axis(name, value):
     if sigma.shape not in ((), (3,)) or not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
         raise ValueError(f"SmootherConfig.{name} must be a positive number or three of them (x, y, z), got {value!r}")
     return float(sigma) if sigma.ndim == 0 else tuple(float(x) for x in sigma)
+
+
+def settings_help():
+    """``visla-edu run --help``'s list: every ``--set`` and ``--smoother-set`` name with its default.
+
+    Returns
+    -------
+    str
+        The :class:`~visla_edu.filters.FilterConfig` settings, then the smoother's own
+        (:data:`OWN_SETTINGS`), as ``name=default`` (:func:`visla_edu.filters._settings.defaults_text`).
+    """
+    from visla_edu.filters import FilterConfig, _settings
+
+    return (f"--set NAME=VALUE, the settings and their defaults: {_settings.defaults_text(FilterConfig)}. "
+            "--smoother-set NAME=VALUE (smooth, window; noise and lag come from --set), the settings and their "
+            f"defaults: {_settings.defaults_text(SmootherConfig, OWN_SETTINGS)}.")
