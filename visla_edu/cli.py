@@ -119,7 +119,7 @@ def _add_run_parser(sub, common):
                      help="use every N-th landmark only (default 1: all; as --set landmark_stride=N)")
     run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
                      help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
-                          "booleans are true/false, ranges are enforced")
+                          "booleans are true/false (or 1/0, yes/no), ranges are enforced")
     run.add_argument("--smoother-set", action="append", default=[], type=_smoother_setting, metavar="NAME=VALUE",
                      help="with --mode smooth or window: a smoother setting of its own, e.g. window_size=40 (repeatable)")
     run.add_argument("--out", default=None, type=_path, help="save the result (.npz)")
