@@ -1,6 +1,6 @@
 """Tests for visla_edu.camera: stereo matrix, projection, Jacobians, triangulation.
 
-Model under test (DESIGN.md): ``z = Ks pi(cam_T_imu inv(world_T_imu) m)`` with
+Model under test (visla_edu.camera): ``z = Ks pi(cam_T_imu inv(world_T_imu) m)`` with
 ``Ks = [[fsu,0,cu,0],[0,fsv,cv,0],[fsu,0,cu,-fsu*b],[0,fsv,cv,0]]``, ``pi(q) = q / q3``
 and the right perturbation ``world_T_imu = mu exp(delta^)``.
 

@@ -1,7 +1,7 @@
 """Tests of the filter modes (visla_edu.filters) and their driver (visla_edu.run).
 
 The key test: the active-set joint EKF and the textbook dense joint EKF give the same pose
-trajectory to rounding error (DESIGN.md, "The joint EKF, fast and exact: the active set").
+trajectory to rounding error (README, "Speed and BLAS threads": the active set).
 """
 
 import dataclasses

@@ -1,6 +1,6 @@
 """Tests for visla_edu.lie: hat/vee, SO(3)/SE(3) exp/log, inverse, adjoint, curly-hat, odot.
 
-Conventions under test (DESIGN.md): twist ``u = [v; w]`` (linear first),
+Conventions under test (README, "Conventions"): twist ``u = [v; w]`` (linear first),
 ``twist_hat(u) = [[hat(w), v], [0, 0]]``, right perturbation ``T = mu exp(delta^)``,
 ``F = exp(-tau curlyhat(u)) = Ad(exp(-tau u^))``, ``s^odot = [[I, -s^], [0, 0]]``.
 

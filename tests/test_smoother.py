@@ -1,6 +1,6 @@
 """Tests for visla_edu.smoother: Jacobians, the Schur/envelope solver, marginals, convergence.
 
-Conventions under test (DESIGN.md): twist ``u = [v; w]``, poses ``world_T_imu``, right
+Conventions under test (README, "Conventions"): twist ``u = [v; w]``, poses ``world_T_imu``, right
 perturbation ``T = mu exp(delta^)``; motion residual ``e_t = log(exp(-tau u^) T_t^{-1} T_{t+1})``.
 Every analytic Jacobian is checked against finite differences (tests/fdiff.py).
 """
