@@ -17,8 +17,9 @@ Drives:
   tracks (the stand-in's real IMU drive, two IMU noise levels);
 * for the course files without ground truth (03, 0022) the gated share and the runtime.
 
-Run: ``python benchmarks/bench_accuracy.py [--quick]`` with ``VISLA_EDU_DATA`` set (drives
-whose files are absent are skipped). Calibrations are cached in a temporary folder.
+Run: ``python benchmarks/bench_accuracy.py [--quick] [--only {0020,segments,sim,standin,course}]``
+with ``VISLA_EDU_DATA`` set (drives whose files are absent are skipped). Calibrations are cached
+in a new temporary folder, unless ``VISLA_EDU_CACHE`` names one.
 """
 
 import argparse
