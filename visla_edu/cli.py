@@ -124,7 +124,7 @@ def _add_run_parser(sub, common):
                      help="with --mode smooth or window: a smoother setting of its own, e.g. window_size=40 (repeatable)")
     run.add_argument("--out", default=None, type=_path, help="save the result (.npz)")
     run.add_argument("--plot", default=None, type=_path,
-                     help="save a top-down figure of trajectory and map (.png, .pdf, .svg)")
+                     help="save a top-down figure of trajectory and map (.png, .pdf, .svg or another matplotlib format)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
                      help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
