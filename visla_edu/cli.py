@@ -27,6 +27,7 @@ import traceback
 import warnings
 from pathlib import Path
 
+from visla_edu import _options
 from visla_edu.codes import RUN_MODES, RUN_MODES_HELP, SLAM, SMOOTHER_MODES
 
 __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
@@ -86,7 +87,7 @@ def build_parser():
     debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
     common = _Parser(add_help=False, parents=[debug])
-    common.add_argument("--data-dir", default=None, type=_path,
+    common.add_argument("--data-dir", default=None, type=_options.path,
                         help="folder with the course files (default: $VISLA_EDU_DATA, else ./data)")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -98,69 +99,55 @@ def build_parser():
     _add_run_parser(sub, common)
 
     stepper = sub.add_parser("stepper", parents=[common], help="serve the interactive filter stepper with Voila")
-    stepper.add_argument("--port", type=_port, default=8866, help="TCP port of the page (default 8866)")
+    stepper.add_argument("--port", type=_options.port, default=8866, help="TCP port of the page (default 8866)")
     stepper.add_argument("--open", action="store_true", help="open a browser")
 
     release = sub.add_parser("release", parents=[debug], help="generate the student notebooks from the solutions")
-    release.add_argument("--src", default=None, type=_path, help="solutions folder (default: the project's solutions/)")
-    release.add_argument("--dst", default=None, type=_path, help="student folder (default: the project's notebooks/)")
+    release.add_argument("--src", default=None, type=_options.path, help="solutions folder (default: the project's solutions/)")
+    release.add_argument("--dst", default=None, type=_options.path, help="student folder (default: the project's notebooks/)")
     release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
     return parser
 
 
 def _add_run_parser(sub, common):
-    run = sub.add_parser("run", parents=[common], help="run a filter over a dataset", epilog=_settings_help)
+    run = sub.add_parser("run", parents=[common], help="run a filter over a dataset", epilog=_options.settings_help)
     run.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     run.add_argument("--mode", default=SLAM, choices=RUN_MODES, help=RUN_MODES_HELP)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--force", action="store_true",
                      help="run even when the estimated memory or time exceeds the limits (2 GiB, 15 min)")
-    run.add_argument("--landmark-stride", type=_stride, default=None, metavar="N",
+    run.add_argument("--landmark-stride", type=_options.stride, default=None, metavar="N",
                      help="use every N-th landmark only (default 1: all; as --set landmark_stride=N)")
-    run.add_argument("--set", action="append", default=[], type=_setting, metavar="NAME=VALUE",
+    run.add_argument("--set", action="append", default=[], type=_options.setting, metavar="NAME=VALUE",
                      help="override a FilterConfig setting, e.g. --set sigma_pixel=2 (repeatable); "
                           "booleans are true/false (or 1/0, yes/no), ranges are enforced")
-    run.add_argument("--smoother-set", action="append", default=[], type=_smoother_setting, metavar="NAME=VALUE",
+    run.add_argument("--smoother-set", action="append", default=[], type=_options.smoother_setting,
+                     metavar="NAME=VALUE",
                      help="with --mode smooth or window: a smoother setting of its own, e.g. window_size=40 (repeatable)")
-    run.add_argument("--out", default=None, type=_path, help="save the result (.npz)")
-    run.add_argument("--plot", default=None, type=_path,
+    run.add_argument("--out", default=None, type=_options.path, help="save the result (.npz)")
+    run.add_argument("--plot", default=None, type=_options.path,
                      help="save a top-down figure of trajectory and map (.png, .pdf, .svg or another matplotlib format)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
-    run.add_argument("--blas-threads", type=_blas_threads, default=1, metavar="N",
+    run.add_argument("--blas-threads", type=_options.blas_threads, default=1, metavar="N",
                      help="BLAS threads while the filter runs (default 1, fastest for its small matrices; "
                           "'none' leaves numpy's setting alone)")
-    run.add_argument("--ground-truth", default=None, type=_path, metavar="FILE",
+    run.add_argument("--ground-truth", default=None, type=_options.path, metavar="FILE",
                      help="KITTI odometry poses (poses/NN.txt: left-camera poses, row i = frame i) to report ATE and "
                           "drift against (automatic for a registered drive such as 0020)")
-    run.add_argument("--ground-truth-times", default=None, type=_path, metavar="FILE",
+    run.add_argument("--ground-truth-times", default=None, type=_options.path, metavar="FILE",
                      help="KITTI times.txt of the ground truth, checked against the dataset's time stamps")
-    run.add_argument("--trajectory-out", default=None, type=_path, metavar="FILE",
+    run.add_argument("--trajectory-out", default=None, type=_options.path, metavar="FILE",
                      help="write the estimated trajectory: .kitti or .txt (KITTI, 12 numbers per row) or .tum "
                           "(TUM: t x y z qx qy qz qw)")
     _add_frames_option(run)
 
 
 def _add_frames_option(parser):
-    parser.add_argument("--frames", default=None, type=_frames, metavar="START:STOP",
+    parser.add_argument("--frames", default=None, type=_options.frames, metavar="START:STOP",
                         help="use frames START..STOP-1 only, as a drive of their own (its ground truth starts at "
                              "frame START); either end may be left out, e.g. 0:300 or 500:")
 
 
-def _settings_help():
-    """The epilog of ``run --help`` (:func:`visla_edu.smoother.settings_help`), imported only when asked."""
-    from visla_edu.smoother import settings_help
-    return settings_help()
-
-
-def _frames(text):
-    """``--frames START:STOP``: ``(start, stop)``, ``start`` 0 and ``stop`` None when left out."""
-    parts = text.split(":")
-    expected = f"START:STOP frame indices such as 0:300, 500: or :300, got {text!r}"
-    if len(parts) != 2:
-        raise argparse.ArgumentTypeError(f"expected {expected}")
-    start = _integer_in(parts[0], 0, 10**9, expected) if parts[0].strip() else 0
-    stop = _integer_in(parts[1], 0, 10**9, expected) if parts[1].strip() else None
-    return start, stop
 
 
 def _select_frames(dataset, frames, truth_option=None):
@@ -218,70 +205,11 @@ def _segment_truth_checked(dataset, segment, start, stop, truth_option):
     return dataclasses.replace(segment, ground_truth=None)
 
 
-def _integer_in(text, low, high, expected):
-    """``int(text)`` if it lies in ``[low, high]``, else argparse's error naming ``expected``."""
-    try:
-        n = int(text)
-    except ValueError:
-        n = low - 1
-    if not low <= n <= high:
-        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
-    return n
 
 
-def _blas_threads(text):
-    """``--blas-threads`` value: a positive integer or ``none``."""
-    if text.strip().lower() == "none":
-        return None
-    return _integer_in(text, 1, 4096, "a positive integer or 'none'")
 
 
-def _path(text):
-    """A file or folder option's value: any non-empty path (an empty one is usually an unset variable)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError(f"empty path {text!r} (an unset shell variable?); give a file or folder "
-                                         "name, or leave the option out")
-    return text
 
-
-def _port(text):
-    """``--port`` value: a TCP port, 1 to 65535."""
-    return _integer_in(text, 1, 65535, "a TCP port number from 1 to 65535")
-
-
-def _setting(text):
-    """``--set NAME=VALUE``: ``(name, value)`` parsed strictly by the setting's declaration."""
-    from visla_edu.filters import FilterConfig, _settings
-
-    if text.strip().lower().startswith("blas_threads"):
-        raise argparse.ArgumentTypeError(f"{text!r}: blas_threads is not a filter setting; use --blas-threads N "
-                                         "(or --blas-threads none)")
-    try:
-        name, value = _settings.parse_setting(FilterConfig, text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(str(err)) from None
-    if name == "extrinsic_correction":
-        from visla_edu.diagnostics import CORRECTIONS
-
-        if value not in ("auto", *CORRECTIONS):
-            raise argparse.ArgumentTypeError(f"extrinsic_correction must be 'auto' or one of {list(CORRECTIONS)}, "
-                                             f"got {value!r}")
-    return name, value
-
-
-def _smoother_setting(text):
-    """``--smoother-set NAME=VALUE``: ``(name, value)`` (:func:`visla_edu.smoother.parse_setting`)."""
-    from visla_edu import smoother
-
-    try:
-        return smoother.parse_setting(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(str(err)) from None
-
-
-def _stride(text):
-    """``--landmark-stride N``: as ``--set landmark_stride=N``."""
-    return _setting(f"landmark_stride={text}")[1]
 
 
 def _cmd_info(args):
