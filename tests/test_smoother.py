@@ -388,6 +388,7 @@ def test_config_rejects_bad_values_naming_the_field(field, value):
 @pytest.mark.parametrize("text, expected", [
     ("window_size=40", ("window_size", 40)), (" loss = Huber ", ("loss", "huber")),
     ("pose_covariance=false", ("pose_covariance", False)), ("loss_scale=2", ("loss_scale", 2.0)),
+    ("landmark_covariance=No", ("landmark_covariance", False)), ("pose_covariance=1", ("pose_covariance", True)),
     ("window_mode=marginalize", ("window_mode", "marginalize")),
 ])
 def test_parse_setting_reads_a_value_as_its_setting_type(text, expected):
@@ -397,7 +398,7 @@ def test_parse_setting_reads_a_value_as_its_setting_type(text, expected):
 
 @pytest.mark.parametrize("text, message", [
     ("window_size", "expected NAME=VALUE"), ("window_size=2.5", "expected an integer"),
-    ("pose_covariance=yes", "expected true or false"), ("loss_scale=nan", "SmootherConfig.loss_scale"),
+    ("pose_covariance=maybe", "expected true or false"), ("loss_scale=nan", "SmootherConfig.loss_scale"),
     ("window_mode=drop", "SmootherConfig.window_mode"), ("imu_lag=1", "comes from the filter's settings"),
     ("blas_threads=2", "'blas_threads' is not a smoother setting"),
 ])

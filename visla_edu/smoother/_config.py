@@ -212,7 +212,7 @@ def parse_setting(pair):
     """``"NAME=VALUE"`` -> ``(name, value)`` for one of :data:`OWN_SETTINGS`, checked as a SmootherConfig would.
 
     The value is read by the type of the setting's default: an integer, a number, ``true`` /
-    ``false``, or a word (lower case).
+    ``false`` (also ``1/0``, ``yes/no``, as ``--set``), or a word (lower case).
 
     Parameters
     ----------
@@ -244,7 +244,7 @@ def parse_setting(pair):
 
 def _parse_like(name, text, default):
     """``text`` read as the type of ``default`` (bool, int, float or str), or a ValueError naming ``name``."""
-    words = {"true": True, "false": False}
+    words = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}  # as --set's
     try:
         if isinstance(default, bool):
             return words[text.lower()]
@@ -253,7 +253,7 @@ def _parse_like(name, text, default):
         if isinstance(default, float):
             return float(text)
     except (KeyError, ValueError):
-        kind = "true or false" if isinstance(default, bool) else "an integer" if isinstance(default, int) else "a number"
+        kind = "true or false (also 1/0, yes/no)" if isinstance(default, bool) else "an integer" if isinstance(default, int) else "a number"
         raise ValueError(f"{name}={text!r}: expected {kind}") from None
     return text.lower()
 
