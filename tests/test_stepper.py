@@ -307,3 +307,35 @@ def test_dataset_choices_list_available_and_small_simulations(data_dir):
     labels = dict((name, label) for label, name in dataset_choices(data_dir))
     if "10" in names and not (data_dir / "10.npz").is_file():
         assert "STAND-IN" in labels["10"]
+
+
+
+_SIGTERM_CHILD = """
+import os, signal, subprocess, time
+from visla_edu.stepper import app
+
+class FakeVoila:
+    def __init__(self, cmd, **options):
+        self.cmd, self.terminated, self.waits = cmd, False, 0
+    def wait(self, timeout=None):
+        self.waits += 1
+        if self.waits == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)  # the handler interrupts this
+        return 0
+    def terminate(self):
+        self.terminated = True
+
+subprocess.Popen = FakeVoila
+proc = app.serve(port=18999, wait=True)
+print(proc.terminated, proc.waits, signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)
+"""
+
+
+def test_serve_stops_voila_on_sigterm_as_on_ctrl_c():
+    """``visla-edu stepper`` killed with SIGTERM (``kill``) stops its Voila child instead of
+    leaving it serving, and puts the default SIGTERM handling back (run in a child process:
+    without the handler, SIGTERM ends it)."""
+    child = subprocess.run([sys.executable, "-c", _SIGTERM_CHILD], capture_output=True, text=True, timeout=60)
+    assert child.returncode == 0, f"the serving process died (status {child.returncode}): {child.stderr[-500:]}"
+    assert child.stdout.split() == ["True", "2", "True"]

@@ -8,6 +8,7 @@ The page is ``visla_edu/stepper_app.ipynb`` (package data), one cell that shows 
 
 import importlib.util
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -42,7 +43,8 @@ def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None,
     mode : str, optional
         Filter mode the page opens with (default ``"slam"``), via ``VISLA_EDU_STEPPER_MODE``.
     wait : bool
-        Block until the server exits (Ctrl-C stops it); otherwise return at once.
+        Block until the server exits (Ctrl-C or a SIGTERM, e.g. ``kill``, stops it, never
+        leaving Voila running behind); otherwise return at once.
     **popen_options
         Passed to :class:`subprocess.Popen` (e.g. ``stdout=``, ``stderr=`` to capture the log).
 
@@ -72,9 +74,30 @@ def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None,
         raise RuntimeError("the stepper page needs Voila: pip install voila")
     proc = subprocess.Popen(cmd, env=env, cwd=str(notebook.parent), **popen_options)
     if wait:
-        try:
-            proc.wait()
-        except KeyboardInterrupt:
-            proc.terminate()
-            proc.wait(timeout=10)
+        _wait_and_stop(proc)
     return proc
+
+
+def _interrupt(signum, frame):
+    """SIGTERM handler while the server runs: stop as Ctrl-C does."""
+    raise KeyboardInterrupt
+
+
+def _wait_and_stop(proc):
+    """Wait for the Voila process; on Ctrl-C or SIGTERM stop it (killed if it lingers 10 s)."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+    except ValueError:  # not the main thread: signals cannot be handled here
+        previous = None
+    try:
+        proc.wait()
+    except KeyboardInterrupt:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
