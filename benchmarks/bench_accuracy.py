@@ -19,7 +19,7 @@ Drives:
 
 Run: ``python benchmarks/bench_accuracy.py [--quick] [--only {0020,segments,sim,standin,course}]``
 with ``VISLA_EDU_DATA`` set (drives whose files are absent are skipped). Calibrations are cached
-in a new temporary folder, unless ``VISLA_EDU_CACHE`` names one.
+in a new temporary folder (removed at the end), unless ``VISLA_EDU_CACHE`` names one.
 """
 
 import argparse
@@ -137,7 +137,19 @@ def main(argv=None):
     parser.add_argument("--only", choices=("0020", "segments", "sim", "standin", "course"), default=None,
                         help="run one group of drives")
     args = parser.parse_args(argv)
-    os.environ.setdefault("VISLA_EDU_CACHE", tempfile.mkdtemp(prefix="visla-edu-bench-cache-"))
+    if "VISLA_EDU_CACHE" in os.environ:
+        run_groups(args)
+        return
+    with tempfile.TemporaryDirectory(prefix="visla-edu-bench-cache-") as cache:  # removed afterwards
+        os.environ["VISLA_EDU_CACHE"] = cache
+        try:
+            run_groups(args)
+        finally:
+            del os.environ["VISLA_EDU_CACHE"]
+
+
+def run_groups(args):
+    """Print the tables of the groups ``args.only`` selects (all by default)."""
     available = data.available(args.data_dir)
     all_modes = FILTER_MODES + SMOOTHER_MODES
     if "0020" in available and args.only in (None, "0020"):
@@ -156,10 +168,11 @@ def main(argv=None):
         for noise in ((0.2, 0.02), (0.05, 0.005)):
             print_table(f"dataset-10-like (3026 frames), 03's flipped axes, 5% random outlier tracks, IMU noise {noise}",
                         *evaluate(standin_like(args.data_dir, noise), ("slam", "smooth")))
-    print("\ncourse files without ground truth:")
-    for name in ("03", "0022"):
-        if name in available and args.only in (None, "course"):
-            gated_and_time(name, args.data_dir)
+    course = [name for name in ("03", "0022") if name in available and args.only in (None, "course")]
+    if course:
+        print("\ncourse files without ground truth:")
+    for name in course:
+        gated_and_time(name, args.data_dir)
 
 
 if __name__ == "__main__":
