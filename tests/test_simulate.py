@@ -527,6 +527,15 @@ def test_course_standin_takes_a_seed_and_harder_settings_and_keeps_the_file_cali
     assert d.ground_truth.outlier.any()
 
 
+def test_course_standin_source_says_which_extrinsic_simulated_its_tracks(tmp_path):
+    """Not the internal "given by the caller": the user never gave one."""
+    imu, _, drive = _fake_inputs(tmp_path)
+    imu.rename(tmp_path / "10_imu_only.npz")
+    save_course_file(drive, tmp_path / "03.npz")
+    d = course_standin10(tmp_path, seed=0, num_landmarks=100)
+    assert "03's corrected imu_T_cam (the physical rig" in d.source and "given by the caller" not in d.source
+
+
 def test_course_standin_errors_name_the_missing_file_and_the_fixed_extrinsic(tmp_path):
     with pytest.raises(FileNotFoundError, match="course_standin10: 10_imu_only.npz and 03.npz not in"):
         course_standin10(tmp_path)

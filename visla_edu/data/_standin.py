@@ -123,13 +123,18 @@ def course_standin10(data_dir=None, seed=0, **overrides):
     calibration = load_npz(directory / "03.npz")
     physical_imu_T_cam, _ = diagnostics.resolve_extrinsics(calibration, "auto")
     dataset = standin_dataset10(directory / "10_imu_only.npz", directory / "03.npz", seed=seed,
-                                imu_T_cam=physical_imu_T_cam, **overrides)
+                                imu_T_cam=physical_imu_T_cam, extrinsic_note=PHYSICAL_RIG_NOTE, **overrides)
     dataset.imu_T_cam = calibration.imu_T_cam.copy()
     dataset.extra["simulated_imu_T_cam"] = physical_imu_T_cam
     return dataset
 
 
-def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, **overrides):
+#: How the stand-in's source line names the extrinsic its tracks were simulated with.
+PHYSICAL_RIG_NOTE = ("tracks simulated with 03's corrected imu_T_cam (the physical rig; the file's uncorrected "
+                     "one is reported, as 03.npz does)")
+
+
+def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, extrinsic_note=None, **overrides):
     """The STAND-IN for course dataset 10: its real IMU drive with simulated stereo tracks.
 
     The real feature file ``10.npz`` is not available. The measured velocities of
@@ -155,6 +160,8 @@ def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, *
     seed : int
     imu_T_cam : array_like, shape (4, 4), optional
         Use this extrinsic instead of the file's (e.g. a corrected one).
+    extrinsic_note : str, optional
+        What the source line says of ``imu_T_cam`` (default: "imu_T_cam given by the caller").
     **overrides
         :class:`~visla_edu.simulate.SimulationConfig` fields (``K``, ``b`` too); the motion
         fields and ``num_frames`` do not apply (the file decides).
@@ -185,7 +192,8 @@ def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, *
         overrides["imu_T_cam"] = imu_T_cam
     config = simulate.make_config("course", num_frames=len(time_stamps), **overrides)
     calibration = _read_calibration(calibration_path, need_extrinsic=imu_T_cam is None)
-    extrinsic = "imu_T_cam given by the caller" if imu_T_cam is not None else f"imu_T_cam from {calibration_path}"
+    extrinsic = (extrinsic_note or "imu_T_cam given by the caller") if imu_T_cam is not None \
+        else f"imu_T_cam from {calibration_path}"
     return simulate.simulate_along_drive(
         time_stamps, true_v, true_w, config, calibration, seed,
         name="10-standin",
