@@ -154,6 +154,16 @@ def _se3_v_only(u):
     return T
 
 
+def _se3_v_transposed(u):
+    """V with the wrong sign of its hat(w) term, I - B hat(w) + C hat(w)^2 = V^T."""
+    u = np.asarray(u, dtype=float)
+    v, w = u[:3], u[3:]
+    _, B, C = A._coefficients(float(w @ w))
+    T = A.se3_exp(u)
+    T[:3, 3] = (np.eye(3) - B * A.hat(w) + C * A.hat(w) @ A.hat(w)) @ v
+    return T
+
+
 def _se3_bad_bottom(u):
     T = A.se3_exp(u)
     T[3, 3] = 0.0
@@ -185,6 +195,9 @@ def test_kinematics_checks(capsys):
     _fails(checks.check_se3_exp, lambda u: A.se3_exp(-u), "inverse pose")
     _fails(checks.check_se3_exp, lambda u: A.se3_inv(A.se3_exp(u)), "inverse pose")
     _fails(checks.check_se3_exp, _se3_v_only, "V v")
+    _fails(checks.check_se3_exp, _se3_v_only, "translation is v,")
+    # first wrong at a tiny angle, where V^T v, v and V v nearly coincide: named as V^T, not as v
+    _fails(checks.check_se3_exp, _se3_v_transposed, "you used V^T")
     _fails(checks.check_se3_exp, _se3_naive, "NaN")
     _fails(checks.check_se3_exp, _se3_bad_bottom, "bottom row")
 
@@ -664,6 +677,21 @@ def test_long_first_lines_are_wrapped():
     first, rest = str(err).split("\n", 1)
     assert len(first) <= 79 and first.startswith("average_nees_bounds: a hint")
     assert rest.endswith("the details") and "too long" in rest
+
+
+def test_compare_names_the_closest_mistake_not_the_first_that_matches_loosely():
+    """Where mistakes nearly coincide (tiny angles), the first loose match is not the mistake."""
+    from visla_edu.checks._core import compare
+
+    expected = np.array([1.0, 2.0])
+    got = expected + [3e-7, 0.0]  # wrong (beyond 1e-7 relative) but within the loose match of all below
+    variants = [("far mistake", lambda: expected + [6e-7, 0.0]), ("exact mistake", lambda: got.copy()),
+                ("also exact", lambda: got.copy())]
+    with pytest.raises(AssertionError, match="^f: exact mistake"):
+        compare("f", got, expected, "here", variants)
+    # a mistake no closer to the answer than the right one names nothing
+    with pytest.raises(AssertionError, match="^f: wrong values"):
+        compare("f", got, expected, "here", [("no better than right", lambda: expected - [3e-7, 0.0])])
 
 
 def test_student_or_reference(capsys):

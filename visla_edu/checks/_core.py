@@ -372,30 +372,36 @@ def close(a, b, rtol, atol):
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=rtol, atol=atol, equal_nan=True))
 
 
+def _distance(a, b):
+    """Largest absolute difference of two same-shaped arrays (inf if they differ in shape or NaN)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape:
+        return np.inf
+    difference = np.abs(a - b)
+    return float(np.max(difference, initial=0.0)) if np.all(np.isfinite(difference)) else np.inf
+
+
 def _matching_variant(got, variants, rtol, atol, expected=None):
     """The hint of the deliberate mistake whose output equals ``got`` (or None).
 
-    Where several match within the tolerance (at inputs too small to tell them apart, e.g. a
-    rotation of 1e-6 rad), the first one that ``got`` is at least ten times closer to than to
-    ``expected`` wins; else the first one that matches.
+    Where several mistakes nearly coincide (at a tiny angle ``R^T``, ``V^T v`` and ``v`` are all
+    within the matching tolerance of one another and of the right answer), the first match is
+    not the mistake: the variant closest to ``got`` wins (the first of equally close ones), and
+    only if ``got`` is closer to it than to ``expected``.
     """
-    matched = []
+    best, best_distance = None, np.inf
     for hint, variant in variants:
         try:
             wrong = variant()
         except Exception:  # noqa: BLE001 - a variant that cannot be computed just does not match
             continue
         if close(got, wrong, max(rtol, 1e-6), max(atol, 1e-8)):
-            if expected is None or _distance(got, wrong) <= 0.1 * _distance(got, expected):
-                return hint
-            matched.append(hint)
-    return matched[0] if matched else None
-
-
-def _distance(a, b):
-    """Largest entry of ``|a - b|`` (NaN entries ignored), for arrays of one shape."""
-    difference = np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))
-    return float(np.nanmax(difference)) if np.any(np.isfinite(difference)) else 0.0
+            distance = _distance(got, wrong)
+            if distance < best_distance:
+                best, best_distance = hint, distance
+    if best is not None and expected is not None and not best_distance < _distance(got, expected):
+        return None
+    return best
 
 
 def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_hint="", extra=None):
@@ -417,9 +423,10 @@ def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_h
     where : str
         The input, e.g. ``"for w = [1, 2, 3]"`` (second line of the message).
     variants : sequence of (hint, callable)
-        Each callable returns the output of one deliberate mistake on the same input; the
-        first that matches ``got`` names the mistake. A hint's first line is short. A
-        variant that raises is skipped; the match uses at least ``rtol = 1e-6`` and
+        Each callable returns the output of one deliberate mistake on the same input; a
+        variant that matches ``got`` names the mistake (of several, the closest to ``got``,
+        and only if ``got`` is closer to it than to ``expected``). A hint's first line is
+        short. A variant that raises is skipped; the match uses at least ``rtol = 1e-6`` and
         ``atol = 1e-8``.
     rtol : float
         Relative tolerance of the agreement.

@@ -200,12 +200,19 @@ def _se3_with_translation(u, translation):
     return T
 
 
-def _swapped_v(w, swap=True):
-    """``V`` of SO(3) with (swap=True) its two coefficients exchanged: the mistake; swap=False: V itself."""
+def _swapped_v(w):
+    """``V`` of SO(3) with its two coefficients exchanged (the mistake)."""
     t = np.linalg.norm(w)
     a, b = ((1 - np.cos(t)) / t**2, (t - np.sin(t)) / t**3) if t > 1e-3 else (0.5 - t**2 / 24, 1 / 6 - t**2 / 120)
     W = lie.hat(w)
-    return np.eye(3) + (b * W + a * W @ W if swap else a * W + b * W @ W)
+    return np.eye(3) + b * W + a * W @ W
+
+
+def _se3_jacobian_transposed(u):
+    """The translation ``V^T v`` (the sign of V's hat(w) term flipped): ``V(w)^T = V(-w)``."""
+    T = lie.se3_exp(u)
+    T[:3, 3] = lie.se3_exp(np.concatenate([u[:3], -u[3:]]))[:3, 3]
+    return T
 
 
 def _check_tiny_twist(name, T, u):
@@ -228,8 +235,8 @@ def check_se3_exp(se3_exp, hidden=False):
     :func:`~visla_edu.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
     at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``V v`` to relative
     accuracy 1e-12 of ``|v|`` and the rotation as there. Recognises the twist order ``[w; v]``,
-    the inverse pose, the translation ``v`` instead of ``V v``, a transposed rotation block, NaN
-    near 0 and a result that is not a pose.
+    the inverse pose, the translation ``v`` instead of ``V v`` or ``V^T v``, a transposed rotation
+    block, NaN near 0 and a result that is not a pose.
 
     Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the smoother's SE(3) right
     Jacobian and its inverse and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
@@ -271,8 +278,8 @@ def check_se3_exp(se3_exp, hidden=False):
              lambda: _se3_with_translation(u, ref[:3, :3] @ u[:3])),
             ("V's two coefficients are swapped\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, _swapped_v(u[3:]) @ u[:3])),
-            ("V is transposed (the right Jacobian of SO(3)): use V = I + (1 - cos t)/t^2 hat(w) + ...",
-             lambda: _se3_with_translation(u, _swapped_v(u[3:], swap=False).T @ u[:3])),
+            ("V's hat(w) term has the wrong sign (you used V^T)\nV = I + (1 - cos t)/t^2 hat(w) + "
+             "(t - sin t)/t^3 hat(w)^2, with a plus before the hat(w) term", lambda: _se3_jacobian_transposed(u)),
             ("the rotation block is transposed (R^T instead of R)",
              lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
         ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_se3)
