@@ -76,6 +76,14 @@ def test_data_checks(capsys):
            "transposed")
     _fails(checks.check_observations_at,
            lambda f, t: (A.observations_at(f, t)[0], A.observations_at(f, t)[1][:, [0, 2, 1, 3]]), "[uL, vL, uR, vR]")
+    # pixels stacked row by row: np.array([]) of an empty frame has shape (0,); the message says so
+    def stacked(f, t):
+        ids = A.observations_at(f, t)[0]
+        return ids, np.array([f[:, i, t] for i in ids])
+
+    message = _fails(checks.check_observations_at, stacked, "wrong shape of the pixels z")
+    assert "an empty frame gives ids of shape (0,) and z of shape (0, 4)" in message.replace("\n", " ")
+    assert "at frame 0, where 0 landmarks are observed" in message
     _fails(checks.check_track_spans, _spans_argmax, "never observed")
     _fails(checks.check_track_spans, _spans_exclusive, "off by one")
     _fails(checks.check_track_spans, lambda f: A.track_spans(f)[:, ::-1], "swapped")
