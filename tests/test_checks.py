@@ -671,6 +671,27 @@ def test_crashing_function_gives_assertion(check):
     assert len(_first_line(info.value)) <= 79
 
 
+def test_an_answer_calling_an_unfinished_exercise_names_that_exercise():
+    """pose_jacobian written with the student's odot, still a stub: the message names odot."""
+    def odot(s):
+        raise NotImplementedError("odot: write your solution here")
+
+    def pose_jacobian(Ks, cam_T_imu, mu, m):
+        s = A.se3_inv(mu) @ np.r_[m, 1.0]
+        q = cam_T_imu @ s
+        return -Ks @ A.projection_jacobian(q) @ cam_T_imu @ odot(s)
+
+    with pytest.raises(NotImplementedError) as info:
+        checks.check_pose_jacobian(pose_jacobian)
+    first, rest = str(info.value).split("\n", 1)
+    assert first == "pose_jacobian calls odot, which is not implemented yet"
+    assert "write odot first" in rest and "odot: write your solution here" in rest
+    assert all(len(line) <= 79 for line in str(info.value).split("\n"))
+    # the stub of the exercise itself still says so
+    with pytest.raises(NotImplementedError, match="^pose_jacobian is not implemented yet"):
+        checks.check_pose_jacobian(_stub)
+
+
 def test_checks_are_deterministic(capsys):
     checks.check_so3_exp(A.so3_exp)
     first = capsys.readouterr().out

@@ -244,6 +244,23 @@ def _float64(arr, name):
     return arr.astype(float)
 
 
+def _raised_elsewhere(fn, err):
+    """Name of the function that raised ``err``, if it is not ``fn`` itself (else None).
+
+    A student's answer that calls another of their functions still a stub (``pose_jacobian``
+    calling their unfinished ``odot``) is not itself unfinished: the message must name the stub.
+    """
+    code = getattr(getattr(fn, "__func__", fn), "__code__", None)
+    tb = err.__traceback__
+    if code is None or tb is None:
+        return None
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    raised = tb.tb_frame.f_code
+    own = raised is code or raised.co_name == getattr(fn, "__name__", None)  # (or fn wraps it)
+    return None if own else raised.co_name
+
+
 class _Student:
     """The student's function, called with the library's versions hidden and state guarded."""
 
@@ -254,7 +271,14 @@ class _Student:
         """Call the student's function; turn its exceptions into readable failures."""
         try:
             return self.fn(*args, **kwargs)
-        except NotImplementedError:
+        except NotImplementedError as err:
+            other = _raised_elsewhere(self.fn, err)
+            if other:
+                raise NotImplementedError(str(fail(
+                    "", f"{self.name} calls {other}, which is not implemented yet",
+                    f"(it raised NotImplementedError: {err})",
+                    f"write {other} first (or use the library's version where the exercise allows it), "
+                    "run its cell, then run this check again"))) from None
             raise NotImplementedError(
                 f"{self.name} is not implemented yet\nreplace the `raise NotImplementedError` line in "
                 "the exercise cell above with your code, run that cell, then run this check again") from None
