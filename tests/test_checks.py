@@ -374,6 +374,7 @@ def test_mapping_checks(capsys):
     _fails(checks.check_landmark_update, lambda *a: A.landmark_update(*a, flip=True), "z - z_pred")
     _fails(checks.check_landmark_update, lambda *a: A.landmark_update(*a, plus=True), "minus sign")
     _fails(checks.check_landmark_update, lambda m, S, *a: (A.landmark_update(m, S, *a)[0], S), "did not change")
+    _fails(checks.check_landmark_update, lambda *a: A.landmark_update(*a[:-1], a[-1] ** 2), "not noise_var^2")
 
 
 # --------------------------------------------------------------------------- 05 pose
@@ -400,6 +401,16 @@ def test_pose_checks(capsys):
     _fails(checks.check_pose_update, lambda *a: A.pose_update(*a, sign=-1.0), "wrong sign")
     _fails(checks.check_pose_update, lambda mu, S, *a: (mu, A.pose_update(mu, S, *a)[1]), "did not move")
     _fails(checks.check_pose_update, _pose_update_twist_swapped, "twist order")
+    _fails(checks.check_pose_update, lambda *a: A.pose_update(*a[:-1], a[-1] ** 2), "not noise_var^2")
+    _fails(checks.check_pose_update, _pose_update_innovation_by_columns, "not stacked like H")
+
+
+def _pose_update_innovation_by_columns(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var):
+    """H stacked observation by observation, the innovation (z - z_pred).T.ravel(): all uL first."""
+    H = np.concatenate([A.pose_jacobian(Ks, cam_T_imu, mu, m) for m in p_world])
+    K = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(len(H)))
+    delta = K @ (np.asarray(z) - A.project(Ks, cam_T_imu, mu, p_world)).T.ravel()
+    return mu @ A.se3_exp(delta), (np.eye(6) - K @ H) @ Sigma
 
 
 @pytest.mark.parametrize("noise", [lambda r: 4.0, lambda r: r ** 2, np.sqrt], ids=["fixed 4", "squared", "root"])

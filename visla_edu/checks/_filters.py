@@ -36,6 +36,10 @@ def _landmark_update_reference(m, Sigma, z, T, camera, noise_var):
     return m_new[0], S_new[0]
 
 
+_SQUARED_NOISE_HINT = ("noise_var is a variance: S gets noise_var I, not noise_var^2 I\n"
+                       "S = H Sigma H^T + noise_var I; noise_var is already sigma^2 (pixels squared)")
+
+
 def _landmark_mean_variants(m, Sigma, z, T, camera, noise_var):
     flipped_z = 2 * camera.predict(T, m[None])[0] - z
     Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
@@ -47,6 +51,8 @@ def _landmark_mean_variants(m, Sigma, z, T, camera, noise_var):
         ("the innovation must be z - z_pred (observed minus predicted)",
          lambda: _landmark_update_reference(m, Sigma, flipped_z, T, camera, noise_var)[0]),
         ("the mean did not move: add K (z - z_pred)", lambda: m),
+        (_SQUARED_NOISE_HINT,
+         lambda: _landmark_update_with(m, Sigma, z, lie.se3_inv(T), Ks, cam_T_imu, noise_var**2)[0]),
     ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
 
 
@@ -76,7 +82,8 @@ def check_landmark_update(landmark_update, hidden=False):
     and a random prior covariance; ``noise_var = 4`` (hidden: 1). Compares with
     :func:`visla_edu.ekf.landmark_update` (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``,
     ``atol=1e-8``). Recognises a flipped innovation, a mean or covariance that does not change,
-    ``(I + K H) Sigma``, the pixel noise missing from ``S`` and transposed rotations. Hides
+    ``(I + K H) Sigma``, the pixel noise missing from ``S`` or squared (``noise_var^2``) and
+    transposed rotations. Hides
     ``ekf.landmark_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
     ``kalman.update``.
 
@@ -127,14 +134,18 @@ def check_landmark_update(landmark_update, hidden=False):
 
 
 def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_world=None, side="right", sign=1.0,
-                      swap=False):
-    """The visual pose update from its formula; ``imu_T_world`` replaces ``inv(mu)`` (for mistakes)."""
+                      swap=False, order="C"):
+    """The visual pose update from its formula; ``imu_T_world`` replaces ``inv(mu)`` (for mistakes).
+
+    ``order="F"`` stacks the innovation column by column (all uL, then all vL, ...) while ``H``
+    stacks the observations one after the other: a mismatch (for mistakes).
+    """
     imu_T_world = lie.se3_inv(mu) if imu_T_world is None else imu_T_world
     s = np.c_[p_world, np.ones(len(p_world))] @ imu_T_world.T  # (k, 4) landmarks in the IMU frame
     q = s @ cam_T_imu.T
     H = (-Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(s)).reshape(-1, _POSE_DIM)
     gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(len(H)))
-    delta = sign * gain @ (z - cam.projection(q) @ Ks.T).ravel()
+    delta = sign * gain @ (z - cam.projection(q) @ Ks.T).ravel(order=order)
     if swap:  # the correction read as [w; v]
         delta = np.r_[delta[3:], delta[:3]]
     mu_new = mu @ lie.se3_exp(delta) if side == "right" else lie.se3_exp(delta) @ mu
@@ -164,6 +175,10 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
         ("the pose did not move", lambda: mu),
         ("wrong twist order: the correction K r is [v; w] (linear first), as se3_exp expects",
          lambda: _pose_update_with(*args, swap=True)[0]),
+        ("the innovation is not stacked like H: use (z - z_pred).ravel()\n"
+         "H stacks the observations one after the other (4 rows each: uL, vL, uR, vR of observation "
+         "1, then of observation 2, ...); (z - z_pred).T.ravel() or .ravel('F') puts all uL first",
+         lambda: _pose_update_with(*args, order="F")[0]),
     ] + [(_NOISE_HINT, lambda r=r: _pose_update_with(*args[:-1], r)[0])
          for r in (noise_var ** 2, np.sqrt(noise_var), 4.0) if r != noise_var
          ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
@@ -180,7 +195,8 @@ def check_pose_update(pose_update, hidden=False):
     written out in the checks (``H`` stacked over the observations, ``K = Sigma H^T (H Sigma H^T
     + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``; mean ``rtol=1e-6``,
     ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the correction applied
-    on the left, its sign, a pose that does not move, the twist order, transposed rotations, a
+    on the left, its sign, a pose that does not move, the twist order, an innovation stacked
+    column by column (unlike ``H``), transposed rotations, a
     noise variance other than ``noise_var`` (squared, its square root or a fixed 4), a result
     that is not a pose and a covariance that does not change. Hides ``ekf.pose_update``,
     ``ekf.joint_update``, ``ekf.cholesky_update``, ``kalman.update`` and the ``pose_update`` of
