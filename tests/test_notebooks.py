@@ -190,6 +190,46 @@ def test_student_notebook_fails_only_at_stubs(name):
         silent_checks)
 
 
+#: Wrong answers that their check rejects, and the first cell that uses the answer after the check:
+#: (notebook, grade id of the exercise, the wrong answer, id of the last cell to run).
+_REJECTED_ANSWERS = [
+    ("03_jacobians.ipynb", "numerical_jacobian",  # transposed: a (4, 3) Jacobian came back (3, 4)
+     "def numerical_jacobian(f, x, eps=1e-6):\n    x = np.asarray(x, dtype=float)\n"
+     "    return np.stack([(np.asarray(f(x + eps * e)) - np.asarray(f(x - eps * e))) / (2 * eps)"
+     " for e in np.eye(x.size)])", "03-11"),
+    ("04_landmark_mapping.ipynb", "landmark_update",  # world_T_imu where its inverse belongs
+     "def landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var):\n"
+     "    q = cam_T_imu @ world_T_imu @ np.r_[m, 1.0]\n"
+     "    H = Ks @ camera.projection_jacobian(q) @ cam_T_imu @ world_T_imu[:, :3]\n"
+     "    K = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))\n"
+     "    return m + K @ (z - Ks @ camera.projection(q)), (np.eye(3) - K @ H) @ Sigma", "04-12"),
+    ("06_joint_slam.ipynb", "dense_covariance_bytes",  # the stride ignored
+     "def dense_covariance_bytes(num_landmarks, stride=1):\n    return (6 + 3 * num_landmarks) ** 2 * 8", "06-08"),
+]
+
+
+@pytest.mark.parametrize("name, grade_id, wrong, last", _REJECTED_ANSWERS,
+                         ids=[case[1] for case in _REJECTED_ANSWERS])
+def test_an_answer_its_check_rejects_is_not_used_by_the_cells_after_it(name, grade_id, wrong, last):
+    """The later cells fall back on the library (and say so) instead of running a rejected answer."""
+    nb = _read(STUDENT / name)
+    ids = [cell.get("id") for cell in nb.cells]
+    nb.cells = nb.cells[:ids.index(last) + 1]
+    for cell in nb.cells:
+        if _nbgrader(cell).get("grade_id") == grade_id:
+            cell.source = wrong
+    from nbclient import NotebookClient
+
+    NotebookClient(nb, timeout=CELL_TIMEOUT, kernel_name="python3", allow_errors=True,
+                   resources={"metadata": {"path": str(STUDENT)}}).execute()
+    at = next(i for i, c in enumerate(nb.cells) if _nbgrader(c).get("grade_id") == f"check_{grade_id}")
+    assert [e.ename for e in _errors(nb.cells[at])] == ["AssertionError"], f"{grade_id}: the check accepted it"
+    after = [c for c in nb.cells[at + 1:] if c.cell_type == "code"]
+    assert not any(_errors(c) for c in after), f"{name}: {[e.evalue for c in after for e in _errors(c)]}"
+    printed = "".join(o.get("text", "") for c in after for o in c.outputs if o.output_type == "stream")
+    assert f"using the library's {grade_id}" in printed, printed
+
+
 # --------------------------------------------------------------------------- release.py units
 
 
