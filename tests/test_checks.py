@@ -401,7 +401,7 @@ def test_pose_checks(capsys):
     _fails(checks.check_pose_update, lambda *a: A.pose_update(*a, sign=-1.0), "wrong sign")
     _fails(checks.check_pose_update, lambda mu, S, *a: (mu, A.pose_update(mu, S, *a)[1]), "did not move")
     _fails(checks.check_pose_update, _pose_update_twist_swapped, "twist order")
-    _fails(checks.check_pose_update, lambda *a: A.pose_update(*a[:-1], a[-1] ** 2), "not noise_var^2")
+    _fails(checks.check_pose_update, lambda *a: A.pose_update(*a[:-1], a[-1] ** 2), "not the argument noise_var")
     _fails(checks.check_pose_update, _pose_update_innovation_by_columns, "not stacked like H")
 
 
@@ -524,10 +524,10 @@ def _series_v(w, swap):
 
 
 def test_se3_exp_translation_mistakes_are_named():
-    """R v instead of V v, V's coefficients exchanged, and V transposed (the right Jacobian)."""
+    """R v instead of V v, V's coefficients exchanged, and V transposed (the right Jacobian, V^T)."""
     _fails(checks.check_se3_exp, lambda u: _se3_translation(u, A.so3_exp(u[3:])), "translation is R v")
     _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=True)), "coefficients are swapped")
-    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "V is transposed")
+    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "you used V^T")
 
 # --------------------------------------------------------------------------- 08 smoothing
 
@@ -787,7 +787,7 @@ def test_among_mistakes_that_match_the_closest_one_is_named():
     variants = [("first, close only by the tolerance", lambda: expected + 1e-6),
                 ("the very mistake", lambda: got.copy())]
     assert _core._matching_variant(got, variants, 1e-7, 1e-9, expected) == "the very mistake"
-    assert _core._matching_variant(got, variants[:1], 1e-7, 1e-9, expected) == "first, close only by the tolerance"
+    assert _core._matching_variant(got, variants[:1], 1e-7, 1e-9, expected) is None  # no closer than the right one
 
 
 def test_the_reference_gauss_newton_jacobian_matches_finite_differences():
