@@ -104,3 +104,13 @@ def test_the_scan_for_gamed_submissions_finds_nothing_in_the_course():
     for path in notebooks:
         hits = [m.group(0) for m in _scan_pattern().finditer(path.read_text(encoding="utf-8"))]
         assert not hits, f"{path.name}: {hits}"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_each_notebook_states_its_own_points_in_its_time_line(name):
+    """The first cell's "Time" line gives the notebook's points, and they are its graded cells' metadata."""
+    first = nbformat.read(str(SOLUTIONS / f"{name}.ipynb"), as_version=4).cells[0].source
+    time_line = first[first.index("**Time"):].split("\n\n")[0]
+    stated = re.findall(r"\((\d+) points?\)", time_line)
+    points = sum(c.metadata["nbgrader"]["points"] for c in _graded(name))
+    assert stated == [f"{points:g}"], f"{name}: the Time line says {stated} points, the graded cells {points:g}"
