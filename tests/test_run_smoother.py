@@ -128,3 +128,30 @@ def test_dead_reckoning_beside_a_smoother_uses_the_smoothers_lag(tiny):
     settings = smoother.SmootherConfig.from_filter_config(run.resolve_config(tiny, CFG), imu_lag=1)
     r = run.run_smoother(tiny, "window", CFG, smoother_config=settings, progress=False)
     np.testing.assert_allclose(r.dead_reckoning, motion.dead_reckon(tiny.time_stamps, tiny.twists, lag=1))
+
+
+def test_filter_settings_lists_exactly_what_the_smoother_model_reads(tiny):
+    """smoother.FILTER_SETTINGS (what --mode window accepts from --set) is what from_filter_config
+    reads: changing any other filter setting leaves the smoother's model unchanged."""
+    import dataclasses
+
+    from visla_edu import smoother
+
+    base = run.resolve_config(tiny, CFG)
+    changed = {"sigma_pixel": 2.0, "sigma_linear_velocity": 0.3, "sigma_angular_velocity": 0.03, "imu_lag": 1,
+               "min_init_disparity": 5.0, "skip_repeated_frames": False, "landmark_prior_inflation": 3.0,
+               "landmark_prior_sigma": 9.0, "initial_pose_sigma": 0.5, "gate_probability": 0.9,
+               "landmark_cross_covariance": False, "mapping_motion_noise": False, "vio_refine_landmarks": True,
+               "slam_error": "right", "reinit_gated_landmarks": False}
+    fields = {f.name for f in dataclasses.fields(FilterConfig)}
+    assert set(changed) | {"extrinsic_correction", "landmark_stride"} == fields  # a new setting is listed here
+    model = smoother.SmootherConfig.from_filter_config(base)
+    for name, value in changed.items():
+        assert getattr(base, name) != value, name
+        other = smoother.SmootherConfig.from_filter_config(dataclasses.replace(base, **{name: value}))
+        assert (other != model) == (name in smoother.FILTER_SETTINGS), name
+
+
+def test_an_ekf_setting_with_mode_window_is_refused_not_ignored(capsys):
+    assert cli.main(["run", "sim-tiny", "--mode", "window", "--set", "gate_probability=0.9", "--quiet"]) == 2
+    assert "--set gate_probability: --mode window does not use it" in capsys.readouterr().err

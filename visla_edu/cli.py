@@ -275,6 +275,7 @@ def _run_config(args):
         raise ValueError(f"--smoother-set {names[0]}: smoother settings need --mode smooth or window, got --mode {args.mode}")
     if len(set(names)) < len(names):
         raise ValueError(f"--smoother-set: {max(names, key=names.count)} is given twice; give each setting once")
+    _check_window_settings(args)
     settings = {}
     pairs = list(args.set) + ([("landmark_stride", args.landmark_stride)] if args.landmark_stride else [])
     for name, value in pairs:
@@ -283,6 +284,19 @@ def _run_config(args):
                              "give each setting once")
         settings[name] = value
     return FilterConfig(**settings)
+
+
+def _check_window_settings(args):
+    """Refuse a ``--set`` that ``--mode window`` would ignore (an EKF-only setting such as the gate)."""
+    if args.mode != "window":
+        return
+    from visla_edu.smoother import FILTER_SETTINGS
+
+    used = (*FILTER_SETTINGS, "extrinsic_correction", "landmark_stride")
+    for name, _ in args.set:
+        if name not in used:
+            raise ValueError(f"--set {name}: --mode window does not use it (a setting of the EKF); the window reads "
+                             f"{', '.join(used[:-1])} and its own --smoother-set settings")
 
 
 def _run_inputs(args):

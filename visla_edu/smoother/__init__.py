@@ -41,7 +41,8 @@ Modules (private; the public names are re-exported here): ``_config``
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
-from visla_edu.smoother._config import LOSSES, OWN_SETTINGS, WINDOW_MODES, SmootherConfig, parse_setting, settings_help
+from visla_edu.smoother._config import (FILTER_SETTINGS, LOSSES, OWN_SETTINGS, WINDOW_MODES, SmootherConfig,
+                                        parse_setting, settings_help)
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
 from visla_edu.smoother._result import HISTORY_FIELDS, STOP_REASONS, SmootherResult
@@ -54,6 +55,7 @@ __all__ = [
     "LOSSES",
     "WINDOW_MODES",
     "OWN_SETTINGS",
+    "FILTER_SETTINGS",
     "parse_setting",
     "settings_help",
     "STATUS_NAMES",

@@ -6,13 +6,17 @@ import numpy as np
 
 from visla_edu.filters._config import MAX_IMU_LAG
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "as_smoother_config", "parse_setting",
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "FILTER_SETTINGS", "as_smoother_config", "parse_setting",
            "settings_help"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
 LOSSES = ("cauchy", "huber", "none")
 #: What the sliding window does with the states that leave it.
 WINDOW_MODES = ("fix", "marginalize")
+#: The filter settings :meth:`SmootherConfig.from_filter_config` reads (the shared model); the
+#: sliding window uses no other filter setting but ``extrinsic_correction``.
+FILTER_SETTINGS = ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity", "imu_lag", "min_init_disparity",
+                   "skip_repeated_frames")
 #: The settings only the smoothers have (``visla-edu run --smoother-set``); the others (noise,
 #: lag, far points, repeated frames) come from the filter's settings
 #: (:meth:`SmootherConfig.from_filter_config`).
