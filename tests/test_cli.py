@@ -52,6 +52,7 @@ def test_smoother_settings_reach_the_smoother_and_the_result_file(tmp_path, caps
     (["--mode", "slam", "--smoother-set", "window_size=5"], "smoother settings need --mode smooth or window"),
     (["--mode", "window", "--smoother-set", "window_size=5", "--smoother-set", "window_size=6"],
      "window_size is given twice"),
+    (["--mode", "smooth", "--smoother-set", "window_size=5"], "window_size: mode smooth does not use it"),
 ])
 def test_smoother_settings_are_refused_where_they_cannot_apply(argv, message, capsys):
     assert cli.main(["run", "sim-tiny", *argv, "--quiet"]) == 2

@@ -155,3 +155,24 @@ def test_filter_settings_lists_exactly_what_the_smoother_model_reads(tiny):
 def test_an_ekf_setting_with_mode_window_is_refused_not_ignored(capsys):
     assert cli.main(["run", "sim-tiny", "--mode", "window", "--set", "gate_probability=0.9", "--quiet"]) == 2
     assert "--set gate_probability: --mode window does not use it" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("mode, ignored", [("smooth", {"window_size": 3, "window_iterations": 3,
+                                                        "window_mode": "marginalize"}),
+                                           ("window", {"max_iterations": 1, "rejection_rounds": 0,
+                                                       "landmark_covariance": False})])
+def test_batch_only_and_window_only_settings_are_what_the_other_mode_ignores(tiny, mode, ignored):
+    """smoother.WINDOW_ONLY leave the batch unchanged and BATCH_ONLY the window (so refusing
+    them for the other mode refuses only what would be ignored); run_smoother refuses them."""
+    import dataclasses
+
+    from visla_edu import smoother
+
+    model = smoother.SmootherConfig.from_filter_config(run.resolve_config(tiny, CFG))
+    listed = smoother.WINDOW_ONLY if mode == "smooth" else smoother.BATCH_ONLY
+    assert set(ignored) == set(listed)
+    default = run.run_smoother(tiny, mode, CFG, smoother_config=model, progress=False)
+    other = run.run_smoother(tiny, mode, CFG, smoother_config=dataclasses.replace(model, **ignored), progress=False)
+    np.testing.assert_array_equal(other.world_T_imu, default.world_T_imu)
+    with pytest.raises(ValueError, match=f"smoother setting {sorted(ignored)[0]}: mode {mode} does not use it"):
+        run.run_smoother(tiny, mode, CFG, progress=False, smoother_settings={sorted(ignored)[0]: ignored[sorted(ignored)[0]]})

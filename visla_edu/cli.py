@@ -275,6 +275,10 @@ def _run_config(args):
         raise ValueError(f"--smoother-set {names[0]}: smoother settings need --mode smooth or window, got --mode {args.mode}")
     if len(set(names)) < len(names):
         raise ValueError(f"--smoother-set: {max(names, key=names.count)} is given twice; give each setting once")
+    if names:
+        from visla_edu import smoother
+
+        smoother.check_mode_settings(args.mode, names)
     _check_window_settings(args)
     settings = {}
     pairs = list(args.set) + ([("landmark_stride", args.landmark_stride)] if args.landmark_stride else [])

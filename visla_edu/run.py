@@ -369,7 +369,7 @@ def _smoother_settings(config, mode, own=None):
     ValueError
         A filter setting the smoother cannot take (e.g. a velocity noise of 0, which the
         filters accept and the smoother's motion factors cannot weigh), or an ``own`` name
-        that is not one of the smoother's own settings.
+        that is not one of the smoother's own settings or that ``mode`` does not use.
     """
     from visla_edu import smoother
 
@@ -377,6 +377,7 @@ def _smoother_settings(config, mode, own=None):
     if unknown:
         raise ValueError(f"smoother_settings: {unknown} are not the smoother's own settings; they are "
                          f"{', '.join(smoother.OWN_SETTINGS)} (noise and lag come from the filter's config)")
+    smoother.check_mode_settings(mode, own or ())
     smoother.SmootherConfig(**(own or {}))  # a bad value of its own is named as the smoother's
     try:
         return smoother.SmootherConfig.from_filter_config(config, **(own or {}))

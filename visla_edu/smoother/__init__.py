@@ -41,8 +41,9 @@ Modules (private; the public names are re-exported here): ``_config``
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
-from visla_edu.smoother._config import (FILTER_SETTINGS, LOSSES, OWN_SETTINGS, WINDOW_MODES, SmootherConfig,
-                                        parse_setting, settings_help)
+from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, LOSSES, OWN_SETTINGS, WINDOW_MODES,
+                                        WINDOW_ONLY, SmootherConfig, check_mode_settings, parse_setting,
+                                        settings_help)
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
 from visla_edu.smoother._result import HISTORY_FIELDS, STOP_REASONS, SmootherResult
@@ -56,6 +57,9 @@ __all__ = [
     "WINDOW_MODES",
     "OWN_SETTINGS",
     "FILTER_SETTINGS",
+    "BATCH_ONLY",
+    "WINDOW_ONLY",
+    "check_mode_settings",
     "parse_setting",
     "settings_help",
     "STATUS_NAMES",

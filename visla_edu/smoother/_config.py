@@ -6,7 +6,8 @@ import numpy as np
 
 from visla_edu.filters._config import MAX_IMU_LAG
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "FILTER_SETTINGS", "as_smoother_config", "parse_setting",
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "OWN_SETTINGS", "FILTER_SETTINGS", "BATCH_ONLY", "WINDOW_ONLY",
+           "check_mode_settings", "as_smoother_config", "parse_setting",
            "settings_help"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
@@ -23,6 +24,9 @@ FILTER_SETTINGS = ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_veloci
 OWN_SETTINGS = ("loss", "loss_scale", "max_iterations", "function_tolerance", "step_tolerance", "initial_damping",
                 "rejection_probability", "rejection_rounds", "min_observations", "min_depth",
                 "pose_covariance", "landmark_covariance", "window_size", "window_iterations", "window_mode")
+#: Own settings only the batch smoother reads, and only the sliding window (the other ignores them).
+BATCH_ONLY = ("max_iterations", "rejection_rounds", "landmark_covariance")
+WINDOW_ONLY = ("window_size", "window_iterations", "window_mode")
 
 
 @dataclass
@@ -210,6 +214,27 @@ def as_smoother_config(config, caller):
     hint = ("smoother.SmootherConfig.from_filter_config(run.resolve_config(dataset, config)) gives the smoother "
             "the filter's model") if type(config).__name__ == "FilterConfig" else "e.g. SmootherConfig(window_size=10)"
     raise TypeError(f"{caller}: config must be a SmootherConfig, got {type(config).__name__}; {hint}")
+
+
+def check_mode_settings(mode, names):
+    """Refuse own settings that smoother ``mode`` would ignore (a window setting with the batch, or back).
+
+    Parameters
+    ----------
+    mode : {"smooth", "window"}
+        The batch smoother or the sliding window (:data:`visla_edu.codes.SMOOTHER_MODES`).
+    names : iterable of str
+        Names of :data:`OWN_SETTINGS` given for it.
+
+    Raises
+    ------
+    ValueError
+        A name in :data:`WINDOW_ONLY` for ``"smooth"`` or in :data:`BATCH_ONLY` for ``"window"``.
+    """
+    ignored, other = (WINDOW_ONLY, "window") if mode == "smooth" else (BATCH_ONLY, "smooth")
+    for name in names:
+        if name in ignored:
+            raise ValueError(f"smoother setting {name}: mode {mode} does not use it (it is mode {other}'s)")
 
 
 def parse_setting(pair):
