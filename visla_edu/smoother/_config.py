@@ -324,4 +324,6 @@ def settings_help():
 
     return (f"--set NAME=VALUE, the settings and their defaults: {_settings.defaults_text(FilterConfig)}. "
             "--smoother-set NAME=VALUE (smooth, window; noise and lag come from --set), the settings and their "
-            f"defaults: {_settings.defaults_text(SmootherConfig, OWN_SETTINGS)}.")
+            f"defaults: {_settings.defaults_text(SmootherConfig, OWN_SETTINGS)} ({', '.join(BATCH_ONLY)}: smooth "
+            f"only; {', '.join(WINDOW_ONLY)}: window only). --mode window takes from --set only "
+            f"{', '.join(FILTER_SETTINGS)} and extrinsic_correction.")
