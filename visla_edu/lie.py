@@ -35,6 +35,7 @@ __all__ = [
     "adjoint",
     "curly_hat",
     "odot",
+    "nonrigid_frames",
     "SMALL_ANGLE",
 ]
 
@@ -327,6 +328,31 @@ def se3_log(T):
     V_inv = np.eye(3) - 0.5 * W + D * (W @ W)
     v = np.einsum("...ij,...j->...i", V_inv, T[..., :3, 3])
     return np.concatenate([v, w], axis=-1)
+
+
+def nonrigid_frames(poses, tolerance):
+    """Which poses of a batch are not in SE(3), and how far their rotations are from orthonormal.
+
+    A pose ``[[R, p], [a, b]]`` is rigid when every entry of ``|R^T R - I|`` and of
+    ``|[a, b] - [0, 0, 0, 1]|`` is at most ``tolerance`` and ``det R > 0``.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (n, 4, 4)
+        Finite.
+    tolerance : float
+
+    Returns
+    -------
+    bad : ndarray of bool, shape (n,)
+        True for a pose that is not rigid.
+    orthogonality : ndarray, shape (n,)
+        ``max |R^T R - I|`` of each pose (for the message).
+    """
+    R = poses[:, :3, :3]
+    orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2), initial=0.0)
+    bottom = np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1, initial=0.0)
+    return (orthogonality > tolerance) | (bottom > tolerance) | (np.linalg.det(R) < 0), orthogonality
 
 
 def se3_inv(T):

@@ -40,10 +40,8 @@ def _check_poses(poses, name, caller):
     bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
     if len(bad):
         raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not finite")
-    R = poses[:, :3, :3]
-    orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
-    bottom = np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1)
-    bad = np.flatnonzero((orthogonality > RIGID_TOLERANCE) | (bottom > RIGID_TOLERANCE) | (np.linalg.det(R) < 0))
+    nonrigid, orthogonality = lie.nonrigid_frames(poses, RIGID_TOLERANCE)
+    bad = np.flatnonzero(nonrigid)
     if len(bad):
         raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not a rigid transform "
                          f"(max |R^T R - I| = {orthogonality[bad[0]]:.2g}, last row {poses[bad[0], 3].tolist()}); "

@@ -15,13 +15,14 @@ of the small arrays, including their plausibility (:mod:`visla_edu.data._plausib
 
 import numpy as np
 
+from visla_edu import lie
+from visla_edu._files import format_bytes
 from visla_edu.data._plausible import (
     check_calibration,
     check_ground_truth_reach,
     check_time_stamps,
     check_velocities,
 )
-from visla_edu._files import format_bytes
 
 __all__ = [
     "FORMAT_2021",
@@ -450,14 +451,12 @@ def check_rigid_poses(poses, key, path, tolerance=GROUND_TRUTH_RIGID_TOL):
         A pose's rotation is not orthonormal, has determinant -1, or its last row is not
         ``[0, 0, 0, 1]`` (names the frame and the value).
     """
-    R = poses[:, :3, :3]
-    orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2), initial=0.0)
-    bottom = np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1, initial=0.0)
-    bad = np.flatnonzero((orthogonality > tolerance) | (bottom > tolerance) | (np.linalg.det(R) < 0))
+    nonrigid, orthogonality = lie.nonrigid_frames(poses, tolerance)
+    bad = np.flatnonzero(nonrigid)
     if bad.size:
         t = int(bad[0])
         raise ValueError(f"{path}: key '{key}': the pose of frame {t} is not a rigid transform (max |R^T R - I| = "
-                         f"{orthogonality[t]:.3g}, det R = {np.linalg.det(R[t]):.3g}, last row {poses[t, 3].tolist()}; "
+                         f"{orthogonality[t]:.3g}, det R = {np.linalg.det(poses[t, :3, :3]):.3g}, last row {poses[t, 3].tolist()}; "
                          f"expected [[R, p], [0, 0, 0, 1]] with R a rotation, to {tolerance:g})")
 
 
