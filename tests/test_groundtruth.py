@@ -120,10 +120,28 @@ def test_missing_and_binary_files(tmp_path, tiny):
         data.load_ground_truth(tiny, tmp_path / "bin.txt")
 
 
-def test_more_poses_than_frames_is_an_error(tmp_path, tiny):
-    np.savetxt(tmp_path / "long.txt", _kitti_rows(61))
-    with pytest.raises(ValueError, match=r"61 poses but dataset 'sim-tiny' has only 60 frames"):
-        data.load_ground_truth(tiny, tmp_path / "long.txt")
+def test_a_sequence_longer_than_the_drive_gives_its_first_rows(tmp_path, tiny):
+    """A course file that is the first part of a KITTI sequence (0042: 500 of 1101 frames) uses the first rows."""
+    head = tiny.segment(0, 40)
+    poses, times = _write_kitti_truth(tmp_path, tiny)  # 60 poses and times for a 40-frame drive
+    for times_path in (times, None):
+        truth = data.load_ground_truth(head, poses, times_path)
+        assert truth.num_frames == 40 and truth.file_rows == 60 and truth.rows_text == "rows 0-39 of 60"
+        np.testing.assert_allclose(truth.world_T_imu, head.ground_truth.world_T_imu, atol=1e-12)
+    attached = data.attach_ground_truth(dataclasses.replace(head, ground_truth=None), poses, times)
+    assert "KITTI poses of every frame (rows 0-39 of 60 of " in data.format_summary(attached)
+    assert data.load_ground_truth(tiny, poses, times).rows_text == ""  # every row used: nothing to say
+
+
+def test_a_longer_sequence_whose_times_differ_is_refused(tmp_path, tiny):
+    """The times tell a sequence that starts with this drive from another drive's poses."""
+    head = tiny.segment(0, 40)
+    poses, times = _write_kitti_truth(tmp_path, tiny)
+    shifted = np.loadtxt(times)
+    shifted[5:] += 0.05
+    np.savetxt(times, shifted, fmt="%e")
+    with pytest.raises(ValueError, match=r"row 5 \(frame 5\) has time .*another drive"):
+        data.load_ground_truth(head, poses, times)
 
 
 @pytest.mark.parametrize("rows", [1, 2])
@@ -211,6 +229,21 @@ def test_course_drive_0020_has_its_kitti_ground_truth(require_data):
     result = metrics.evaluate(motion.dead_reckon(ds.time_stamps, ds.twists, lag=1), g.world_T_imu)
     assert result.path_length == pytest.approx(1241, abs=5) and result.drift_segments > 500
     assert result.ate_raw < 15 and result.drift_translation < 4
+
+
+@pytest.mark.data
+def test_course_drive_0042_uses_the_first_rows_of_its_longer_sequence(require_data):
+    """0042.npz is the first 500 frames of KITTI odometry 01; its poses file has all 1101 rows."""
+    path = require_data("0042")
+    if not (path.parent / data.REGISTRY["0042"]["ground_truth"]["poses"]).is_file():
+        pytest.skip("kitti_odometry_01_poses.txt not found beside 0042.npz")
+    ds = data.load("0042", data_dir=path.parent)
+    g = ds.ground_truth
+    assert (ds.num_frames, g.num_frames, g.file_rows) == (500, 500, 1101) and g.rows_text == "rows 0-499 of 1101"
+    from visla_edu import motion
+
+    result = metrics.evaluate(motion.dead_reckon(ds.time_stamps, ds.twists, lag=1), g.world_T_imu)
+    assert result.path_length == pytest.approx(1171, abs=5) and result.ate_raw < 10
 
 
 # ----------------------------------------------------------------------------- drawing

@@ -394,7 +394,9 @@ def _load_with_ground_truth(args):
 def _print_evaluation(evaluations, ground_truth, mode):
     """The lines ``visla-edu run`` prints about the ground truth, estimate and dead reckoning."""
     source = Path(ground_truth.source).name if ground_truth.source else "the simulation"
-    print(f"ATE against ground truth ({source}, {ground_truth.num_frames} frames), drift over 100-800 m segments:")
+    rows = f", {ground_truth.rows_text}" if ground_truth.rows_text else ""
+    print(f"ATE against ground truth ({source}, {ground_truth.num_frames} frames{rows}), "
+          "drift over 100-800 m segments:")
     rows = {f"{mode} estimate": evaluations["estimate"]}
     if "start" in evaluations:
         rows["slam (EKF) it started from"] = evaluations["start"]

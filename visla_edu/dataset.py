@@ -42,6 +42,10 @@ class GroundTruth:
         Landmarks whose tracks were corrupted on purpose (simulated drives only).
     source : str
         Where the poses came from (a file path, or ``""`` for a simulation).
+    file_rows : int or None
+        How many poses the source file holds (None for a simulation). A KITTI sequence longer
+        than the drive (``0042.npz`` is the first 500 of the 1101 frames of sequence 01) has
+        ``file_rows > num_frames``: rows ``0 .. num_frames - 1`` were used.
     """
 
     world_T_imu: np.ndarray
@@ -50,6 +54,14 @@ class GroundTruth:
     angular_velocity: np.ndarray = None
     outlier: np.ndarray = None
     source: str = ""
+    file_rows: int = None
+
+    @property
+    def rows_text(self):
+        """Which rows of the source file are used, e.g. ``"rows 0-499 of 1101"``; ``""`` when all are."""
+        if self.file_rows is None or self.file_rows == self.num_frames:
+            return ""
+        return f"rows 0-{self.num_frames - 1} of {self.file_rows}"
 
     @property
     def num_frames(self):
@@ -312,7 +324,7 @@ def _segment_ground_truth(truth, start, stop, kept):
         linear_velocity=None if truth.linear_velocity is None else truth.linear_velocity[frames].copy(),
         angular_velocity=None if truth.angular_velocity is None else truth.angular_velocity[frames].copy(),
         outlier=None if truth.outlier is None else truth.outlier[kept].copy(),
-        source=truth.source)
+        source=truth.source, file_rows=truth.file_rows)
 
 
 def frame_major_order(obs_ids, obs_frames, num_frames):

@@ -9,9 +9,13 @@ file: ``cam_T_imu = inv(imu_T_cam)``)
 
     world_T_imu[i] = inv(cam_T_imu) @ P_i @ cam_T_imu = imu_T_cam @ P_i @ inv(imu_T_cam).
 
-Rows are frames: row ``i`` is the dataset's frame ``i``; the poses may cover fewer frames
-than the dataset (``0020.npz`` has 1104 frames, its poses 1101), never more. The times, when
-given, must equal the dataset's ``time_stamps - time_stamps[0]`` to :data:`TIME_TOLERANCE`.
+Rows are frames: row ``i`` is the dataset's frame ``i``. The poses may cover fewer frames
+than the dataset (``0020.npz`` has 1104 frames, its poses 1101) or more: a course file that
+is the first part of a KITTI sequence (``0042.npz``, the first 500 of sequence 01's 1101
+frames) uses the first rows, and says which (:attr:`~visla_edu.dataset.GroundTruth.rows_text`).
+The times, when given, must equal the dataset's ``time_stamps - time_stamps[0]`` to
+:data:`TIME_TOLERANCE` on every frame they share with it; they are what tells a longer
+sequence that starts with this drive from another drive's poses.
 """
 
 import dataclasses
@@ -107,7 +111,7 @@ def kitti_poses_from_imu(world_T_imu, imu_T_cam):
     return np.linalg.inv(imu_T_cam) @ np.asarray(world_T_imu, dtype=float) @ imu_T_cam
 
 
-def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE):
+def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE, allow_longer=False):
     """Check ground-truth times against the dataset's ``time_stamps - time_stamps[0]``.
 
     Parameters
@@ -115,23 +119,28 @@ def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE):
     times : ndarray, shape (n,)
         Seconds since frame 0, row ``i`` for frame ``i``.
     time_stamps : ndarray, shape (T,)
-        The dataset's time stamps, ``T >= n``.
+        The dataset's time stamps, ``T >= n`` unless ``allow_longer``.
     path : str or os.PathLike
         The file the times came from, for the message.
     tolerance : float
         Seconds.
+    allow_longer : bool
+        Accept more times than frames (a sequence longer than the drive) and check the first
+        ``T``.
 
     Raises
     ------
     ValueError
         The first row whose time differs by more than ``tolerance``, with both values; more
-        times than frames; a ``tolerance`` that is not a finite number >= 0.
+        times than frames (unless ``allow_longer``); a ``tolerance`` that is not a finite
+        number >= 0.
     """
     times = np.asarray(times, dtype=float).ravel()
     time_stamps = np.asarray(time_stamps, dtype=float).ravel()
-    if len(times) > len(time_stamps):
+    if len(times) > len(time_stamps) and not allow_longer:
         raise ValueError(f"{path}: {len(times)} times but the dataset has only {len(time_stamps)} frames "
                          "(one time per frame: is this the ground truth of another drive?)")
+    times = times[: len(time_stamps)]
     if not (np.isfinite(tolerance) and tolerance >= 0):
         raise ValueError(f"check_times: tolerance must be a finite number of seconds >= 0, got {tolerance!r}")
     relative = time_stamps[: len(times)] - time_stamps[0]
@@ -148,23 +157,25 @@ def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE):
 
 
 def _read_checked_poses(dataset, poses_path, times_path, tolerance):
-    """KITTI poses of ``dataset``'s first frames, their times checked: ``P`` (n, 4, 4)."""
+    """KITTI poses of ``dataset``'s first frames, their times checked: ``P`` (n, 4, 4), and the file's rows.
+
+    A file with more poses than the drive has frames is the sequence the drive begins
+    (``0042.npz``): its first ``T`` rows are the drive's frames, and the times, when given,
+    are checked on those rows.
+    """
     cam0_T_cam, inline_times = read_kitti(poses_path)
     n, T = len(cam0_T_cam), dataset.num_frames
     if n < MIN_POSES:
         raise ValueError(f"{poses_path}: {n} pose(s); an ATE against ground truth needs at least {MIN_POSES} "
                          "(the SE(3) alignment is undetermined with fewer)")
-    if n > T:
-        raise ValueError(f"{poses_path}: {n} poses but dataset {dataset.name!r} has only {T} frames "
-                         "(rows are frames: is this the ground truth of another drive?)")
     if inline_times is not None:
-        check_times(inline_times, dataset.time_stamps, poses_path, tolerance)
+        check_times(inline_times, dataset.time_stamps, poses_path, tolerance, allow_longer=True)
     if times_path is not None:
         times = read_kitti_times(times_path)
         if len(times) != n:
             raise ValueError(f"{times_path}: {len(times)} times but {poses_path} has {n} poses (one time per pose)")
-        check_times(times, dataset.time_stamps, times_path, tolerance)
-    return cam0_T_cam
+        check_times(times, dataset.time_stamps, times_path, tolerance, allow_longer=True)
+    return cam0_T_cam[:T], n
 
 
 def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLERANCE):
@@ -185,7 +196,8 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
     Returns
     -------
     GroundTruth
-        ``world_T_imu`` (n, 4, 4) for frames ``0 .. n - 1`` (``n <= T``), ``world`` = the IMU at
+        ``world_T_imu`` (n, 4, 4) for frames ``0 .. n - 1`` (``n <= T``: a longer file gives its
+        first ``T`` rows, and ``file_rows`` says how many it has), ``world`` = the IMU at
         frame 0: ``imu_T_cam @ inv(P_0) @ P_i @ inv(imu_T_cam)`` (KITTI's ``P_0`` is the identity,
         so this is the formula of the module docstring); no landmarks or velocities.
 
@@ -195,20 +207,20 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
         A file is missing.
     ValueError
         A bad file (see :func:`visla_edu.trajectory.read_kitti`), fewer than
-        :data:`MIN_POSES` or more poses than frames, times not one per pose or not matching
-        the dataset's, a pose farther from the first than the drive can go in its time
+        :data:`MIN_POSES` poses, times not one per pose or not matching the dataset's on the
+        frames they share, a pose farther from the first than the drive can go in its time
         (:func:`~visla_edu.data._plausible.check_ground_truth_reach`: another unit, another drive).
     TypeError
         ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
     """
     if not isinstance(dataset, Dataset):
         raise TypeError(f"load_ground_truth: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")
-    cam0_T_cam = _read_checked_poses(dataset, poses_path, times_path, tolerance)
+    cam0_T_cam, file_rows = _read_checked_poses(dataset, poses_path, times_path, tolerance)
     cam0_T_cam = np.linalg.inv(cam0_T_cam[0]) @ cam0_T_cam
     world_T_imu = imu_poses_from_kitti(cam0_T_cam, dataset.imu_T_cam)
     check_ground_truth_reach(world_T_imu, dataset.time_stamps, "KITTI poses", poses_path)
     source = str(expand_user(poses_path).resolve())
-    return GroundTruth(world_T_imu=world_T_imu, source=source)
+    return GroundTruth(world_T_imu=world_T_imu, source=source, file_rows=file_rows)
 
 
 def attach_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLERANCE):

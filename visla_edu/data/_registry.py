@@ -60,6 +60,14 @@ REGISTRY = {
         # KITTI odometry poses/06.txt and sequences/06/times.txt, renamed: looked for beside the npz
         "ground_truth": {"poses": "kitti_odometry_06_poses.txt", "times": "kitti_odometry_06_times.txt"},
     },
+    "0042": {
+        "sha256": "379f3c8f80adf918e67ddd72c3c716923c6a19fd37d972d6f5345ee07e3d5590",
+        "format": FORMAT_2019,
+        "description": "KITTI raw 2011_10_03_drive_0042 = the first 500 frames of KITTI odometry sequence 01 "
+        "(2019/2020 course format), 10 Hz stereo feature tracks + IMU velocities",
+        # KITTI odometry poses/01.txt and sequences/01/times.txt (the whole sequence, 1101 rows), renamed
+        "ground_truth": {"poses": "kitti_odometry_01_poses.txt", "times": "kitti_odometry_01_times.txt"},
+    },
     "10_imu_only": {
         "sha256": "5543a9f404a80564b1ea382b7c2101652f3ef0829aa53fe16f0bbd93257018aa",
         "format": "2021+ (IMU only)",
@@ -68,7 +76,7 @@ REGISTRY = {
     },
 }
 #: Course names :func:`~visla_edu.data.load` finds as ``<data dir>/<name>.npz``.
-COURSE_NAMES = ("03", "10", "0022", "0020")
+COURSE_NAMES = ("03", "10", "0022", "0020", "0042")
 #: Files the dataset-10 stand-in is built from when ``10.npz`` is absent.
 STANDIN_INPUTS = ("10_imu_only.npz", "03.npz")
 

@@ -38,7 +38,9 @@ def summarize(dataset):
         tiny_disparity_depth_m, repeated_frames, tracks_contiguous,
         noncontiguous_landmarks, speed_m_s`` (mean/min/max), ``distance_m, ground_truth``
         (bool), ``ground_truth_frames`` (frames its poses cover, or None),
-        ``ground_truth_simulated`` (bool), ``ground_truth_source`` (file, or ``""``).
+        ``ground_truth_simulated`` (bool), ``ground_truth_source`` (file, or ``""``),
+        ``ground_truth_rows`` (:attr:`~visla_edu.dataset.GroundTruth.rows_text`, ``""`` when the
+        file's rows are all used).
     """
     ds = dataset
     steps = ds.time_steps
@@ -83,6 +85,7 @@ def _ground_truth_facts(gt):
         "ground_truth_frames": None if gt is None else gt.num_frames,
         "ground_truth_simulated": gt is not None and gt.simulated,
         "ground_truth_source": "" if gt is None else gt.source,
+        "ground_truth_rows": "" if gt is None else gt.rows_text,
     }
 
 
@@ -186,4 +189,5 @@ def _truth_text(s):
         return "yes (poses, landmarks, velocities, outliers)"
     n, T = s["ground_truth_frames"], s["frames"]
     cover = "every frame" if n == T else f"frames 0-{n - 1}, {n} of {T} frames"
-    return f"attached: KITTI poses of {cover} ({_shorten(s['ground_truth_source'], 100)})"
+    rows = f"{s['ground_truth_rows']} of " if s["ground_truth_rows"] else ""
+    return f"attached: KITTI poses of {cover} ({rows}{_shorten(s['ground_truth_source'], 100)})"
