@@ -1,4 +1,4 @@
-"""Command line: ``visla-edu {info,run,stepper,release} ...`` (also ``python -m visla_edu``).
+"""Command line: ``visla-edu {info,run,stepper,release,student} ...`` (also ``python -m visla_edu``).
 
 Examples: the README's "Command line" section; every option: ``visla-edu COMMAND --help``.
 
@@ -68,7 +68,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser():
     """The argument parser of ``visla-edu``.
 
-    Subcommands ``info``, ``run``, ``stepper`` and ``release`` (required, stored as
+    Subcommands ``info``, ``run``, ``stepper``, ``release`` and ``student`` (required, stored as
     ``command``); ``--debug`` is accepted before or after the subcommand, ``--data-dir`` after
     ``info``, ``run`` and ``stepper``. Values are checked while parsing (paths, ports, strides,
     BLAS threads and ``--set NAME=VALUE`` settings).
@@ -108,6 +108,9 @@ def build_parser():
                          help="student edition folder (default: the package's visla_edu/course/notebooks/)")
     release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
     release.add_argument("--force", action="store_true", help="also replace student notebooks edited by hand")
+    student = sub.add_parser("student", parents=[debug], help="create a student's folder, or add the new notebooks")
+    student.add_argument("folder", type=_options.path, help="the student's folder (created if missing; files "
+                                                            "already there are never replaced)")
     return parser
 
 
@@ -440,7 +443,14 @@ def _cmd_release(args):
         print(f"updated the points table in {teaching}")
 
 
-_HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release}
+def _cmd_student(args):
+    from visla_edu.course import student
+
+    print(student.make_student_folder(args.folder).report())
+
+
+_HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release,
+             "student": _cmd_student}
 
 
 def main(argv=None):
