@@ -91,3 +91,26 @@ def test_expand_user_names_an_unknown_user(monkeypatch, tmp_path):
         _files.expand_user("~visla-edu-no-such-user-4711/a.npz")
     with pytest.raises(ValueError, match="cannot expand"):  # every check of a path uses it
         _files.check_output_path("~visla-edu-no-such-user-4711/a.npz", (".npz",), "--out")
+
+
+def test_atomic_write_without_replace_keeps_a_file_that_appears_meanwhile(tmp_path):
+    target = tmp_path / "a.ipynb"
+    with pytest.raises(FileExistsError, match="exists already; not replaced"):
+        with _files.atomic_write(target, "wb", replace=False) as f:
+            f.write(b"course")
+            target.write_bytes(b"student")  # the student's save, while the copy is written
+    assert target.read_bytes() == b"student" and os.listdir(tmp_path) == ["a.ipynb"]
+
+
+def test_atomic_write_without_replace_and_without_hard_links(tmp_path, monkeypatch):
+    def no_links(src, dst):
+        raise OSError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    with _files.atomic_write(tmp_path / "new.ipynb", "wb", replace=False) as f:
+        f.write(b"course")
+    assert (tmp_path / "new.ipynb").read_bytes() == b"course"
+    with pytest.raises(FileExistsError):
+        with _files.atomic_write(tmp_path / "new.ipynb", "wb", replace=False) as f:
+            f.write(b"again")
+    assert (tmp_path / "new.ipynb").read_bytes() == b"course" and os.listdir(tmp_path) == ["new.ipynb"]

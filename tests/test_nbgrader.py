@@ -6,11 +6,11 @@ In a temporary course directory this builds the assignment from ``solutions/``, 
 gradebook:
 
 * the solutions get every point of the metadata;
-* the untouched student release (``notebooks/``) gets zero;
+* the untouched student release (``visla_edu/course/notebooks/``) gets zero;
 * answers that call the library's own function (under its module name, an alias, a class
   method, or through a function that survives the checks' reload) get zero for those cells,
   and so do answer cells that replace the checks, the checks' machinery or a library function;
-* nbgrader's own release of the solutions matches ``notebooks/`` cell by cell (stubs aside).
+* nbgrader's own release of the solutions matches the student edition cell by cell (stubs aside).
 
 To keep the runtime small the graded assignment holds each notebook's set-up cell and its
 exercise and graded cells only (the demonstrations are executed by nbval on ``solutions/``),
@@ -34,12 +34,13 @@ pytest.importorskip("nbgrader", reason="nbgrader is in the dev extra: pip instal
 from nbgrader.api import Gradebook  # noqa: E402
 
 from visla_edu import release  # noqa: E402
+from visla_edu.course import STUDENT_NOTEBOOKS  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"
-STUDENT = ROOT / "notebooks"
+STUDENT = STUDENT_NOTEBOOKS
 NAMES = sorted(p.stem for p in SOLUTIONS.glob("*.ipynb"))
 ASSIGNMENT = "visla"
 
@@ -212,7 +213,7 @@ def test_gamed_answers_get_no_points(graded, student):
 
 
 def test_nbgrader_release_matches_the_student_notebooks(graded):
-    """nbgrader's release and ``notebooks/`` agree on the set-up, exercise and graded cells."""
+    """nbgrader's release and the student edition agree on the set-up, exercise and graded cells."""
     course, _ = graded
     for name in NAMES:
         ours = _exercises_only(_read(STUDENT / f"{name}.ipynb")).cells

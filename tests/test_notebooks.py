@@ -1,7 +1,8 @@
 """Tests of the course notebooks.
 
-* ``solutions/`` is the single source and ``notebooks/`` is generated from it: regenerating
-  must reproduce ``notebooks/`` byte for byte.
+* ``solutions/`` is the single source and the student edition (``visla_edu/course/notebooks/``,
+  :data:`visla_edu.course.STUDENT_NOTEBOOKS`) is generated from it: regenerating must reproduce
+  it byte for byte, with its release manifest.
 * Both are stored without outputs, each file under 1 MB.
 * The solutions are well formed for nbgrader (unique grade ids, balanced markers, a graded
   check after every exercise, every check exists in ``visla_edu.checks`` and is called through a
@@ -21,10 +22,11 @@ import nbformat
 import pytest
 
 from visla_edu import checks, release
+from visla_edu.course import STUDENT_NOTEBOOKS, manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"
-STUDENT = ROOT / "notebooks"
+STUDENT = STUDENT_NOTEBOOKS
 NAMES = sorted(p.name for p in SOLUTIONS.glob("*.ipynb"))
 MAX_BYTES = 1_000_000
 #: Seconds one notebook may take (the course budget is 5 minutes for all of them).
@@ -57,14 +59,15 @@ def test_there_are_notebooks():
 
 def test_student_notebooks_in_sync():
     drifted = release.check_in_sync(SOLUTIONS, STUDENT)
-    assert not drifted, (f"notebooks/ is out of date for {drifted}: run `python -m visla_edu.release` "
-                         "(never edit notebooks/ by hand)")
+    assert not drifted, (f"{STUDENT} is out of date for {drifted}: run `visla-edu release` "
+                         "(never edit the student edition by hand)")
 
 
 def test_regenerating_reproduces_student_notebooks_byte_for_byte(tmp_path):
     release.make_student_notebooks(SOLUTIONS, tmp_path)
     for name in NAMES:
         assert (tmp_path / name).read_bytes() == (STUDENT / name).read_bytes(), name
+    assert (tmp_path / manifest.MANIFEST_NAME).read_bytes() == (STUDENT / manifest.MANIFEST_NAME).read_bytes()
     assert sorted(p.name for p in STUDENT.glob("*.ipynb")) == NAMES
 
 

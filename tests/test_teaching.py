@@ -13,6 +13,7 @@ import nbformat
 import pytest
 
 from visla_edu import release
+from visla_edu.course import STUDENT_NOTEBOOKS
 
 ROOT = Path(__file__).resolve().parents[1]
 TEACHING = ROOT / "TEACHING.md"
@@ -100,7 +101,7 @@ def test_the_scan_for_gamed_submissions_finds_each_trick(source):
 
 
 def test_the_scan_for_gamed_submissions_finds_nothing_in_the_course():
-    notebooks = sorted(SOLUTIONS.glob("*.ipynb")) + sorted((ROOT / "notebooks").glob("*.ipynb"))
+    notebooks = sorted(SOLUTIONS.glob("*.ipynb")) + sorted(STUDENT_NOTEBOOKS.glob("*.ipynb"))
     for path in notebooks:
         hits = [m.group(0) for m in _scan_pattern().finditer(path.read_text(encoding="utf-8"))]
         assert not hits, f"{path.name}: {hits}"

@@ -11,7 +11,7 @@ estimate before a run, ``capstone`` notebook 09's filter loop, ``metrics`` (ATE,
 ``diagnostics`` the calibration from the data, ``cache`` the user cache, ``plotting``,
 ``stepper`` the filter stepper (model, figure, widget, Voila page), ``checks`` the exercise
 checks (``numdiff`` their central-difference reference), ``release`` the student notebooks,
-``cli``.
+``course`` course scaffolding (the student edition, a student's folder), ``cli``.
 """
 
 __version__ = "0.1.0"

@@ -22,6 +22,7 @@ argument, so ``str(err)`` is the whole message.
 """
 
 import contextlib
+import errno
 import os
 import secrets
 import stat
@@ -69,7 +70,7 @@ def expand_user(path):
 
 
 @contextlib.contextmanager
-def atomic_write(path, mode="w", encoding="utf-8"):
+def atomic_write(path, mode="w", encoding="utf-8", replace=True):
     """Context manager: a file object whose content replaces ``path`` only if the block succeeds.
 
     The temporary file ``.<name>.<pid>.<random>.tmp`` is created in the same folder (so the
@@ -88,6 +89,10 @@ def atomic_write(path, mode="w", encoding="utf-8"):
         Text or binary.
     encoding : str
         For text mode.
+    replace : bool
+        False: never replace an existing file. The finished temporary file is hard-linked to
+        ``path`` (:func:`os.link` fails if ``path`` exists, even if it appeared while writing);
+        on a file system without hard links, ``path`` is checked just before the rename.
 
     Yields
     ------
@@ -100,6 +105,8 @@ def atomic_write(path, mode="w", encoding="utf-8"):
         The target's folder does not exist.
     ValueError
         ``mode`` is not ``"w"`` or ``"wb"``, or ``path`` is a folder.
+    FileExistsError
+        ``replace`` is False and ``path`` exists; it is left as it was.
 
     Examples
     --------
@@ -122,12 +129,27 @@ def atomic_write(path, mode="w", encoding="utf-8"):
             yield f
             f.flush()
             os.fsync(f.fileno())
+        if not replace:
+            _link_new(tmp, path)
+            return
         with contextlib.suppress(FileNotFoundError):
             os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+
+
+def _link_new(tmp, path):
+    """Give the finished ``tmp`` the name ``path`` only if nothing has it (``atomic_write(..., replace=False)``)."""
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise FileExistsError(errno.EEXIST, "exists already; not replaced", str(path)) from None
+    except OSError:  # no hard links here (FAT, some network shares): check, then rename
+        if os.path.lexists(path):
+            raise FileExistsError(errno.EEXIST, "exists already; not replaced", str(path)) from None
+        os.replace(tmp, path)
 
 
 def format_bytes(n):

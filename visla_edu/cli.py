@@ -1,4 +1,4 @@
-"""Command line: ``visla-edu {info,run,stepper,release} ...`` (also ``python -m visla_edu``).
+"""Command line: ``visla-edu {info,run,stepper,release,student} ...`` (also ``python -m visla_edu``).
 
 Examples: the README's "Command line" section; every option: ``visla-edu COMMAND --help``.
 
@@ -68,7 +68,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser():
     """The argument parser of ``visla-edu``.
 
-    Subcommands ``info``, ``run``, ``stepper`` and ``release`` (required, stored as
+    Subcommands ``info``, ``run``, ``stepper``, ``release`` and ``student`` (required, stored as
     ``command``); ``--debug`` is accepted before or after the subcommand, ``--data-dir`` after
     ``info``, ``run`` and ``stepper``. Values are checked while parsing (paths, ports, strides,
     BLAS threads and ``--set NAME=VALUE`` settings).
@@ -104,8 +104,13 @@ def build_parser():
 
     release = sub.add_parser("release", parents=[debug], help="generate the student notebooks from the solutions")
     release.add_argument("--src", default=None, type=_options.path, help="solutions folder (default: the project's solutions/)")
-    release.add_argument("--dst", default=None, type=_options.path, help="student folder (default: the project's notebooks/)")
+    release.add_argument("--dst", default=None, type=_options.path,
+                         help="student edition folder (default: the package's visla_edu/course/notebooks/)")
     release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
+    release.add_argument("--force", action="store_true", help="also replace student notebooks edited by hand")
+    student = sub.add_parser("student", parents=[debug], help="create a student's folder, or add the new notebooks")
+    student.add_argument("folder", type=_options.path, help="the student's folder (created if missing; files "
+                                                            "already there are never replaced)")
     return parser
 
 
@@ -415,10 +420,11 @@ def _cmd_stepper(args):
 
 def _cmd_release(args):
     from visla_edu import release
+    from visla_edu.course import STUDENT_NOTEBOOKS
 
     root = Path(__file__).resolve().parent.parent
     src = Path(args.src) if args.src else root / "solutions"
-    dst = Path(args.dst) if args.dst else root / "notebooks"
+    dst = Path(args.dst) if args.dst else STUDENT_NOTEBOOKS
     if not src.is_dir():
         raise FileNotFoundError(f"solutions folder {src} not found (run from a source checkout or pass --src)")
     if dst.exists() and not dst.is_dir():
@@ -429,15 +435,22 @@ def _cmd_release(args):
         drifted = release.check_in_sync(src, dst)
         if teaching.is_file() and release.update_points_table(src, teaching, check=True):
             drifted.append(teaching.name)
-        print("\n".join(f"drifted: {name}" for name in drifted) or "notebooks/ is in sync with solutions/")
+        print("\n".join(f"drifted: {name}" for name in drifted) or f"{dst} is in sync with {src}")
         raise SystemExit(1 if drifted else 0)
-    release.make_student_notebooks(src, dst)
+    release.make_student_notebooks(src, dst, force=args.force)
     print(f"wrote student notebooks to {dst}")
     if teaching.is_file() and release.update_points_table(src, teaching):
         print(f"updated the points table in {teaching}")
 
 
-_HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release}
+def _cmd_student(args):
+    from visla_edu.course import student
+
+    print(student.make_student_folder(args.folder).report())
+
+
+_HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release,
+             "student": _cmd_student}
 
 
 def main(argv=None):

@@ -1,0 +1,161 @@
+"""What ``visla-edu release`` last wrote into a folder: ``.release.json``, one sha256 per file.
+
+``release`` (:func:`visla_edu.release.make_student_notebooks`) writes the student notebooks and
+then this manifest beside them, and the manifest is committed with them. Before it replaces a
+notebook, release compares the file's digest with the recorded one:
+
+* the same digest: the file is release's own output, and a newer release may replace it;
+* another digest, or a file the manifest does not list: someone made or edited it (a student
+  answering in a clone, a teacher fixing a typo in the generated copy), so release refuses and
+  names it, unless forced.
+
+The file (sorted keys, two-space indentation, a final newline: the same bytes for the same
+notebooks, so the test that the folder is in sync checks it too)::
+
+    {
+      "about": "...",
+      "sha256": {
+        "01_se3_kinematics.ipynb": "<64 hexadecimal digits>",
+        ...
+      }
+    }
+
+A digest is that of the file's bytes, which are the notebook's text in UTF-8
+(:func:`visla_edu.release.notebook_text`).
+"""
+
+import hashlib
+import json
+from pathlib import Path
+
+from visla_edu._files import atomic_write
+
+__all__ = ["MANIFEST_NAME", "digest", "manifest_text", "read_manifest", "write_manifest", "edited_files"]
+
+#: The manifest's file name, in the folder of the notebooks it describes (hidden: not for students).
+MANIFEST_NAME = ".release.json"
+
+_ABOUT = ("sha256 of each file `visla-edu release` wrote in this folder; release refuses to overwrite a file whose "
+          "content no longer has its digest (edited by hand) unless --force")
+
+
+def digest(data):
+    """The sha256 of ``data`` as 64 hexadecimal digits.
+
+    Parameters
+    ----------
+    data : bytes or str
+        A ``str`` is encoded as UTF-8 (the bytes release writes).
+
+    Returns
+    -------
+    str
+    """
+    return hashlib.sha256(data.encode("utf-8") if isinstance(data, str) else data).hexdigest()
+
+
+def manifest_text(texts):
+    """The manifest of files with contents ``texts``, as it is stored.
+
+    Parameters
+    ----------
+    texts : dict of str to str
+        File name -> the text release writes there.
+
+    Returns
+    -------
+    str
+        JSON (format in the module docstring), with a final newline.
+    """
+    body = {"about": _ABOUT, "sha256": {name: digest(text) for name, text in sorted(texts.items())}}
+    return json.dumps(body, indent=2, sort_keys=True) + "\n"
+
+
+def read_manifest(folder):
+    """The digests recorded in ``folder``'s manifest.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+
+    Returns
+    -------
+    dict of str to str
+        File name -> sha256; empty when there is no manifest (a folder release never wrote).
+
+    Raises
+    ------
+    ValueError
+        The manifest is not valid JSON or lacks its ``sha256`` table of names and digests; the
+        message names the file and what to do.
+    """
+    path = Path(folder) / MANIFEST_NAME
+    if not path.is_file():
+        return {}
+    try:
+        table = json.loads(path.read_text(encoding="utf-8"))["sha256"]
+    except (ValueError, KeyError, TypeError) as err:
+        table, problem = None, f"{type(err).__name__}: {err}"
+    else:
+        problem = "its 'sha256' entry is not a table of file names and digests"
+    if not isinstance(table, dict) or not all(isinstance(v, str) for v in table.values()):
+        raise ValueError(f"{path}: not a release manifest ({problem}); check the notebooks beside it by hand "
+                         "(git diff), then run release with --force, which rewrites it")
+    return table
+
+
+def write_manifest(folder, texts):
+    """Write ``folder``'s manifest for files with contents ``texts``, atomically, if it changes.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        Must exist.
+    texts : dict of str to str
+        File name -> the text release wrote there.
+
+    Returns
+    -------
+    bool
+        True if the manifest was written (new or different).
+    """
+    path = Path(folder) / MANIFEST_NAME
+    text = manifest_text(texts)
+    if path.is_file() and path.read_bytes() == text.encode("utf-8"):
+        return False
+    with atomic_write(path, "wb") as f:
+        f.write(text.encode("utf-8"))
+    return True
+
+
+def edited_files(folder, names):
+    """The files among ``names`` in ``folder`` that release did not write as they are now.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+    names : iterable of str
+        File names release is about to replace.
+
+    Returns
+    -------
+    list of str
+        The names, in the order given, of the files that exist but are not a regular file, or
+        whose digest differs from the manifest's (or that it does not list). A missing file is
+        never edited.
+
+    Raises
+    ------
+    ValueError
+        A damaged manifest (:func:`read_manifest`).
+    """
+    folder = Path(folder)
+    recorded = read_manifest(folder)
+    edited = []
+    for name in names:
+        path = folder / name
+        if not (path.exists() or path.is_symlink()):
+            continue
+        if not path.is_file() or digest(path.read_bytes()) != recorded.get(name):
+            edited.append(name)
+    return edited
