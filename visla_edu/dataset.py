@@ -324,7 +324,7 @@ def _segment_ground_truth(truth, start, stop, kept):
         linear_velocity=None if truth.linear_velocity is None else truth.linear_velocity[frames].copy(),
         angular_velocity=None if truth.angular_velocity is None else truth.angular_velocity[frames].copy(),
         outlier=None if truth.outlier is None else truth.outlier[kept].copy(),
-        source=truth.source, file_rows=truth.file_rows)
+        source=truth.source)  # the file's rows are the whole drive's, not the segment's: no rows_text
 
 
 def frame_major_order(obs_ids, obs_frames, num_frames):
