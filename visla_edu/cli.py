@@ -29,6 +29,7 @@ from pathlib import Path
 
 from visla_edu import _options
 from visla_edu.codes import RUN_MODES, RUN_MODES_HELP, SLAM, SMOOTHER_MODES
+from visla_edu.course import _commands as _project_commands
 
 __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
 
@@ -106,6 +107,7 @@ def build_parser():
     release.add_argument("--src", default=None, type=_options.path, help="solutions folder (default: the project's solutions/)")
     release.add_argument("--dst", default=None, type=_options.path, help="student folder (default: the project's notebooks/)")
     release.add_argument("--check", action="store_true", help="only report notebooks that drifted")
+    _project_commands.add_parser(sub, common, debug)
     return parser
 
 
@@ -438,6 +440,7 @@ def _cmd_release(args):
 
 
 _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release}
+_HANDLERS["project"] = _project_commands.run
 
 
 def main(argv=None):
