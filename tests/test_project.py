@@ -199,10 +199,17 @@ def test_a_filter_written_outside_the_library_is_graded_with_its_own_ate(graded)
     assert int(row["points_measured"]) == sum(points.values()) and points["completes"] == 10
 
 
-def test_the_starter_of_project_md_earns_the_dead_reckoning_band(graded):
+def test_the_starter_of_project_md_earns_the_dead_reckoning_band_and_steps_in_the_stepper(graded):
     row = graded["rows"]["starter"]
     assert (row["points_completes"], row["points_accuracy"], row["points_consistency"]) == ("10", "10", "0")
     assert row["nees_per_dof"] == ""  # its covariance is zero: no NEES
+    blocks = re.findall(r"```python\n(.*?)```", project.assignment_text(), flags=re.S)
+    namespace = {}
+    exec(blocks[0], namespace)  # noqa: S102 - the starting point
+    exec(blocks[1].replace('"sim-small"', '"sim-tiny"'), namespace)  # noqa: S102 - how to step it
+    record = namespace["stepper"].goto(10)
+    with np.load(graded["dir"] / "starter" / "estimate.npz") as saved:
+        np.testing.assert_allclose(record.world_T_imu, saved["world_T_imu"][10], rtol=0, atol=1e-12)
 
 
 def test_a_submission_using_the_library_is_refused_and_marked(graded):
@@ -369,4 +376,5 @@ def test_accuracy_is_not_scored_where_dead_reckoning_is_as_good_as_slam(require_
     prepared = project.prepare_drive(name)
     assert prepared.truth is not None and not prepared.simulated
     assert "dead reckoning alone earns the top band" in _rubric.accuracy_unscored(prepared.reference_measures)
+    assert prepared.reference_measures["slam"].nees_per_dof > 10  # "a pose NEES in the tens", not scored
     assert f"`{name}`" in project.assignment_text()
