@@ -378,3 +378,13 @@ def test_accuracy_is_not_scored_where_dead_reckoning_is_as_good_as_slam(require_
     assert "dead reckoning alone earns the top band" in _rubric.accuracy_unscored(prepared.reference_measures)
     assert prepared.reference_measures["slam"].nees_per_dof > 10  # "a pose NEES in the tens", not scored
     assert f"`{name}`" in project.assignment_text()
+
+
+def test_a_trajectory_equal_to_the_librarys_is_marked_for_a_human():
+    prepared = project.prepare_drive("sim-tiny")
+    slam = prepared.references["slam"].world_T_imu
+    marks = project._library_marks({"world_T_imu": slam.copy()}, prepared.references)
+    assert len(marks) == 1 and marks[0].startswith("its trajectory matches the library's slam to 0.0e+00 m")
+    nearby = slam.copy()
+    nearby[:, 0, 3] += 1e-4  # a tenth of a millimetre: an own implementation's difference
+    assert project._library_marks({"world_T_imu": nearby}, prepared.references) == []
