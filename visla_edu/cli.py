@@ -29,6 +29,7 @@ from pathlib import Path
 
 from visla_edu import _options
 from visla_edu.codes import RUN_MODES, RUN_MODES_HELP, SLAM, SMOOTHER_MODES
+from visla_edu.course import _commands as _project_commands
 
 __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
 
@@ -111,6 +112,7 @@ def build_parser():
     student = sub.add_parser("student", parents=[debug], help="create a student's folder, or add the new notebooks")
     student.add_argument("folder", type=_options.path, help="the student's folder (created if missing; files "
                                                             "already there are never replaced)")
+    _project_commands.add_parser(sub, common, debug)
     return parser
 
 
@@ -451,6 +453,7 @@ def _cmd_student(args):
 
 _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release,
              "student": _cmd_student}
+_HANDLERS["project"] = _project_commands.run
 
 
 def main(argv=None):

@@ -9,8 +9,17 @@
   by hand.
 * :mod:`visla_edu.course.student`: ``visla-edu student DIR``, the student's own working folder:
   copies of the student edition that are never overwritten, and a short README.
+* :mod:`visla_edu.course.project`: the summative project: the written assignment (``PROJECT.md``,
+  package data: :func:`~visla_edu.course.project.assignment_text`), the drive a submission is
+  graded on (:func:`~visla_edu.course.project.prepare_drive`), the measured rubric and
+  :func:`~visla_edu.course.project.grade`, what ``visla-edu project grade`` runs; ``_sandbox``
+  what a graded submission may use of visla_edu and how the rest is hidden, ``_grader_child``
+  the process that runs one submission, ``_runner`` starts it with its limits and reads what it
+  left, ``_report`` the figures, the reports and the summary table, ``_commands`` the
+  ``visla-edu project`` command line.
 
-Nothing is imported or read at import time.
+Nothing is imported or read at import time (``visla-edu`` builds its parser without loading
+the grader).
 """
 
 from pathlib import Path

@@ -1,0 +1,267 @@
+"""Start the grading process of one submission with its limits, and read what it left.
+
+:func:`run_submission` writes the request (:func:`write_request`), starts
+``python -m visla_edu.course._grader_child REQUEST`` in a folder and a process group of its
+own (its output, the submission's prints included, goes to ``output.txt`` there), waits for it
+with the time limit (:func:`wait_with_time_limit`: it starts counting when the child begins
+importing the submission, so the grader's own start-up is not the submission's time; then the
+whole group is killed), and reads the outcome (:func:`read_outcome`). A child that left no
+outcome is described by how it ended: killed at the time limit (``timeout``), by a signal or
+an early exit (``crashed``).
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["ChildOutcome", "DEFAULT_TIME_LIMIT", "DEFAULT_MEMORY_LIMIT", "EXIT_STATUSES", "STARTUP_SECONDS",
+           "FILE_LIMIT", "write_request", "wait_with_time_limit", "read_outcome", "run_submission"]
+
+#: Seconds a submission may take (import, make_filter and every step) by default.
+DEFAULT_TIME_LIMIT = 600.0
+#: Bytes of address space a submission's process may use by default.
+DEFAULT_MEMORY_LIMIT = 4 * 2**30
+#: The folder that holds the ``visla_edu`` package: the child imports this very copy.
+PACKAGE_PARENT = Path(__file__).resolve().parents[2]
+#: Seconds the grading process may take to start (imports, loading the drive) before the time limit counts.
+STARTUP_SECONDS = 120.0
+#: Bytes any one file the grading process writes may reach (its output log included).
+FILE_LIMIT = 256 * 2**20
+#: CPU seconds the grading process may use beyond the time limit (its start-up and the outcome).
+CPU_MARGIN = 60
+#: How often the parent looks at the child (s).
+_POLL_SECONDS = 0.05
+#: What the parent reports when the child left no outcome (the child's own: ``_grader_child.STATUSES``).
+EXIT_STATUSES = {
+    "timeout": "ran past the time limit (wall clock) or its CPU seconds, and was stopped",
+    "crashed": "the grading process ended without an outcome: killed by a signal, os._exit, a crash",
+}
+_SIGNALS = {
+    "SIGXCPU": ("timeout", "used more CPU seconds than the time limit allows and was stopped (SIGXCPU)"),
+    "SIGXFSZ": ("crashed", f"wrote more than {FILE_LIMIT // 2**20} MiB to one file or to its output, and was stopped "
+                           "(SIGXFSZ)"),
+    "SIGKILL": ("crashed", "was killed (SIGKILL: often the system running out of memory)"),
+    "SIGSEGV": ("crashed", "crashed the Python process (SIGSEGV: a segmentation fault in compiled code)"),
+}
+
+
+@dataclass
+class ChildOutcome:
+    """What one submission's grading process reported, or how it ended.
+
+    Attributes
+    ----------
+    status : str
+        A key of :data:`visla_edu.course._grader_child.STATUSES` or of :data:`EXIT_STATUSES`.
+    message : str
+        One line (without the submission's name).
+    frames : int
+        Frames the submission completed.
+    seconds : float
+        Its own time: import, ``make_filter`` and the steps (NaN when it left no outcome).
+    hidden_calls : list of str
+        Hidden visla_edu functions (and imports) it called.
+    traceback : str
+        The text of its error, for its report (``""`` when none).
+    notes : list of str
+        The grader's notes (a limit that could not be set...).
+    arrays : dict of str to ndarray
+        ``estimate.npz``: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6), ``nis``, ``nis_dof``,
+        ``step_seconds`` (k,), for the ``k = frames`` frames done (empty without it).
+    output : str
+        The end of what the process printed (the submission's prints), at most 4000 characters.
+    """
+
+    status: str
+    message: str
+    frames: int = 0
+    seconds: float = float("nan")
+    hidden_calls: list = field(default_factory=list)
+    traceback: str = ""
+    notes: list = field(default_factory=list)
+    arrays: dict = field(default_factory=dict)
+    output: str = ""
+
+
+def write_request(folder, submission, drive_file, config, time_limit, memory_limit):
+    """Write ``folder/request.json`` for the grading process; return its path.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The submission's working folder (the child's current folder and where it writes).
+    submission, drive_file : pathlib.Path
+        The submission's file and the prepared drive (:func:`visla_edu.data.save`).
+    config : visla_edu.filters.FilterConfig
+        Resolved; sent as its :meth:`~visla_edu.filters.FilterConfig.to_dict`.
+    time_limit : float
+        Seconds; the child's CPU limit is this plus :data:`CPU_MARGIN`.
+    memory_limit : int or None
+        Bytes of address space, or None for no limit.
+    """
+    request = {"submission": str(Path(submission).resolve()), "drive": str(drive_file), "config": config.to_dict(),
+               "out": str(folder), "memory_limit": memory_limit, "cpu_limit": int(time_limit + CPU_MARGIN),
+               "file_limit": FILE_LIMIT}
+    path = folder / "request.json"
+    path.write_text(json.dumps(request), encoding="utf-8")
+    return path
+
+
+def _kill_group(proc):
+    """Kill the child and everything it started (its own process group)."""
+    try:
+        if hasattr(os, "killpg"):
+            os.killpg(proc.pid, signal.SIGKILL)
+        else:  # pragma: no cover - Windows
+            proc.kill()
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
+def wait_with_time_limit(proc, progress_file, time_limit):
+    """Wait for ``proc``; kill its group ``time_limit`` s after ``progress_file`` appeared.
+
+    Before the file appears (the grader's start-up) :data:`STARTUP_SECONDS` apply.
+
+    Returns
+    -------
+    returncode : int
+    timed_out : bool
+    """
+    deadline = time.monotonic() + STARTUP_SECONDS
+    counting = False
+    while True:
+        try:
+            proc.wait(timeout=_POLL_SECONDS)
+            _kill_group(proc)  # whatever it left behind
+            return proc.returncode, False
+        except subprocess.TimeoutExpired:
+            pass
+        now = time.monotonic()
+        if not counting and progress_file.exists():
+            counting, deadline = True, now + time_limit
+        if now > deadline:
+            _kill_group(proc)
+            proc.wait()
+            return proc.returncode, True
+
+
+#: The variables of the grader's environment the child keeps (none of the teacher's paths or keys).
+_KEPT_VARIABLES = ("PATH", "HOME", "LANG", "LC_ALL", "LC_CTYPE", "TMPDIR", "TEMP", "TMP", "SYSTEMROOT", "MPLCONFIGDIR")
+
+
+def _child_environment():
+    """The child's environment: a few system variables, this visla_edu first on the path, one BLAS thread."""
+    env = {name: os.environ[name] for name in _KEPT_VARIABLES if name in os.environ}
+    given = os.environ.get("PYTHONPATH", "")
+    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT)] + ([given] if given else []))
+    env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONDONTWRITEBYTECODE="1",
+               MPLBACKEND="Agg", PYTHONIOENCODING="utf-8")
+    return env
+
+
+def _where(progress, num_frames):
+    """Where a time limit struck, from the child's ``progress`` text."""
+    if progress == "import":
+        return "while importing it"
+    if progress == "make_filter":
+        return "in make_filter"
+    if progress.startswith("frame "):
+        return f"at about frame {progress.split()[1]} of {num_frames}"
+    return "in step()"
+
+
+def _ended_without_outcome(returncode, timed_out, progress, time_limit, num_frames):
+    """``(status, message)`` of a child that left no outcome."""
+    if timed_out and progress is None:
+        return "timeout", (f"the grader's start-up took more than {STARTUP_SECONDS:.0f} s (an overloaded machine?); "
+                           "the submission did not run")
+    if timed_out:
+        return "timeout", f"ran past the time limit of {time_limit:g} s ({_where(progress, num_frames)})"
+    if progress is None:
+        return None, None  # the grader's own failure: see read_outcome
+    if returncode < 0:
+        name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else f"signal {-returncode}"
+        return _SIGNALS.get(name, ("crashed", f"was stopped by {name}"))
+    return "crashed", (f"ended with exit status {returncode} before the grader finished ({_where(progress, num_frames)}"
+                       "; os._exit, or a crash: see output.txt)")
+
+
+def _read_text(path, limit=None):
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    return text if limit is None else text[-limit:]
+
+
+def read_outcome(folder, returncode, timed_out, time_limit, num_frames):
+    """The :class:`ChildOutcome` of the grading process that ran in ``folder``.
+
+    Raises
+    ------
+    RuntimeError
+        The process failed before the submission ran (loading the drive, its imports): a
+        problem of the grader, not of the submission (the command line reports it as a bug).
+    """
+    import numpy as np  # here: the command line imports this module to build its parser
+
+    output = _read_text(folder / "output.txt", 4000) or ""
+    try:
+        reported = json.loads((folder / "outcome.json").read_text(encoding="utf-8"))
+        outcome = ChildOutcome(**{key: reported[key] for key in ("status", "message", "frames", "seconds",
+                                                                 "hidden_calls", "traceback", "notes")})
+    except (OSError, ValueError, KeyError, TypeError):
+        progress = _read_text(folder / "progress")
+        status, message = _ended_without_outcome(returncode, timed_out, progress, time_limit, num_frames)
+        if status is None:
+            last = (output.strip().splitlines() or ["(nothing)"])[-1]
+            raise RuntimeError(f"the grading process failed before the submission ran (exit status {returncode}); "
+                               f"its last line: {last}")
+        outcome = ChildOutcome(status, message)
+    outcome.output = output
+    try:
+        with np.load(folder / "estimate.npz") as saved:
+            outcome.arrays = {key: saved[key] for key in saved.files}
+    except (OSError, ValueError):
+        outcome.arrays = {}
+    outcome.frames = len(outcome.arrays.get("world_T_imu", ()))
+    return outcome
+
+
+def run_submission(submission, drive_file, config, folder, time_limit, memory_limit, num_frames):
+    """Grade one submission in its own process; return its :class:`ChildOutcome`.
+
+    Parameters
+    ----------
+    submission : pathlib.Path
+    drive_file : pathlib.Path
+        The prepared drive (no ground truth).
+    config : visla_edu.filters.FilterConfig
+        Resolved.
+    folder : pathlib.Path
+        An empty working folder for this submission.
+    time_limit : float
+        Seconds for the import, ``make_filter`` and every step together.
+    memory_limit : int or None
+        Bytes of address space.
+    num_frames : int
+        Frames of the drive (for the messages).
+    """
+    request = write_request(folder, submission, drive_file, config, time_limit, memory_limit)
+    command = [sys.executable, "-m", "visla_edu.course._grader_child", str(request)]
+    with open(folder / "output.txt", "wb") as log:
+        proc = subprocess.Popen(command, cwd=folder, env=_child_environment(), stdin=subprocess.DEVNULL, stdout=log,
+                                stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            returncode, timed_out = wait_with_time_limit(proc, folder / "progress", time_limit)
+        except BaseException:  # Ctrl-C: never leave a submission running
+            _kill_group(proc)
+            proc.wait()
+            raise
+    return read_outcome(folder, returncode, timed_out, time_limit, num_frames)
