@@ -387,6 +387,22 @@ def _run_sphinx(src, out, doctrees, settings):
     return [line for line in warnings.getvalue().splitlines() if line.strip()]
 
 
+def _pages(paths, course_data, log):
+    """``{page name: executed student edition}`` of ``paths``, the kernels working in a temporary folder.
+
+    The folder is the system's (``/tmp/visla-edu-book-...``), not the site's: a notebook that prints its
+    data folder without the course data (``.../data``) names that short path.
+    """
+    pages = {}
+    with tempfile.TemporaryDirectory(prefix="visla-edu-book-") as work:
+        for path in paths:
+            started = time.perf_counter()
+            pages[path.stem] = student_page(path, work, course_data)
+            code = any(cell.cell_type == "code" for cell in pages[path.stem].cells)
+            log(f"{'executed' if code else 'read'} {path.name} ({time.perf_counter() - started:.1f} s)")
+    return pages
+
+
 def build_book(out_dir, src_dir=None, course_data=True, repository=None, branch="main", log=print):
     """Build the course site into ``out_dir``.
 
@@ -426,14 +442,7 @@ def build_book(out_dir, src_dir=None, course_data=True, repository=None, branch=
     paths = notebook_paths(default_solutions() if src_dir is None else src_dir)
     with _staging(out_dir) as staging:
         src = staging / "source"
-        work = staging / "work"
-        work.mkdir()
-        pages = {}
-        for path in paths:
-            started = time.perf_counter()
-            pages[path.stem] = student_page(path, work, course_data)
-            code = any(cell.cell_type == "code" for cell in pages[path.stem].cells)
-            log(f"{'executed' if code else 'read'} {path.name} ({time.perf_counter() - started:.1f} s)")
+        pages = _pages(paths, course_data, log)
         _write_sources(src, pages, _index_text(list(pages), repository, branch, course_data))
         site = staging / "site"
         for warning in _run_sphinx(src, site, staging / "doctrees", _sphinx_settings(repository, branch)):
