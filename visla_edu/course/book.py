@@ -166,15 +166,11 @@ def _staging(out_dir):
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _move_into_place(site, out_dir):
-    """Replace ``out_dir`` (absent, empty, or an old site) by the folder ``site``."""
-    old = None
+def _move_into_place(site, out_dir, staging):
+    """Replace ``out_dir`` (absent, empty, or an old site) by the folder ``site``; the old one goes into ``staging``."""
     if out_dir.is_dir():
-        old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
-        out_dir.rename(old)
+        out_dir.rename(staging / "previous-site")
     site.rename(out_dir)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def _kernel_env(course_data):
@@ -447,5 +443,5 @@ def build_book(out_dir, src_dir=None, course_data=True, repository=None, branch=
         site = staging / "site"
         for warning in _run_sphinx(src, site, staging / "doctrees", _sphinx_settings(repository, branch)):
             log(f"sphinx: {warning}")
-        _move_into_place(site, out_dir)
+        _move_into_place(site, out_dir, staging)
     return out_dir / "index.html"
