@@ -367,20 +367,28 @@ def _write_sources(src, pages, index_text):
 
 
 def _run_sphinx(src, out, doctrees, settings):
-    """Build the HTML; returns Sphinx's warnings (lines). :class:`BookError` if Sphinx fails."""
+    """Build the HTML; returns Sphinx's warnings (lines). :class:`BookError` if Sphinx fails.
+
+    Python's deprecation warnings raised inside the build (the theme's use of Sphinx's API) are not
+    shown: they are for the theme's authors, and nothing the user can change.
+    """
     import io
+    import warnings
 
     from sphinx.application import Sphinx
     from sphinx.errors import SphinxError
 
-    warnings = io.StringIO()
+    log = io.StringIO()
     try:
-        app = Sphinx(str(src), None, str(out), str(doctrees), "html", confoverrides=settings,
-                     status=io.StringIO(), warning=warnings, freshenv=True)
-        app.build()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            warnings.simplefilter("ignore", PendingDeprecationWarning)
+            app = Sphinx(str(src), None, str(out), str(doctrees), "html", confoverrides=settings,
+                         status=io.StringIO(), warning=log, freshenv=True)
+            app.build()
     except SphinxError as err:
         raise BookError(f"Sphinx failed: {err}") from err
-    return [line for line in warnings.getvalue().splitlines() if line.strip()]
+    return [line for line in log.getvalue().splitlines() if line.strip()]
 
 
 def _pages(paths, course_data, log):
