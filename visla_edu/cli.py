@@ -1,4 +1,4 @@
-"""Command line: ``visla-edu {info,run,stepper,release,student} ...`` (also ``python -m visla_edu``).
+"""Command line: ``visla-edu {info,run,stepper,release,student,project,book} ...`` (also ``python -m visla_edu``).
 
 Examples: the README's "Command line" section; every option: ``visla-edu COMMAND --help``.
 
@@ -69,7 +69,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser():
     """The argument parser of ``visla-edu``.
 
-    Subcommands ``info``, ``run``, ``stepper``, ``release`` and ``student`` (required, stored as
+    Subcommands ``info``, ``run``, ``stepper``, ``release``, ``student``, ``project`` and ``book`` (required, stored as
     ``command``); ``--debug`` is accepted before or after the subcommand, ``--data-dir`` after
     ``info``, ``run`` and ``stepper``. Values are checked while parsing (paths, ports, strides,
     BLAS threads and ``--set NAME=VALUE`` settings).
@@ -113,6 +113,14 @@ def build_parser():
     student.add_argument("folder", type=_options.path, help="the student's folder (created if missing; files "
                                                             "already there are never replaced)")
     _project_commands.add_parser(sub, common, debug)
+
+    book = sub.add_parser("book", parents=[debug], help="build the course site (the student edition, executed) in DIR")
+    book.add_argument("dir", type=_options.path, metavar="DIR", help="the site's folder: new, empty or a former site")
+    book.add_argument("--src", default=None, type=_options.path, help="solutions folder (default: the project's)")
+    book.add_argument("--no-course-data", action="store_true", help="run without VISLA_EDU_DATA, as on Binder")
+    book.add_argument("--repository", default=None, metavar="URL",
+                      help="https://github.com/OWNER/NAME: Binder and Colab buttons on each page")
+    book.add_argument("--branch", default="main", help="the branch those buttons open (default: main)")
     return parser
 
 
@@ -451,8 +459,15 @@ def _cmd_student(args):
     print(student.make_student_folder(args.folder).report())
 
 
+def _cmd_book(args):
+    from visla_edu.course import book
+
+    index = book.build_book(args.dir, args.src, not args.no_course_data, args.repository, args.branch)
+    print(f"wrote the course site: {index}")
+
+
 _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release,
-             "student": _cmd_student}
+             "student": _cmd_student, "book": _cmd_book}
 _HANDLERS["project"] = _project_commands.run
 
 

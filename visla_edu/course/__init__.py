@@ -17,6 +17,8 @@
   the process that runs one submission, ``_runner`` starts it with its limits and reads what it
   left, ``_report`` the figures, the reports and the summary table, ``_commands`` the
   ``visla-edu project`` command line.
+* :mod:`visla_edu.course.book`: ``visla-edu book DIR``, the course site (the student edition of
+  every notebook, executed, as static HTML that works offline).
 
 Nothing is imported or read at import time (``visla-edu`` builds its parser without loading
 the grader).
