@@ -4,8 +4,9 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from visla_edu.filters._settings import check_settings, setting
+from visla_edu.diagnostics import CORRECTIONS
 from visla_edu.metrics import chi2_quantile
+from visla_edu.settings import check_settings, setting
 
 __all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS"]
 
@@ -54,10 +55,10 @@ class FilterConfig:
       unobservable directions do not depend on the estimate, so it stays consistent where the
       right perturbation (notebooks 05-06) becomes overconfident (notebook 07).
 
-    Each field declares what it accepts next to its default (:func:`visla_edu.filters._settings.setting`:
+    Each field declares what it accepts next to its default (:func:`visla_edu.settings.setting`:
     kind, plausible range and why, words such as ``"auto"``, None or not); the same
     declaration checks values given in Python and parses ``visla-edu run --set NAME=VALUE``
-    strictly (:func:`visla_edu.filters._settings.parse_setting`). An out-of-range value is
+    strictly (:func:`visla_edu.settings.parse_setting`). An out-of-range value is
     refused with its range, never clipped.
 
     The three switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
@@ -157,8 +158,8 @@ class FilterConfig:
                                         why="no image is wider than the range")
     imu_lag: object = setting(AUTO, int, -MAX_IMU_LAG, MAX_IMU_LAG, words=(AUTO,),
                               why="which velocity sample near the step drives it; a larger shift is a broken file")
-    extrinsic_correction: str = setting("auto", str,
-                                        why="'auto', 'none' or a correction of visla_edu.diagnostics.CORRECTIONS")
+    extrinsic_correction: str = setting("auto", str, words=(AUTO, *CORRECTIONS),
+                                        why="'auto' applies what the data show; see visla_edu.diagnostics.CORRECTIONS")
     landmark_cross_covariance: bool = setting(True, bool)
     mapping_motion_noise: bool = setting(True, bool)
     vio_refine_landmarks: bool = setting(False, bool)
