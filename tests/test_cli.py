@@ -60,10 +60,14 @@ def test_smoother_settings_are_refused_where_they_cannot_apply(argv, message, ca
 
 
 @pytest.mark.parametrize("value, message", [
-    ("window_size=1", "window_size must be >= 2"),
-    ("window_size=big", "expected an integer"),
+    ("window_size=1", "window_size must be an integer >= 2"),
+    ("window_size=big", "window_size needs an int (an integer >= 2"),
     ("sigma_pixel=2", "comes from the filter's settings: use --set"),
+    ("imu_lag=1", "comes from the filter's settings: use --set imu_lag=VALUE"),
+    ("min_disparity=5", "use --set min_init_disparity=VALUE"),
     ("windowsize=5", "'windowsize' is not a smoother setting"),
+    ("blas_threads=2", "'blas_threads' is not a smoother setting"),
+    ("window_size", "expected NAME=VALUE; the smoother's settings are loss, loss_scale"),
 ])
 def test_a_bad_smoother_setting_is_an_argparse_error(value, message, capsys):
     with pytest.raises(SystemExit):
@@ -169,6 +173,23 @@ def test_run_help_names_every_mode_and_every_setting_with_its_default(capsys):
     for name in smoother.OWN_SETTINGS:
         assert f"{name}={shown(getattr(smoother_defaults, name))}" in text, name
     assert "every N-th landmark only (default 1" in text
+
+
+def test_run_help_says_what_each_setting_accepts_and_which_mode_reads_it(capsys):
+    """Each setting's line of the epilog: its default, then its declaration's description."""
+    from visla_edu import settings, smoother
+    from visla_edu.filters import FilterConfig
+
+    with pytest.raises(SystemExit):
+        cli.main(["run", "--help"])
+    lines = capsys.readouterr().out.splitlines()
+    own = {name: spec for name, spec in settings.specs(smoother.SmootherConfig).items() if name in smoother.OWN_SETTINGS}
+    for name, spec in [*settings.specs(FilterConfig).items(), *own.items()]:
+        line = next(line for line in lines if line.startswith(f"  {name}="))
+        assert line.split()[0] == f"{name}={settings.format_value(spec.default)}", line
+        assert spec.describe() in line, line
+        assert ("(window only)" in line) == (name in smoother.WINDOW_ONLY), line
+        assert ("(smooth only)" in line) == (name in smoother.BATCH_ONLY), line
 
 
 def test_stepper_help_states_the_default_port(capsys):

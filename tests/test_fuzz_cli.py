@@ -310,7 +310,7 @@ SETTING_CASES = {
     "gate probability 0": (["--set", "gate_probability=0"], 2, r"gate_probability must be a number in \(0, 1\]"),
     "unknown setting": (["--set", "sigma_pxl=2"], 2, r"unknown setting 'sigma_pxl'; settings are sigma_pixel"),
     "no equals sign": (["--set", "sigma_pixel"], 2, r"expected NAME=VALUE"),
-    "unknown correction": (["--set", "extrinsic_correction=flip"], 2, r"extrinsic_correction must be 'auto' or one"),
+    "unknown correction": (["--set", "extrinsic_correction=flip"], 2, r"extrinsic_correction must be one of 'auto', 'none', 'flip_yz'"),
     "none for a number": (["--set", "sigma_pixel=none"], 2, r"sigma_pixel needs a float"),
     "dense with vio": (["--mode", "vio", "--dense"], 2, r"--dense is the textbook joint filter and needs --mode slam"),
 }

@@ -99,7 +99,7 @@ def test_a_filter_setting_the_smoother_cannot_take_is_refused_before_the_ekf_run
     monkeypatch.setattr(run, "run_filter", lambda *a, **k: pytest.fail("the EKF ran before the check"))
     config = FilterConfig(extrinsic_correction="none", sigma_linear_velocity=0.2, sigma_angular_velocity=0.0, imu_lag=0)
     with pytest.raises(ValueError, match=rf"mode {mode} cannot use these filter settings: "
-                                         r"SmootherConfig.sigma_angular_velocity must be a positive number"):
+                                         r"SmootherConfig.sigma_angular_velocity must be a number > 0 rad/s"):
         run.run_smoother(tiny, mode, config, progress=False)
 
 
@@ -112,7 +112,7 @@ def test_smoother_settings_of_its_own_change_the_run(tiny):
     assert not np.allclose(r.world_T_imu, default.world_T_imu)
     with pytest.raises(ValueError, match=r"\['sigma_pixel'\] are not the smoother's own settings"):
         run.run_smoother(tiny, "window", CFG, progress=False, smoother_settings={"sigma_pixel": 2.0})
-    with pytest.raises(ValueError, match="SmootherConfig.window_size must be >= 2"):
+    with pytest.raises(ValueError, match="SmootherConfig.window_size must be an integer >= 2"):
         run.run_smoother(tiny, "window", CFG, progress=False, smoother_settings={"window_size": 1})
     from visla_edu import smoother
     with pytest.raises(ValueError, match="not both"):

@@ -1,12 +1,13 @@
-"""Strict settings (visla_edu.filters._settings): one declaration per FilterConfig field checks and parses."""
+"""Strict settings (visla_edu.settings): one declaration per config field checks and parses."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from visla_edu.filters import FilterConfig, _settings
-from visla_edu.filters._settings import check_settings, parse_setting, parse_settings, setting, spec_of
+from visla_edu import settings
+from visla_edu.filters import FilterConfig
+from visla_edu.settings import check_settings, parse_setting, parse_settings, setting, specs
 
 
 @dataclasses.dataclass
@@ -79,7 +80,7 @@ def test_words_and_none_when_declared():
         _Example(mode="slow")
     with pytest.raises(ValueError, match=r"sigma_pixel needs a float"):
         parse_setting(FilterConfig, "sigma_pixel=none")  # not optional
-    assert spec_of(_Example, "threads").describe() == "an integer in [1, 64] or none"
+    assert specs(_Example)["threads"].describe() == "an integer in [1, 64] or none"
 
 
 def test_names_and_repetition():
@@ -93,8 +94,41 @@ def test_names_and_repetition():
 
 def test_every_field_declares_what_it_accepts():
     for field in dataclasses.fields(FilterConfig):
-        spec = field.metadata[_settings.SPEC]
+        spec = field.metadata[settings.SPEC]
         assert spec.kind in (bool, int, float, str), field.name
         spec.check(field.name, field.default)  # the defaults are valid
         if spec.kind in (int, float):
             assert spec.low is not None and spec.high is not None and spec.why, field.name
+
+
+def test_the_smoothers_settings_are_declared_the_same_way():
+    """SmootherConfig: every field has a spec with a valid default; its own settings and the ones
+    it takes from the filter (FROM_FILTER) are all its fields, each once."""
+    from visla_edu import smoother
+
+    declared = specs(smoother.SmootherConfig)
+    assert list(declared) == [field.name for field in dataclasses.fields(smoother.SmootherConfig)]
+    for name, spec in declared.items():
+        assert spec.kind in (bool, int, float, str) and spec.default == getattr(smoother.SmootherConfig(), name), name
+        spec.check(name, spec.default)
+    assert sorted([*smoother.OWN_SETTINGS, *smoother.FROM_FILTER]) == sorted(declared)
+    assert set(smoother.FROM_FILTER.values()) <= set(specs(FilterConfig))
+    with pytest.raises(ValueError, match=r"SmootherConfig.pose_covariance must be true or false"):
+        smoother.SmootherConfig(pose_covariance=1)  # was taken as is
+
+
+def test_messages_name_the_config_class():
+    with pytest.raises(ValueError, match=r"^_Example.mode must be one of 'fast', 'exact'"):
+        _Example(mode="slow")
+    with pytest.raises(ValueError, match=r"^FilterConfig.extrinsic_correction must be one of 'auto', 'none', 'flip_yz'"):
+        FilterConfig(extrinsic_correction="flip")  # refused when made, not when the camera is resolved
+    assert parse_setting(FilterConfig, "extrinsic_correction=FLIP_YZ") == ("extrinsic_correction", "flip_yz")
+
+
+@pytest.mark.parametrize("value, text", [(True, "true"), (None, "none"), (1_000_000, "1000000"), (1e-6, "1e-06"),
+                                         (0.999, "0.999"), ("auto", "auto"), ((0.1, 0.02, 0.02), "0.1,0.02,0.02")])
+def test_format_value_is_what_name_value_would_set(value, text):
+    assert settings.format_value(value) == text
+    if not isinstance(value, str) and value is not None:
+        spec = settings.SettingSpec(type(value[0] if isinstance(value, tuple) else value), per_axis=True)
+        assert spec.parse("x", text) == value

@@ -12,7 +12,7 @@ import pytest
 from scipy.sparse import linalg as sparse_linalg
 
 from fdiff import fd_jacobian  # tests/fdiff.py
-from visla_edu import lie, metrics, motion, run, simulate, smoother
+from visla_edu import lie, metrics, motion, run, settings, simulate, smoother
 from visla_edu.filters import FilterConfig
 from visla_edu.smoother import _batch, _envelope, _normal, _problem
 
@@ -392,19 +392,19 @@ def test_config_rejects_bad_values_naming_the_field(field, value):
     ("window_mode=marginalize", ("window_mode", "marginalize")),
 ])
 def test_parse_setting_reads_a_value_as_its_setting_type(text, expected):
-    name, value = smoother.parse_setting(text)
+    name, value = settings.parse_setting(smoother.SmootherConfig, text)
     assert (name, value) == expected and type(value) is type(expected[1])
 
 
 @pytest.mark.parametrize("text, message", [
-    ("window_size", "expected NAME=VALUE"), ("window_size=2.5", "expected an integer"),
-    ("pose_covariance=maybe", "expected true or false"), ("loss_scale=nan", "SmootherConfig.loss_scale"),
-    ("window_mode=drop", "SmootherConfig.window_mode"), ("imu_lag=1", "comes from the filter's settings"),
-    ("blas_threads=2", "'blas_threads' is not a smoother setting"),
+    ("window_size", "expected NAME=VALUE"), ("window_size=2.5", "window_size needs an int (an integer >= 2"),
+    ("pose_covariance=maybe", "pose_covariance needs a bool (true or false"),
+    ("loss_scale=nan", "loss_scale needs a float (a number > 0"),
+    ("window_mode=drop", "window_mode must be one of 'fix', 'marginalize'"),
 ])
 def test_parse_setting_names_what_is_wrong(text, message):
     with pytest.raises(ValueError, match=re.escape(message)):
-        smoother.parse_setting(text)
+        settings.parse_setting(smoother.SmootherConfig, text)
 
 def test_bad_initial_values_get_a_clear_error(tiny):
     T = tiny.ground_truth.world_T_imu

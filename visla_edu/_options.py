@@ -6,16 +6,50 @@ prints ``usage`` and that line, and :mod:`visla_edu.cli` exits with status 2.
 """
 
 import argparse
+import textwrap
 
 __all__ = ["settings_help", "frames", "integer_in", "blas_threads", "path", "port", "setting", "smoother_setting",
            "stride"]
 
 
 def settings_help():
-    """The epilog of ``run --help`` (:func:`visla_edu.smoother.settings_help`), imported only when asked."""
-    from visla_edu import smoother
+    """The epilog of ``run --help``: every ``--set`` and ``--smoother-set`` setting, its default and what it accepts.
 
-    return smoother.settings_help()
+    One line a setting, ``name=default`` then :meth:`visla_edu.settings.SettingSpec.describe`
+    (the smoother's own settings also say which mode reads them); the configs are imported only
+    when the help is asked for.
+
+    Returns
+    -------
+    str
+        Lines for :class:`argparse.RawDescriptionHelpFormatter`.
+    """
+    from visla_edu import smoother
+    from visla_edu.filters import FilterConfig
+    from visla_edu.settings import specs
+
+    own = {name: spec for name, spec in specs(smoother.SmootherConfig).items() if name in smoother.OWN_SETTINGS}
+    modes = {**dict.fromkeys(smoother.BATCH_ONLY, "smooth"), **dict.fromkeys(smoother.WINDOW_ONLY, "window")}
+    window_reads = f"{', '.join(smoother.FILTER_SETTINGS)} and extrinsic_correction"
+    return "\n".join([
+        "--set NAME=VALUE, the filter's settings (FilterConfig), their defaults and what they accept:",
+        *_setting_lines(specs(FilterConfig), {}),
+        "--smoother-set NAME=VALUE (--mode smooth or window; noise and lag come from --set), the smoother's own:",
+        *_setting_lines(own, modes),
+        *textwrap.wrap(f"--mode window takes from --set only {window_reads}.", 100, subsequent_indent="  ")])
+
+
+def _setting_lines(specs, modes):
+    """``"  name=default  what it accepts"`` per setting (``specs``: name -> SettingSpec), aligned.
+
+    ``modes`` maps a name to the one mode that reads it, said after what it accepts.
+    """
+    from visla_edu.settings import format_value
+
+    heads = {name: f"{name}={format_value(spec.default)}" for name, spec in specs.items()}
+    width = max(map(len, heads.values()))
+    return [f"  {heads[name]:<{width}}  {spec.describe()}" + (f" ({modes[name]} only)" if name in modes else "")
+            for name, spec in specs.items()]
 
 
 def frames(text):
@@ -62,30 +96,39 @@ def port(text):
 
 def setting(text):
     """``--set NAME=VALUE``: ``(name, value)`` parsed strictly by the setting's declaration."""
-    from visla_edu.filters import FilterConfig, _settings
+    from visla_edu.filters import FilterConfig
 
     if text.strip().lower().startswith("blas_threads"):
         raise argparse.ArgumentTypeError(f"{text!r}: blas_threads is not a filter setting; use --blas-threads N "
                                          "(or --blas-threads none)")
-    try:
-        name, value = _settings.parse_setting(FilterConfig, text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(str(err)) from None
-    if name == "extrinsic_correction":
-        from visla_edu.diagnostics import CORRECTIONS
-
-        if value not in ("auto", *CORRECTIONS):
-            raise argparse.ArgumentTypeError(f"extrinsic_correction must be 'auto' or one of {list(CORRECTIONS)}, "
-                                             f"got {value!r}")
-    return name, value
+    return _parsed(FilterConfig, text)
 
 
 def smoother_setting(text):
-    """``--smoother-set NAME=VALUE``: ``(name, value)`` (:func:`visla_edu.smoother.parse_setting`)."""
+    """``--smoother-set NAME=VALUE``: ``(name, value)`` of a smoother setting of its own, parsed by its declaration.
+
+    A setting the smoother takes from the filter's (:data:`visla_edu.smoother.FROM_FILTER`) is
+    refused with the ``--set`` that gives it.
+    """
     from visla_edu import smoother
 
+    name, sep, _ = (part.strip() for part in text.partition("="))
+    if not sep or name not in smoother.OWN_SETTINGS:
+        source = smoother.FROM_FILTER.get(name)
+        what = ("expected NAME=VALUE" if not sep else f"{name!r} is not a smoother setting" if source is None else
+                f"{name} is not a smoother setting of its own (it comes from the filter's settings: use --set "
+                f"{source}=VALUE)")
+        own = ", ".join(smoother.OWN_SETTINGS)
+        raise argparse.ArgumentTypeError(f"{text!r}: {what}; the smoother's settings are {own}")
+    return _parsed(smoother.SmootherConfig, text)
+
+
+def _parsed(config_class, text):
+    """:func:`visla_edu.settings.parse_setting` of ``text`` for ``config_class``, its error as argparse's."""
+    from visla_edu import settings
+
     try:
-        return smoother.parse_setting(text)
+        return settings.parse_setting(config_class, text)
     except ValueError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
 

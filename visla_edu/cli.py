@@ -125,7 +125,8 @@ def build_parser():
 
 
 def _add_run_parser(sub, common):
-    run = sub.add_parser("run", parents=[common], help="run a filter over a dataset", epilog=_options.settings_help)
+    run = sub.add_parser("run", parents=[common], help="run a filter over a dataset", epilog=_options.settings_help,
+                         formatter_class=argparse.RawDescriptionHelpFormatter)
     run.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
     run.add_argument("--mode", default=SLAM, choices=RUN_MODES, help=RUN_MODES_HELP)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
@@ -290,11 +291,7 @@ def _run_config(args):
         raise ValueError(f"--smoother-set {names[0]}: smoother settings need --mode smooth or window, got --mode {args.mode}")
     if len(set(names)) < len(names):
         raise ValueError(f"--smoother-set: {max(names, key=names.count)} is given twice; give each setting once")
-    if names:
-        from visla_edu import smoother
-
-        smoother.check_mode_settings(args.mode, names)
-    _check_window_settings(args)
+    _check_window_settings(args)  # the smoother's own settings are checked by run.run_smoother
     settings = {}
     pairs = list(args.set) + ([("landmark_stride", args.landmark_stride)] if args.landmark_stride else [])
     for name, value in pairs:

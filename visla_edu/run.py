@@ -19,7 +19,7 @@ True
 
 import contextlib
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -80,10 +80,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
         raise ValueError(f"cannot run the filter: {problems[0]}")
     _check_enough_data(dataset, mode)
     config = resolve_config(dataset, config or FilterConfig())
-    imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
-    if verbose and evidence:
-        print(evidence)
-    camera = StereoCamera(dataset.K, dataset.b, imu_T_cam)
+    camera = StereoCamera(dataset.K, dataset.b, _imu_T_cam(dataset, config, verbose))
     if mode == SLAM:
         return filters.JointSlam(dataset, camera, config, dense=dense)
     return _MODE_CLASSES[mode](dataset, camera, config)
@@ -108,9 +105,10 @@ def resolve_config(dataset, config):
     """``config`` with its ``"auto"`` settings measured from ``dataset``.
 
     The velocity noise and the IMU lag come from :func:`visla_edu.diagnostics.calibrate`
-    (cached by the data's content); ``extrinsic_correction="auto"`` stays as it is and is
-    resolved with the camera (:func:`visla_edu.diagnostics.resolve_extrinsics`, the same
-    calibration).
+    (cached by the data's content, applied by :meth:`~visla_edu.filters.FilterConfig.resolve`);
+    ``extrinsic_correction="auto"`` stays as it is and is resolved with the camera
+    (:func:`_imu_T_cam`, the same calibration). The smoothers take the resolved values
+    (:meth:`~visla_edu.smoother.SmootherConfig.from_filter_config`).
 
     Parameters
     ----------
@@ -125,6 +123,18 @@ def resolve_config(dataset, config):
     if config.resolved:
         return config
     return config.resolve(diagnostics.calibrate(dataset))
+
+
+def _imu_T_cam(dataset, config, verbose):
+    """The camera's extrinsic with ``config.extrinsic_correction`` applied (``"auto"`` resolved), shape (4, 4).
+
+    :func:`visla_edu.diagnostics.resolve_extrinsics`; ``verbose`` prints the evidence of an
+    automatic correction.
+    """
+    imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
+    if verbose and evidence:
+        print(evidence)
+    return imu_T_cam
 
 
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
@@ -325,6 +335,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
 
     if mode not in SMOOTHER_MODES:
         raise ValueError(f"mode must be one of {SMOOTHER_MODES}, got {mode!r}")
+    smoother.check_own_settings(mode, smoother_settings or ())
     _check_enough_data(dataset, mode)
     if config is not None and config.landmark_stride != 1:
         raise ValueError(f"landmark_stride={config.landmark_stride} thins the map of the filters (mapping, vio, slam); "
@@ -336,20 +347,14 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     start = None
     if mode == SMOOTH:
         start = run_filter(dataset, SLAM, config, progress=progress, verbose=verbose, blas_threads=blas_threads)
-        imu_T_cam = start.imu_T_cam
+        solved = smoother.smooth(dataset, start.world_T_imu, start.landmarks, start.imu_T_cam, settings, blas_threads)
     else:
-        imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
-        if verbose and evidence:
-            print(evidence)
-    if mode == SMOOTH:
-        solved = smoother.smooth(dataset, start.world_T_imu, start.landmarks, imu_T_cam, settings, blas_threads)
-    else:
-        solved = smoother.smooth_window(dataset, None, imu_T_cam, settings, blas_threads)
+        solved = smoother.smooth_window(dataset, None, _imu_T_cam(dataset, config, verbose), settings, blas_threads)
     return _smoother_run_result(dataset, config, solved, start)
 
 
 def _smoother_settings(config, mode, own=None):
-    """The smoother's model from the filter's resolved settings, or a ValueError saying where it came from.
+    """The smoother's model from the filter's resolved settings and its own, or a ValueError saying which.
 
     Parameters
     ----------
@@ -358,7 +363,8 @@ def _smoother_settings(config, mode, own=None):
     mode : str
         Names the mode in the message.
     own : dict, optional
-        Settings of the smoother's own (:data:`visla_edu.smoother.OWN_SETTINGS`).
+        Settings of the smoother's own (checked by
+        :func:`visla_edu.smoother.check_own_settings` already).
 
     Returns
     -------
@@ -368,21 +374,16 @@ def _smoother_settings(config, mode, own=None):
     ------
     ValueError
         A filter setting the smoother cannot take (e.g. a velocity noise of 0, which the
-        filters accept and the smoother's motion factors cannot weigh), or an ``own`` name
-        that is not one of the smoother's own settings or that ``mode`` does not use.
+        filters accept and the smoother's motion factors cannot weigh), or a bad value of its
+        own (named as the smoother's).
     """
     from visla_edu import smoother
 
-    unknown = sorted(set(own or ()) - set(smoother.OWN_SETTINGS))
-    if unknown:
-        raise ValueError(f"smoother_settings: {unknown} are not the smoother's own settings; they are "
-                         f"{', '.join(smoother.OWN_SETTINGS)} (noise and lag come from the filter's config)")
-    smoother.check_mode_settings(mode, own or ())
-    smoother.SmootherConfig(**(own or {}))  # a bad value of its own is named as the smoother's
     try:
-        return smoother.SmootherConfig.from_filter_config(config, **(own or {}))
+        model = smoother.SmootherConfig.from_filter_config(config)
     except ValueError as err:
         raise ValueError(f"mode {mode} cannot use these filter settings: {err}") from None
+    return replace(model, **(own or {}))
 
 
 #: Smoother observation status (:data:`visla_edu.smoother.STATUS_NAMES`) -> the filters' codes.

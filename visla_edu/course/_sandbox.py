@@ -39,7 +39,7 @@ __all__ = ["ALLOWED_MODULES", "ALLOWED_NAMES", "HIDDEN_CALLS", "SubmissionUsedLi
 #: visla_edu modules a submission may use while it is graded.
 ALLOWED_MODULES = ("visla_edu", "visla_edu.lie", "visla_edu.camera", "visla_edu.dataset", "visla_edu.codes",
                    "visla_edu.metrics", "visla_edu.numdiff", "visla_edu.kalman", "visla_edu.filters",
-                   "visla_edu.filters._config", "visla_edu.filters._settings")
+                   "visla_edu.filters._config", "visla_edu.settings")
 #: Names a submission may use from otherwise hidden modules (the interface's types).
 ALLOWED_NAMES = {"visla_edu.filters._base": ("StepRecord", "FilterDivergedError", "MIN_DEPTH", "MAX_DISTANCE")}
 #: The names of the ``visla_edu.filters`` package a submission may import (the rest are its filters).

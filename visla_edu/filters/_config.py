@@ -4,8 +4,9 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from visla_edu.filters._settings import check_settings, setting
+from visla_edu.diagnostics import CORRECTIONS
 from visla_edu.metrics import chi2_quantile
+from visla_edu.settings import check_settings, setting
 
 __all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS"]
 
@@ -54,11 +55,11 @@ class FilterConfig:
       unobservable directions do not depend on the estimate, so it stays consistent where the
       right perturbation (notebooks 05-06) becomes overconfident (notebook 07).
 
-    Each field declares what it accepts next to its default (:func:`visla_edu.filters._settings.setting`:
-    kind, plausible range and why, words such as ``"auto"``, None or not); the same
+    Each field declares what it accepts next to its default (:func:`visla_edu.settings.setting`:
+    kind, plausible range and why the range is what it is, words such as ``"auto"``); the same
     declaration checks values given in Python and parses ``visla-edu run --set NAME=VALUE``
-    strictly (:func:`visla_edu.filters._settings.parse_setting`). An out-of-range value is
-    refused with its range, never clipped.
+    strictly (:func:`visla_edu.settings.parse_setting`). An out-of-range value is refused with
+    its range, never clipped. The attributes below say what each setting means.
 
     The three switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
     ``vio_refine_landmarks`` are the teaching comparisons of the modes that read them: the
@@ -73,8 +74,7 @@ class FilterConfig:
     sigma_linear_velocity : float, (float, float, float) or "auto"
         Modes: all. Noise on each linear-velocity sample (m/s), one value for every axis or one
         per body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
-        axis (:func:`visla_edu.diagnostics.calibrate`: the samples' white noise and how much
-        the velocity changes within a step, which the model holds constant).
+        axis (the first point above).
     sigma_angular_velocity : float, (float, float, float) or "auto"
         Modes: all. Noise on each angular-velocity sample (rad/s), as above.
     landmark_prior_inflation : float
@@ -88,20 +88,19 @@ class FilterConfig:
     landmark_prior_sigma : float
         Modes: mapping, vio, slam. Isotropic part of a new landmark's covariance (m).
     initial_pose_sigma : float
-        Modes: all. Standard deviation of the first pose; 0 because ``world`` is the first IMU
-        frame.
+        Modes: all. Standard deviation of the first pose.
     gate_probability : float
         Modes: mapping, vio, slam. Observations whose Mahalanobis distance exceeds the
         chi-square quantile with 4 degrees of freedom at this probability are rejected as
         outliers (1.0 disables gating).
     min_init_disparity : float
         Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` (px) to triangulate a new
-        landmark; smaller disparities give depths beyond ``fsu b / min_init_disparity``.
-        Observations with non-positive disparity are never used.
+        landmark (a depth up to ``fsu b / min_init_disparity``). Observations with non-positive
+        disparity are never used.
     imu_lag : int or "auto"
         Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
-        the step ``t -> t+1``: ``u[t + imu_lag]``, in ``-2 .. 2``. ``"auto"``: the lag the data
-        supports (:func:`visla_edu.diagnostics.calibrate`), 0 without clear evidence.
+        the step ``t -> t+1``: ``u[t + imu_lag]``. ``"auto"``: the lag the data support (the
+        second point above).
     extrinsic_correction : str
         Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
@@ -125,13 +124,12 @@ class FilterConfig:
         has one at 1008).
     landmark_stride : int
         Modes: mapping, vio, slam. Use only landmarks whose index is a multiple of this (the
-        textbook workaround for the dense filter's memory; 1 = every landmark).
+        textbook workaround for the dense filter's memory).
     slam_error : {"invariant", "right"}
         Mode: slam. What the joint state's error means (:mod:`visla_edu.filters._forms`):
-        ``"invariant"`` (world-frame error, ``T = exp(hat(xi)) mu``: the invariant EKF, consistent)
-        or ``"right"`` (the right perturbation ``T = mu exp(hat(delta))`` notebooks 05-06 derive,
-        whose estimate-dependent unobservable directions make it overconfident: pose NEES in the
-        hundreds on 1100-frame simulated drives, against 4-6 for the invariant form).
+        ``"invariant"`` (world-frame error, ``T = exp(hat(xi)) mu``) or ``"right"`` (the right
+        perturbation ``T = mu exp(hat(delta))``); the last point above says why the default is
+        the invariant form.
     reinit_gated_landmarks : bool
         Mode: slam. A landmark no update has used yet (only its first observation placed it) is
         placed again from its next observation when that one falls outside the gate: the first
@@ -157,8 +155,8 @@ class FilterConfig:
                                         why="no image is wider than the range")
     imu_lag: object = setting(AUTO, int, -MAX_IMU_LAG, MAX_IMU_LAG, words=(AUTO,),
                               why="which velocity sample near the step drives it; a larger shift is a broken file")
-    extrinsic_correction: str = setting("auto", str,
-                                        why="'auto', 'none' or a correction of visla_edu.diagnostics.CORRECTIONS")
+    extrinsic_correction: str = setting("auto", str, words=(AUTO, *CORRECTIONS),
+                                        why="'auto' applies what the data show; see visla_edu.diagnostics.CORRECTIONS")
     landmark_cross_covariance: bool = setting(True, bool)
     mapping_motion_noise: bool = setting(True, bool)
     vio_refine_landmarks: bool = setting(False, bool)

@@ -41,9 +41,8 @@ Modules (private; the public names are re-exported here): ``_config``
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
-from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, LOSSES, OWN_SETTINGS, WINDOW_MODES,
-                                        WINDOW_ONLY, SmootherConfig, check_mode_settings, parse_setting,
-                                        settings_help)
+from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, FROM_FILTER, LOSSES, OWN_SETTINGS, WINDOW_MODES,
+                                        WINDOW_ONLY, SmootherConfig, check_own_settings)
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
 from visla_edu.smoother._result import HISTORY_FIELDS, STOP_REASONS, SmootherResult
@@ -55,13 +54,12 @@ __all__ = [
     "SmootherResult",
     "LOSSES",
     "WINDOW_MODES",
+    "FROM_FILTER",
     "OWN_SETTINGS",
     "FILTER_SETTINGS",
     "BATCH_ONLY",
     "WINDOW_ONLY",
-    "check_mode_settings",
-    "parse_setting",
-    "settings_help",
+    "check_own_settings",
     "STATUS_NAMES",
     "HISTORY_FIELDS",
     "STOP_REASONS",

@@ -1,11 +1,13 @@
-"""Strict settings: what each :class:`~visla_edu.filters.FilterConfig` field accepts, in one place.
+"""Declared settings: what each field of a configuration dataclass accepts, in one place.
 
-Every field is declared with :func:`setting`, which stores a :class:`SettingSpec` in the
-field's metadata: its kind (float, int, bool or str), its plausible range and why, the words
-it accepts besides values (e.g. ``"auto"``) and whether it may be None. The same spec
-checks a value given in Python (:func:`check_settings`, from ``FilterConfig.__post_init__``)
-and parses one given as text on the command line (:func:`parse_setting`, for
-``visla-edu run --set NAME=VALUE``):
+:class:`~visla_edu.filters.FilterConfig` and :class:`~visla_edu.smoother.SmootherConfig`
+declare every field with :func:`setting`, which stores a :class:`SettingSpec` in the field's
+metadata: its default, kind (float, int, bool or str), plausible range and why, the words it
+accepts besides values (e.g. ``"auto"``) and whether it may be None. The same spec checks a
+value given in Python (:func:`check_settings`, from the config's ``__post_init__``), parses
+one given as text on the command line (:func:`parse_setting`, for ``visla-edu run --set
+NAME=VALUE`` and ``--smoother-set``) and says what is valid for ``--help``
+(:meth:`SettingSpec.describe`, :func:`format_value`):
 
 * booleans are ``true/false``, ``1/0``, ``yes/no`` (any case); anything else is an error;
 * integers are integer literals (``2``, not ``2.5`` or ``2.0``);
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SettingSpec", "setting", "spec_of", "check_settings", "parse_setting", "parse_settings", "defaults_text"]
+__all__ = ["SettingSpec", "setting", "specs", "check_settings", "parse_setting", "parse_settings", "format_value"]
 
 #: Key of the :class:`SettingSpec` in a dataclass field's metadata.
 SPEC = "visla_edu.setting"
@@ -49,6 +51,8 @@ class SettingSpec:
         (``0.1,0.02,0.02`` on the command line), each within the range.
     unit, why : str
         For messages: the unit of the value and why the range is what it is.
+    default : object
+        The field's default (what ``--help`` shows).
     """
 
     kind: type
@@ -60,6 +64,7 @@ class SettingSpec:
     unit: str = ""
     why: str = ""
     per_axis: bool = False
+    default: object = None
 
     def describe(self):
         """What is valid, e.g. ``"a number in (0.001, 100] px"`` or ``"an integer in [-2, 2] or 'auto'"``."""
@@ -76,7 +81,10 @@ class SettingSpec:
         return text + (" or none" if self.optional else "")
 
     def check(self, name, value):
-        """``value`` if valid (an integral float becomes an int for int settings), else ValueError."""
+        """``value`` if valid (an integral float becomes an int for int settings), else ValueError.
+
+        The message is ``"<name> must be <what is valid> (<why>), got <value>"``.
+        """
         if value is None and self.optional or (isinstance(value, str) and value in self.words):
             return value
         if self.per_axis and isinstance(value, (tuple, list, np.ndarray)) and np.ndim(value) == 1 and len(value) == 3:
@@ -90,7 +98,7 @@ class SettingSpec:
             ok = math.isfinite(value) and _in_range(value, self.low, self.high, self.low_open)
         if not ok or (self.kind is str and self.words and value not in self.words):
             why = f" ({self.why})" if self.why else ""
-            raise ValueError(f"FilterConfig.{name} must be {self.describe()}{why}, got {_shown(shown)!r}")
+            raise ValueError(f"{name} must be {self.describe()}{why}, got {_shown(shown)!r}")
         return value
 
     def parse(self, name, text):
@@ -111,10 +119,7 @@ class SettingSpec:
             article = "an" if self.kind is int else "a"
             raise ValueError(f"{name} needs {article} {self.kind.__name__} ({self.describe()}{why}), "
                              f"got {text!r}") from None
-        try:
-            return self.check(name, value)
-        except ValueError as err:
-            raise ValueError(str(err).removeprefix("FilterConfig.")) from None
+        return self.check(name, value)
 
 
 def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why="",
@@ -125,7 +130,7 @@ def setting(default, kind, low=None, high=None, *, low_open=False, words=(), opt
     ----------
     default : object
         The field's default (not checked here; :func:`check_settings` checks it on each
-        instance).
+        instance); also kept in the spec.
     kind : {float, int, bool, str}
     low, high : float, optional
         The plausible range; None leaves that side open.
@@ -145,32 +150,30 @@ def setting(default, kind, low=None, high=None, *, low_open=False, words=(), opt
     dataclasses.Field
         ``dataclasses.field(default=default)`` with the spec in its metadata under :data:`SPEC`.
     """
-    spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why, per_axis)
+    spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why, per_axis, default)
     return dataclasses.field(default=default, metadata={SPEC: spec})
 
 
-def spec_of(cls, name):
-    """The :class:`SettingSpec` of field ``name`` of dataclass ``cls`` (KeyError if it has none).
+def specs(cls):
+    """The :class:`SettingSpec` of each field of dataclass ``cls`` declared with :func:`setting`.
 
     Parameters
     ----------
     cls : type or instance
         A dataclass (or one of its instances).
-    name : str
-        A field name.
 
     Returns
     -------
-    SettingSpec
+    dict
+        Field name -> :class:`SettingSpec`, in declaration order (fields declared otherwise
+        are left out).
 
     Raises
     ------
-    KeyError
-        ``cls`` has no field ``name``, or the field was not declared with :func:`setting`.
     TypeError
         ``cls`` is not a dataclass.
     """
-    return {f.name: f for f in dataclasses.fields(cls)}[name].metadata[SPEC]
+    return {f.name: f.metadata[SPEC] for f in dataclasses.fields(cls) if SPEC in f.metadata}
 
 
 def check_settings(config):
@@ -189,12 +192,11 @@ def check_settings(config):
     Raises
     ------
     ValueError
-        The first invalid value: ``"FilterConfig.<name> must be <what is valid> (<why>), got
-        <value>"``.
+        The first invalid value: ``"<class>.<name> must be <what is valid> (<why>), got
+        <value>"``, e.g. ``"FilterConfig.imu_lag must be ..."``.
     """
-    for f in dataclasses.fields(config):
-        if SPEC in f.metadata:
-            setattr(config, f.name, f.metadata[SPEC].check(f.name, getattr(config, f.name)))
+    for name, spec in specs(config).items():
+        setattr(config, name, spec.check(f"{type(config).__name__}.{name}", getattr(config, name)))
 
 
 def parse_setting(cls, pair):
@@ -226,11 +228,11 @@ def parse_setting(cls, pair):
     """
     name, sep, text = pair.partition("=")
     name = name.strip()
-    specs = {f.name: f.metadata[SPEC] for f in dataclasses.fields(cls) if SPEC in f.metadata}
-    if not sep or name not in specs:
+    declared = specs(cls)
+    if not sep or name not in declared:
         what = "expected NAME=VALUE" if not sep else f"unknown setting {name!r}"
-        raise ValueError(f"{pair!r}: {what}; settings are {', '.join(specs)}")
-    return name, specs[name].parse(name, text)
+        raise ValueError(f"{pair!r}: {what}; settings are {', '.join(declared)}")
+    return name, declared[name].parse(name, text)
 
 
 def parse_settings(cls, pairs):
@@ -262,29 +264,23 @@ def parse_settings(cls, pairs):
     return out
 
 
-def defaults_text(cls, names=None):
-    """``"name=default, ..."`` of a dataclass's fields, as ``NAME=VALUE`` would set them (for ``--help``).
+def format_value(value):
+    """``value`` as ``NAME=VALUE`` would set it (for ``--help``): ``true``/``false``, ``none``, short numbers.
 
     Parameters
     ----------
-    cls : type
-        A dataclass (:class:`~visla_edu.filters.FilterConfig`, :class:`~visla_edu.smoother.SmootherConfig`).
-    names : sequence of str, optional
-        The fields to list, in this order (default: every field, in declaration order).
+    value : bool, int, float, str, tuple or None
 
     Returns
     -------
     str
-        Booleans as ``true``/``false``, None as ``none``, numbers as short as they read.
+        E.g. ``"true"``, ``"none"``, ``"1000000"``, ``"1e-06"``, ``"auto"``, ``"0.1,0.02,0.02"``.
     """
-    defaults = {field.name: field.default for field in dataclasses.fields(cls)}
-
-    def text(value):
-        if isinstance(value, bool) or value is None:
-            return str(value).lower()
-        return _number(value) if isinstance(value, (int, float)) else str(value)
-
-    return ", ".join(f"{name}={text(defaults[name])}" for name in (defaults if names is None else names))
+    if isinstance(value, bool) or value is None:
+        return str(value).lower()
+    if isinstance(value, tuple):
+        return ",".join(format_value(v) for v in value)
+    return _number(value) if isinstance(value, (int, float)) else str(value)
 
 
 def _shown(value):
