@@ -122,7 +122,10 @@ def resolve_config(dataset, config):
     """
     if config.resolved:
         return config
-    return config.resolve(diagnostics.calibrate(dataset))
+    calibration = diagnostics.calibrate(dataset) if any(getattr(config, n) == filters.AUTO for n in filters.AUTO_FIELDS) \
+        else None
+    return config.resolve(calibration, focal_length=float(dataset.K[0, 0]),
+                          time_step=float(np.median(dataset.time_steps)) if dataset.num_frames > 1 else 0.1)
 
 
 def _imu_T_cam(dataset, config, verbose):
