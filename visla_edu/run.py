@@ -193,10 +193,13 @@ class RunResult:
     evaluation : dict
         Figures against ground truth, filled by :func:`evaluate_result` (empty without):
         ``estimate_<name>``, ``dead_reckoning_<name>`` (and for the batch smoother
-        ``start_<name>``, the EKF it started from) for every field of
+        ``start_<name>``, the start it took, :attr:`start_mode`) for every field of
         :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
     start_world_T_imu : ndarray, shape (T, 4, 4), or None
-        Batch smoother: the joint EKF's trajectory it started from (None otherwise).
+        Batch smoother: the trajectory it started from (None otherwise).
+    start_mode : str
+        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``, the
+        lowest objective of the three), else ``""``.
     notes : str
         Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
     """
@@ -218,6 +221,7 @@ class RunResult:
     imu_T_cam: np.ndarray = None
     evaluation: dict = field(default_factory=dict)
     start_world_T_imu: np.ndarray = None
+    start_mode: str = ""
     notes: str = ""
 
     def status_totals(self):
@@ -347,13 +351,35 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
         raise ValueError("run_smoother: give smoother_config or smoother_settings, not both")
     config = resolve_config(dataset, config or FilterConfig())
     settings = smoother_config or _smoother_settings(config, mode, smoother_settings)  # before the EKF: fail fast
-    start = None
+    start, start_note = None, ""
     if mode == SMOOTH:
-        start = run_filter(dataset, SLAM, config, progress=progress, verbose=verbose, blas_threads=blas_threads)
+        start, start_note = _best_start(dataset, config, settings, progress, verbose, blas_threads)
         solved = smoother.smooth(dataset, start.world_T_imu, start.landmarks, start.imu_T_cam, settings, blas_threads)
     else:
         solved = smoother.smooth_window(dataset, None, _imu_T_cam(dataset, config, verbose), settings, blas_threads)
-    return _smoother_run_result(dataset, config, solved, start)
+    result = _smoother_run_result(dataset, config, solved, start)
+    result.notes = "\n".join(line for line in (start_note, result.notes) if line)
+    result.start_mode = "" if start is None else start.mode
+    return result
+
+
+def _best_start(dataset, config, settings, progress, verbose, blas_threads):
+    """The batch smoother's start: the joint EKF, or (``start="best"``) the lowest objective of dead reckoning, VIO and it.
+
+    Each candidate is a :class:`RunResult` (dead reckoning with no map: the smoother
+    triangulates it); :func:`visla_edu.smoother.start_cost` prices them on the same
+    observations. Returns the chosen result (its ``mode`` names it) and a line of the costs.
+    """
+    from visla_edu import smoother
+
+    candidates = [run_filter(dataset, mode, config, progress=progress and mode == SLAM, verbose=verbose and mode == SLAM,
+                             blas_threads=blas_threads) for mode in (DEADRECKON, VIO, SLAM)]
+    costs = [smoother.start_cost(dataset, c.world_T_imu, None if c.mode == DEADRECKON else c.landmarks, c.imu_T_cam,
+                                 settings) for c in candidates]
+    best = int(np.argmin(costs)) if settings.start == "best" else 2
+    text = ", ".join(f"{c.mode} {cost:.4g}" for c, cost in zip(candidates, costs))
+    why = "the lowest objective" if settings.start == "best" else "start=slam; the objectives"
+    return candidates[best], f"start: {candidates[best].mode} ({why} of {text})"
 
 
 def _smoother_settings(config, mode, own=None):

@@ -185,12 +185,12 @@ class CloneWindow:
             return None
         H1 = Q1T[0] @ H
         H1_Sigma = H1 @ self.state.Sigma[U]  # (3, D)
-        mean, cross, block = _tracks.delayed_entry(Q1T[0] @ r.ravel(), R1[0], H1_Sigma, H1_Sigma[:, U] @ H1.T,
+        _, cross, block = _tracks.delayed_entry(Q1T[0] @ r.ravel(), R1[0], H1_Sigma, H1_Sigma[:, U] @ H1.T,
                                                    self.noise_var)
         at = self.state.landmark_end
         self.state.enter(np.array([lm]))
         self.state.augment_delayed(np.array([lm]), np.insert(cross, [at] * 3, 0.0, axis=1), block)
-        self.landmarks[lm] = p_world[0] + mean
+        self.landmarks[lm] = p_world[0]  # the robust fit; its Q1 rows are ~0 at the inliers
         self.updates[lm] = 0
         self.track_counts["entered"] += 1
         return H_o, r_o

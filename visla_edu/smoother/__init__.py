@@ -40,7 +40,7 @@ Modules (private; the public names are re-exported here): ``_config``
 ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window`` (:func:`smooth_window`).
 """
 
-from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
+from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth, start_cost
 from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, FROM_FILTER, LOSSES, OWN_SETTINGS, WINDOW_MODES,
                                         WINDOW_ONLY, SmootherConfig, check_own_settings)
 from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
@@ -64,6 +64,7 @@ __all__ = [
     "HISTORY_FIELDS",
     "STOP_REASONS",
     "smooth",
+    "start_cost",
     "smooth_window",
     "NormalEquations",
     "normal_equations",

@@ -11,7 +11,7 @@ import numpy as np
 from visla_edu.filters import MAX_IMU_LAG
 from visla_edu.settings import check_settings, setting
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "FROM_FILTER", "OWN_SETTINGS", "FILTER_SETTINGS", "BATCH_ONLY",
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "STARTS", "FROM_FILTER", "OWN_SETTINGS", "FILTER_SETTINGS", "BATCH_ONLY",
            "WINDOW_ONLY", "check_own_settings", "as_smoother_config"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
@@ -27,7 +27,9 @@ FROM_FILTER = {"sigma_pixel": "sigma_pixel", "sigma_linear_velocity": "sigma_lin
 #: ``extrinsic_correction``.
 FILTER_SETTINGS = tuple(FROM_FILTER.values())
 #: Own settings only the batch smoother reads, and only the sliding window (the other ignores them).
-BATCH_ONLY = ("max_iterations", "rejection_rounds", "landmark_covariance")
+BATCH_ONLY = ("max_iterations", "rejection_rounds", "landmark_covariance", "start")
+#: Starts of the batch smoother (``visla-edu run --mode smooth``, :func:`visla_edu.run.run_smoother`).
+STARTS = ("slam", "best")
 WINDOW_ONLY = ("window_size", "window_iterations", "window_mode")
 
 
@@ -102,6 +104,10 @@ class SmootherConfig:
         Gauss-Newton iterations per new frame in the sliding window.
     window_mode : {"fix", "marginalize"}
         What happens to a pose leaving the window, see :func:`smooth_window`.
+    start : {"slam", "best"}
+        Where the batch smoother starts (:func:`visla_edu.run.run_smoother`): the joint EKF's
+        estimate, or the lowest objective of dead reckoning, VIO and the joint EKF
+        (:func:`start_cost`). Either way the costs of all three are reported.
     """
 
     sigma_pixel: float = setting(1.5, float, 0.0, low_open=True, unit="px",
@@ -129,6 +135,7 @@ class SmootherConfig:
     window_size: int = setting(20, int, 2, why="two frames hold one motion step")
     window_iterations: int = setting(1, int, 1)
     window_mode: str = setting("fix", str, words=WINDOW_MODES)
+    start: str = setting("slam", str, words=STARTS)
 
     def __post_init__(self):
         check_settings(self)
