@@ -213,6 +213,44 @@ def test_pose_jacobian_matches_design_formula(cam):
         assert rel(J_m[j], cam.Ks @ dpi @ cam.cam_T_imu @ lie.se3_inv(mu) @ P_T) < 1e-12
 
 
+def test_project_points_jacobians_vs_finite_differences(cam):
+    """J_z_point = Ks dpi/dq A P^T and J_z_transform (right perturbation A exp(delta^)) for batched transforms."""
+    rng = np.random.default_rng(11)
+    A = np.stack([[lie.se3_exp(rng.normal(size=6) * 0.1) for _ in range(3)] for _ in range(2)])  # (2, 3, 4, 4)
+    p = np.stack([[points_in_view(rng, 5, (2.0, 60.0)) for _ in range(3)] for _ in range(2)])  # (2, 3, 5, 3)
+    z, q, J_point, J_transform = camera.project_points(cam.Ks, A, p)
+    assert z.shape == (2, 3, 5, 4) and q.shape == (2, 3, 5, 4)
+    assert J_point.shape == (2, 3, 5, 4, 3) and J_transform.shape == (2, 3, 5, 4, 6)
+    z_only, q_only = camera.project_points(cam.Ks, A, p, jacobians=False)
+    np.testing.assert_array_equal(z_only, z)
+    np.testing.assert_array_equal(q_only, q)
+    for i, k, n in [(0, 0, 0), (1, 2, 4), (0, 1, 3)]:
+        np.testing.assert_allclose(z[i, k, n], camera.projection(A[i, k] @ np.r_[p[i, k, n], 1.0]) @ cam.Ks.T,
+                                   rtol=1e-12)
+        fd_p = fd_jacobian(lambda x: camera.project_points(cam.Ks, A[i, k], x[None], False)[0][0], p[i, k, n], 1e-4)
+        assert rel(J_point[i, k, n], fd_p) < FD_REL
+        fd_A = fd_jacobian(lambda d: camera.project_points(cam.Ks, A[i, k] @ lie.se3_exp(d), p[i, k, n][None],
+                                                           False)[0][0], np.zeros(6), 1e-5)
+        assert rel(J_transform[i, k, n], fd_A) < FD_REL
+
+
+def test_stereo_projection_one_pose_or_one_per_landmark(cam):
+    """A pose per landmark gives, landmark by landmark, what the single-pose call gives (the smoother's use)."""
+    rng = np.random.default_rng(12)
+    poses = np.stack([random_pose(rng) for _ in range(4)])
+    m = np.concatenate([to_world(T, points_in_view(rng, 1, (1.0, 80.0))) for T in poses])
+    z, depth, J_m, J_pose = camera.stereo_projection(cam.Ks, cam.cam_T_imu, poses, m)
+    for j, T in enumerate(poses):
+        z_j, J_m_j, J_pose_j = cam.predict_with_jacobians(T, m[j:j + 1])
+        np.testing.assert_allclose(z[j], z_j[0], rtol=1e-12)
+        np.testing.assert_allclose(J_m[j], J_m_j[0], rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(J_pose[j], J_pose_j[0], rtol=1e-10, atol=1e-9)
+        assert abs(depth[j] - cam.points_in_camera(T, m[j:j + 1])[0, 2]) < 1e-9
+    z_only, depth_only = camera.stereo_projection(cam.Ks, cam.cam_T_imu, poses, m, jacobians=False)
+    np.testing.assert_array_equal(z_only, z)
+    np.testing.assert_array_equal(depth_only, depth)
+
+
 # ----------------------------------------------------------------------------- triangulation
 
 

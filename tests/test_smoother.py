@@ -23,40 +23,6 @@ def rel(a, b):
     return np.linalg.norm(np.asarray(a) - np.asarray(b)) / np.linalg.norm(b)
 
 
-# --- SE(3) right Jacobian -------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.05, 0.0999, 0.1001, 0.7, 2.5])
-def test_right_jacobian_inverse_matches_finite_differences_of_log(angle):
-    rng = np.random.default_rng(1)
-    x = rng.normal(size=6)
-    x[3:] *= angle / np.linalg.norm(x[3:])
-    fd = fd_jacobian(lambda d: lie.se3_log(lie.se3_exp(x) @ lie.se3_exp(d)), np.zeros(6), 1e-5)
-    assert rel(smoother.se3_right_jacobian_inv(x), fd) < FD_REL
-    fd_r = fd_jacobian(lambda d: lie.se3_log(lie.se3_inv(lie.se3_exp(x)) @ lie.se3_exp(x + d)), np.zeros(6), 1e-5)
-    assert rel(smoother.se3_right_jacobian(x), fd_r) < FD_REL
-    assert np.allclose(smoother.se3_right_jacobian(x) @ smoother.se3_right_jacobian_inv(x), np.eye(6), atol=1e-12)
-
-
-@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.0999, 0.1001, 2.5])
-def test_so3_right_jacobians_match_finite_differences(angle):
-    """``exp((phi + d)^) ~ exp(phi^) exp((J_r d)^)`` and ``log(exp(phi^) exp(d^)) ~ phi + J_r^{-1} d``."""
-    from visla_edu.smoother import _se3
-
-    phi = np.random.default_rng(5).normal(size=3)
-    phi *= angle / np.linalg.norm(phi)
-    R = lie.so3_exp(phi)
-    fd = fd_jacobian(lambda d: lie.so3_log(R.T @ lie.so3_exp(phi + d)), np.zeros(3), 1e-5)
-    assert rel(_se3.so3_right_jacobian(phi), fd) < FD_REL
-    fd_inv = fd_jacobian(lambda d: lie.so3_log(R @ lie.so3_exp(d)), np.zeros(3), 1e-5)
-    assert rel(_se3.so3_right_jacobian_inv(phi), fd_inv) < FD_REL
-
-
-def test_right_jacobian_rejects_a_wrong_shape():
-    with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
-        smoother.se3_right_jacobian_inv(np.zeros(3))
-
-
 # --- residuals ------------------------------------------------------------------------------
 
 

@@ -16,13 +16,14 @@ The motion ``cam_T_next`` (camera at ``t + 1`` in the camera at ``t``) maps
    ``|r|^2 / 2 < pixel_sigma^2 chi2_4(probability)`` (defaults 1 px and 99%: ``|r| < 5.15``
    px). Most inliers win (ties: the smaller sum of inlier errors).
 3. **Gauss-Newton on SE(3)**, right perturbation ``cam_T_next = mu exp(hat(delta))``, with
-   ``J_z_motion = Ks dpi/dq(q) mu odot(p_next)``: first on the RANSAC inliers; then the
-   inliers again, with each residual's own covariance ``sigma^2 (I + A A^T)`` (``A`` carries
-   frame ``t + 1``'s pixel noise through triangulation and transfer) in the chi-square test,
-   plus a cap on the plain residual in both directions; then weighted by ``W = (I + A
-   A^T)^-1``. The covariance of ``delta`` is ``s^2 H^-1``, ``H = J^T W J``, with ``s^2`` the
-   measured ``sum r^T W r / (4 n - 6)`` of the pair's ``n`` inliers, shrunk toward the drive's
-   pooled value (a pair of 3 points has only 6 residual degrees of freedom).
+   ``J_z_motion = Ks dpi/dq(q) mu odot(p_next)`` (:func:`visla_edu.camera.project_points`): first
+   on the RANSAC inliers; then the inliers again, with each residual's own covariance
+   ``sigma^2 (I + A A^T)`` (``A`` carries frame ``t + 1``'s pixel noise through triangulation and
+   transfer) in the chi-square test, plus a cap on the plain residual in both directions; then
+   weighted by ``W = (I + A A^T)^-1``. The covariance of ``delta`` is ``s^2 H^-1``,
+   ``H = J^T W J``, with ``s^2`` the measured ``sum r^T W r / (4 n - 6)`` of the pair's ``n``
+   inliers, shrunk toward the drive's pooled value (a pair of 3 points has only 6 residual
+   degrees of freedom).
 
 Points whose pixels at ``t + 1`` repeat those at ``t`` bit for bit are stale copies (the course
 files have whole frame pairs of them while the vehicle turns) and are left out. Pairs with
@@ -36,7 +37,7 @@ import numpy as np
 
 from visla_edu import lie
 from visla_edu.metrics import chi2_quantile
-from visla_edu.camera import stereo_matrix, triangulate_disparity, triangulation_jacobian
+from visla_edu.camera import project_points, stereo_matrix, triangulate_disparity, triangulation_jacobian
 
 __all__ = ["VisualOdometry", "visual_odometry", "align_triples", "transfer_pixels", "camera_motion", "motion_errors"]
 
@@ -159,10 +160,11 @@ def _plane_frame(p):
 def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
     """Stereo pixels in frame ``t`` of points triangulated in frame ``t + 1``, and their Jacobian.
 
-    ``q = cam_T_next p_next``, ``z = Ks pi(q)``; for the right perturbation
-    ``cam_T_next = mu exp(hat(delta))``, ``delta = [v; w]``::
+    ``q = cam_T_next p_next``, ``z = Ks pi(q)``: :func:`visla_edu.camera.project_points` with the
+    motion as the transform, so for the right perturbation ``cam_T_next = mu exp(hat(delta))``,
+    ``delta = [v; w]``::
 
-        J_z_motion = Ks dpi/dq(q) mu odot(p_next) = Ks dpi/dq(q)[:, :3] [R, -R hat(p_next)]
+        J_z_motion = Ks dpi/dq(q) mu odot(p_next) = [J_z_point, -J_z_point hat(p_next)]
 
     Parameters
     ----------
@@ -182,39 +184,10 @@ def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
     J_z_motion : ndarray, shape (..., N, 4, 6)
         Only when ``jacobian`` is true.
     """
-    z, p_prev = _transfer(cam_T_next, p_next, Ks)
     if not jacobian:
-        return z
-    return z, _transfer_jacobian(cam_T_next[..., None, :3, :3], p_next, p_prev, Ks)
-
-
-def _transfer_jacobian(R, p_next, p_prev, Ks):
-    """``J_z_motion`` of :func:`transfer_pixels` (..., N, 4, 6), built from (..., N) arrays.
-
-    ``d pi / dp_j = d[x/z, y/z, 1, 1/z] / dq  R e_j``; the rotation block's rows are
-    ``a^T R (-hat(p_next)) = cross(p_next, R^T a)^T`` for the rows ``a`` of ``Ks dpi/dq``.
-    """
-    inv_depth = 1.0 / p_prev[..., 2]
-    x_n, y_n = p_prev[..., 0] * inv_depth, p_prev[..., 1] * inv_depth
-    dpi = []  # for each column j of R: (d x/z, d y/z, d 1/z) / dp_j
-    for j in range(3):
-        r0, r1, r2 = R[..., 0, j], R[..., 1, j], R[..., 2, j]
-        dpi.append(((r0 - x_n * r2) * inv_depth, (r1 - y_n * r2) * inv_depth, -r2 * inv_depth**2))
-    p = [p_next[..., j] for j in range(3)]
-    columns = []
-    for k in range(4):  # row k of Ks dpi/dq R, skipping the zero entries of Ks (the third row of dpi/dq is 0)
-        a = [sum((Ks[k, m] * dpi[j][i] for i, m in enumerate((0, 1, 3)) if Ks[k, m] != 0), np.zeros_like(x_n))
-             for j in range(3)]
-        columns += a + [p[1] * a[2] - p[2] * a[1], p[2] * a[0] - p[0] * a[2], p[0] * a[1] - p[1] * a[0]]
-    return np.stack(columns, axis=-1).reshape(inv_depth.shape + (4, 6))
-
-
-def _transfer(cam_T_next, p_next, Ks):
-    """Predicted pixels ``Ks pi(q)`` (..., N, 4) and the moved points ``q`` (..., N, 3)."""
-    p_prev = p_next @ np.swapaxes(cam_T_next[..., :3, :3], -1, -2) + cam_T_next[..., None, :3, 3]
-    inv_depth = 1.0 / p_prev[..., 2:3]
-    pi = np.concatenate([p_prev[..., :2] * inv_depth, np.ones_like(inv_depth), inv_depth], axis=-1)
-    return pi @ Ks.T, p_prev
+        return project_points(Ks, cam_T_next, p_next, jacobians=False)[0]
+    z, _, _, J_z_motion = project_points(Ks, cam_T_next, p_next)
+    return z, J_z_motion
 
 
 def camera_motion(world_T_imu, imu_T_cam):
@@ -320,9 +293,8 @@ def _transfer_information(cam_T_next, z_next, p_next, K, b, Ks):
     -------
     ndarray, shape (..., N, 4, 4)
     """
-    _, J_z_motion = transfer_pixels(cam_T_next, p_next, Ks)
-    J_z_q = J_z_motion[..., :3]  # Ks dpi/dq R, the derivative w.r.t. the point p_next
-    A = J_z_q @ triangulation_jacobian(z_next, K, b)
+    J_z_point = project_points(Ks, cam_T_next, p_next)[2]  # Ks dpi/dq R, the derivative w.r.t. p_next
+    A = J_z_point @ triangulation_jacobian(z_next, K, b)
     finite = np.all(np.isfinite(A), axis=(-2, -1))
     A[~finite] = 0.0
     return np.linalg.inv(np.eye(4) + A @ np.swapaxes(A, -1, -2)) * finite[..., None, None]
@@ -354,7 +326,7 @@ def _inliers(cam_T_next, batch, information, Ks, threshold):
     camera, where their expected transfer error is large) from buying itself a lenient test.
     """
     z_prev, z_next, p_prev, p_next, mask = batch
-    z, p_moved = _transfer(cam_T_next, p_next, Ks)
+    z, p_moved = project_points(Ks, cam_T_next, p_next, jacobians=False)
     residual = z_prev - z
     mahalanobis = np.einsum("...i,...ij,...j->...", residual, information, residual)
     cap = _MAX_MAGNIFICATION**2 * threshold

@@ -27,7 +27,6 @@ from scipy import sparse
 from visla_edu import lie
 from visla_edu.smoother import _envelope
 from visla_edu.smoother._factors import motion_residuals, robust_loss
-from visla_edu.smoother._se3 import se3_right_jacobian_inv
 
 __all__ = ["Linearization", "Step", "observation_errors", "evaluate", "linearize", "solve_step",
            "apply_step", "marginals", "normal_equations"]
@@ -160,7 +159,7 @@ def _prior_residual(problem, world_T_imu):
     if prior is None:
         return None
     e = lie.se3_log(lie.se3_inv(prior.mean) @ world_T_imu[prior.frame])
-    return prior.sqrt_information @ e, prior.sqrt_information @ se3_right_jacobian_inv(e)
+    return prior.sqrt_information @ e, prior.sqrt_information @ lie.se3_right_jacobian_inv(e)
 
 
 def evaluate(problem, world_T_imu, landmarks, errors=None):
@@ -248,7 +247,7 @@ def _observation_blocks(problem, world_T_imu, landmarks):
     """Per-observation weighted blocks (component-first layout) and the robust cost.
 
     With ``J_q = A R_c`` (``R_c`` the camera's rotation from the IMU), the Jacobians of
-    :func:`~._factors.reprojection` are ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``,
+    :func:`visla_edu.camera.stereo_projection` are ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``,
     ``P = hat(p_imu)``; so with ``K = J_q^T w J_q`` and ``h = J_q^T w r``::
 
         J_p^T w J_p = [[K, -K P], [P K, -P K P]]     J_p^T w r = [-h; -P h]

@@ -1,0 +1,43 @@
+"""Calibrated stereo camera: the stereo matrix Ks, projection, Jacobians, triangulation.
+
+Model (rectified stereo pair, left camera optical frame ``o``: x right, y down, z forward)::
+
+    q = cam_T_imu @ inv(world_T_imu) @ m          # homogeneous point in the left camera
+    z = Ks @ pi(q) = [uL, vL, uR, vR]             # pixels, left then right image
+
+    Ks = [[fsu, 0,   cu, 0       ],
+          [0,   fsv, cv, 0       ],
+          [fsu, 0,   cu, -fsu * b],
+          [0,   fsv, cv, 0       ]]
+    pi(q) = q / q3
+
+With the right perturbation ``world_T_imu = mu @ exp(twist_hat(delta))`` (the convention and the
+``J_out_in`` names of :mod:`visla_edu.lie`) the pose Jacobian is
+``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` and the landmark Jacobian
+``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` with ``P = [I 0]``. Both are computed in
+one place, :func:`project_points` (pixels of points moved by any transform, and the Jacobians
+with respect to the point and to the transform's right perturbation), which
+:func:`stereo_projection` (one pose, or one pose per landmark), the filters, the smoothers, the
+visual odometry and the capstone all call.
+
+Modules (private; everything public is re-exported here): ``_projection`` (``pi``, ``dpi/dq``,
+:func:`project_points`, :func:`stereo_projection`), ``_triangulation`` (depth from disparity
+and from bearings, the triangulation Jacobian), ``_rig`` (the stereo matrix and
+:class:`StereoCamera`).
+"""
+
+from visla_edu.camera._projection import project_points, projection, projection_jacobian, stereo_projection
+from visla_edu.camera._rig import StereoCamera, stereo_matrix
+from visla_edu.camera._triangulation import triangulate_bearing, triangulate_disparity, triangulation_jacobian
+
+__all__ = [
+    "stereo_matrix",
+    "projection",
+    "projection_jacobian",
+    "project_points",
+    "stereo_projection",
+    "triangulate_disparity",
+    "triangulate_bearing",
+    "triangulation_jacobian",
+    "StereoCamera",
+]
