@@ -13,6 +13,7 @@ from scipy.sparse import linalg as sparse_linalg
 
 from fdiff import fd_jacobian  # tests/fdiff.py
 from visla_edu import lie, metrics, motion, run, simulate, smoother
+from visla_edu.camera import StereoCamera
 from visla_edu.filters import FilterConfig
 from visla_edu.smoother import _batch, _envelope, _normal, _problem
 
@@ -62,7 +63,7 @@ def rig():
 
 def test_reprojection_equals_the_camera_model_and_its_jacobians(rig):
     rng = np.random.default_rng(4)
-    cam = smoother._problem.StereoCamera(*rig)
+    cam = StereoCamera(*rig)
     poses = lie.se3_exp(np.concatenate([rng.normal(0, 3, (6, 3)), rng.normal(0, 0.2, (6, 3))], 1))
     p_world = np.stack([(T @ cam.imu_T_cam @ np.r_[rng.uniform(-5, 5, 2), rng.uniform(5, 40), 1])[:3]
                         for T in poses])
@@ -105,6 +106,17 @@ def _problem_at(dataset, world_T_imu, config, landmarks=None):
 
 
 def test_normal_equations_are_jtwj_of_the_checked_jacobians(tiny):
+    _assert_normal_equations_are_jtwj(tiny)
+
+
+def test_normal_equations_of_a_rig_with_two_intrinsics_are_jtwj_too():
+    """K_r != K_l: the closed-form blocks (_projection_information_two) against the camera's Jacobians."""
+    K = np.array(simulate.default_rig()[0], dtype=float)
+    K_right = K @ np.array([[1.04, 0.0, 0.02], [0.0, 1.03, -0.03], [0.0, 0.0, 1.0]])
+    _assert_normal_equations_are_jtwj(simulate.simulate_drive("tiny", 3, outlier_share=0.05, K_right=K_right))
+
+
+def _assert_normal_equations_are_jtwj(tiny):
     config = smoother.SmootherConfig(loss="huber", loss_scale=1.0)
     T = tiny.ground_truth.world_T_imu
     problem, m = _problem_at(tiny, T, config)

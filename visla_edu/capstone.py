@@ -29,7 +29,6 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import diagnostics, ekf, lie, motion, run
-from visla_edu.camera import StereoCamera
 from visla_edu.codes import OBS_FAR, OBS_GATED, OBS_NEW, OBS_USED
 from visla_edu.filters._base import _Filter
 
@@ -206,8 +205,12 @@ class CapstoneFilter(_Filter):
         if not isinstance(parts, Parts) or not isinstance(steps, Steps):
             raise TypeError("CapstoneFilter: parts must be a capstone.Parts and steps a capstone.Steps, got "
                             f"{type(parts).__name__} and {type(steps).__name__}")
+        if not cam.same_intrinsics(dataset.K, dataset.K_right):
+            raise ValueError(f"CapstoneFilter: {dataset.name}'s stereo rig has two intrinsics (K_l != K_r), but the "
+                             "notebooks' functions take one K and a baseline b; run the library's filters on it "
+                             "(run.run_filter), or the capstone on a drive with one K")
         imu_T_cam, _ = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
-        super().__init__(dataset, StereoCamera(dataset.K, dataset.b, imu_T_cam), config)
+        super().__init__(dataset, dataset.stereo_camera(imu_T_cam), config)
         self.parts, self.steps, self.joint = parts, steps, bool(joint)
         self.Sigma = config.initial_pose_sigma**2 * np.eye(POSE_DIM)
         M = dataset.num_landmarks

@@ -3,7 +3,8 @@
 import numpy as np
 
 from visla_edu import lie
-from visla_edu.camera._intrinsics import stereo_matrix
+from visla_edu.camera._extrinsics import rectified_baseline
+from visla_edu.camera._intrinsics import disparity, same_intrinsics, stereo_matrix, stereo_rows
 from visla_edu.camera._projection import projection, stereo_projection
 from visla_edu.camera._triangulation import triangulate_bearing, triangulate_disparity, triangulation_jacobian
 
@@ -18,7 +19,7 @@ def _check_points(p_world, name):
 
 
 class StereoCamera:
-    """A calibrated stereo rig mounted on the IMU.
+    """A calibrated stereo rig mounted on the IMU (a rectified pair, one or two intrinsics).
 
     Parameters
     ----------
@@ -28,6 +29,8 @@ class StereoCamera:
         Baseline in metres.
     imu_T_cam : array_like, shape (4, 4)
         Pose of the left camera (optical frame) in the IMU frame.
+    K_right : array_like, shape (3, 3), optional
+        Right camera intrinsics (default: ``K``); see :mod:`visla_edu.camera._intrinsics`.
 
     Attributes
     ----------
@@ -35,19 +38,69 @@ class StereoCamera:
         Stereo matrix, see :func:`~visla_edu.camera.stereo_matrix`.
     cam_T_imu : ndarray, shape (4, 4)
         ``inv(imu_T_cam)``, written ``o_T_i`` in the course.
+    K_right : ndarray, shape (3, 3)
+        ``K`` itself (a copy) for a single-intrinsics rig.
+    same_intrinsics : bool
+        ``K_right == K``: every computation is the single-intrinsics one, bit for bit.
+    stereo_rows : ndarray, shape (3, 4)
+        The exact reduction of the four stereo rows (:func:`~visla_edu.camera.stereo_rows`).
+    fsu_b : float
+        ``fsu b``: a landmark at depth ``d`` has :meth:`disparity` ``fsu b / d`` (px).
     """
 
-    def __init__(self, K, b, imu_T_cam):
+    def __init__(self, K, b, imu_T_cam, K_right=None):
         self.K = np.array(K, dtype=float)
         self.b = float(b)
-        self.Ks = stereo_matrix(self.K, self.b)
+        self.Ks = stereo_matrix(self.K, self.b, K_right)
+        self.same_intrinsics = same_intrinsics(self.K, K_right)
+        self.K_right = self.K.copy() if self.same_intrinsics else np.array(K_right, dtype=float)
+        self.stereo_rows = stereo_rows(self.Ks)
+        self.fsu_b = self.K[0, 0] * self.b
         self.imu_T_cam = np.array(imu_T_cam, dtype=float)
         if self.imu_T_cam.shape != (4, 4):
             raise ValueError(f"StereoCamera: imu_T_cam must have shape (4, 4), got {self.imu_T_cam.shape}")
         self.cam_T_imu = lie.se3_inv(self.imu_T_cam)
 
+    @classmethod
+    def from_extrinsics(cls, K, K_right, imu_T_left, imu_T_right):
+        """The rig of two cameras given by their poses, the baseline derived (a rectified pair only).
+
+        Parameters
+        ----------
+        K, K_right : array_like, shape (3, 3)
+        imu_T_left, imu_T_right : array_like, shape (4, 4)
+            Both cameras' optical frames in the IMU frame.
+
+        Returns
+        -------
+        StereoCamera
+            ``b = |inv(imu_T_left) imu_T_right|`` (:func:`~visla_edu.camera.rectified_baseline`).
+
+        Raises
+        ------
+        ValueError
+            The cameras are rotated against each other, or the right one is not on the left
+            one's x axis, beyond the tolerances (the message says which and by how much).
+        """
+        return cls(K, rectified_baseline(imu_T_left, imu_T_right), imu_T_left, K_right)
+
     def __repr__(self):
-        return f"StereoCamera(fsu={self.K[0, 0]:.2f}, fsv={self.K[1, 1]:.2f}, b={self.b:.4f} m)"
+        right = "" if self.same_intrinsics else f", right fsu={self.K_right[0, 0]:.2f}, fsv={self.K_right[1, 1]:.2f}"
+        return f"StereoCamera(fsu={self.K[0, 0]:.2f}, fsv={self.K[1, 1]:.2f}{right}, b={self.b:.4f} m)"
+
+    def disparity(self, z):
+        """Disparity in the left camera's pixels (``uL - uR`` for one intrinsics), shape (...).
+
+        Parameters
+        ----------
+        z : array_like, shape (..., 4)
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``fsu b / depth`` on noise-free pixels (:func:`~visla_edu.camera.disparity`).
+        """
+        return disparity(z, self.K, None if self.same_intrinsics else self.K_right)
 
     def points_in_camera(self, world_T_imu, p_world):
         """Homogeneous landmark coordinates in the left camera, ``q = cam_T_imu inv(T) m``.
@@ -168,15 +221,19 @@ class StereoCamera:
             NaN rows where the disparity is not positive.
         """
         if method == "disparity":
-            p_cam = triangulate_disparity(z, self.K, self.b)
+            p_cam = triangulate_disparity(z, self.K, self.b, self._right())
         elif method == "bearing":
-            p_cam = triangulate_bearing(z, self.K, self.b)
+            p_cam = triangulate_bearing(z, self.K, self.b, self._right())
         else:
             raise ValueError(f"triangulate: method must be 'disparity' or 'bearing', got {method!r}")
         if world_T_imu is None:
             return p_cam
         world_T_cam = np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam
         return p_cam @ world_T_cam[:3, :3].T + world_T_cam[:3, 3]
+
+    def triangulation_jacobian(self, z):
+        """:func:`~visla_edu.camera.triangulation_jacobian` of the rig's disparity triangulation, (..., 3, 4)."""
+        return triangulation_jacobian(z, self.K, self.b, self._right())
 
     def triangulation_covariance(self, z, noise_var, world_T_imu=None):
         """Covariance of triangulated points from pixel noise ``noise_var I4``.
@@ -195,9 +252,13 @@ class StereoCamera:
         -------
         ndarray, shape (M, 3, 3)
         """
-        J = triangulation_jacobian(z, self.K, self.b)
+        J = self.triangulation_jacobian(z)
         cov = noise_var * J @ np.swapaxes(J, -1, -2)
         if world_T_imu is None:
             return cov
         R = (np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam)[:3, :3]
         return R @ cov @ R.T
+
+    def _right(self):
+        """``K_right`` for the triangulation functions (None for one intrinsics: their bit-identical path)."""
+        return None if self.same_intrinsics else self.K_right

@@ -33,12 +33,13 @@ complement; the smoothers never form it).
     True
 
 Modules (private; the public names are re-exported here): ``_config``
-(:class:`SmootherConfig`), ``_factors`` (the motion residual and its Jacobians, robust losses), ``_problem`` (observations and structure),
-``_envelope`` (the block envelope Cholesky, solve and selected inverse), ``_normal``
-(linearisation, the Schur step, marginals), ``_result`` (:class:`SmootherResult`),
-``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window`` (:func:`smooth_window`).
-The reprojection factor and its Jacobians are the camera's (:func:`visla_edu.camera.stereo_projection`,
-re-exported here as ``reprojection``), the SE(3) right Jacobians lie's (re-exported for notebook 08).
+(:class:`SmootherConfig`), ``_factors`` (the motion residual and its Jacobians, robust losses),
+``_problem`` (observations and structure), ``_envelope`` (the block envelope Cholesky, solve and
+selected inverse), ``_normal`` (linearisation, the Schur step, marginals), ``_result``
+(:class:`SmootherResult`), ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window``
+(:func:`smooth_window`). The reprojection factor and its Jacobians are the camera's
+(:func:`visla_edu.camera.stereo_projection`, re-exported here as ``reprojection``), the SE(3)
+right Jacobians lie's (re-exported for notebook 08).
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth

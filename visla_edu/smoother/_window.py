@@ -94,7 +94,7 @@ class _WindowState:
         lo, hi = self.dataset.frame_ptr[k], self.dataset.frame_ptr[k + 1]
         idx = np.arange(lo, hi)
         ids = self.dataset.obs_ids[idx]
-        disparity = self.dataset.obs_z[idx, 0] - self.dataset.obs_z[idx, 2]
+        disparity = self.camera.disparity(self.dataset.obs_z[idx])
         new = idx[(self.status[idx] == USED) & np.isnan(self.landmarks[ids, 0])
                   & (disparity >= self.config.min_disparity)]
         if len(new):
