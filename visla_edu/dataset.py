@@ -116,7 +116,9 @@ class Dataset:
         A human-readable description; stand-ins say so here.
     extra : dict
         Metadata, empty by default and not written by :func:`visla_edu.data.save`. A loaded
-        course file has ``"sha256"``, ``"format"`` and ``"known_file"``; a simulated drive
+        course file has ``"sha256"``, ``"format"`` and ``"known_file"`` (a 2025+ file also
+        ``"extrinsic_reading"``, ``"ignored_keys"`` and, without features, ``"no_features"``: why,
+        in words); a simulated drive
         ``"preset"``, ``"seed"`` and ``"config"`` (and ``"simulated_imu_T_cam"`` when the
         reported calibration differs from the simulated rig's). Diagnostics keep results here
         (``"calibration"``, ``"visual_odometry"``).
