@@ -161,7 +161,8 @@ class JointSlam(_Filter):
         """The joint EKF update with the observations of landmarks ``lm``; returns the NIS."""
         active = self.state.active_ids
         try:
-            delta, nis = ekf.joint_correction(self.state.Sigma, self.state.slot_of[lm], z, self.noise_var, prediction)
+            delta, nis = ekf.joint_correction(self.state.Sigma, self.state.slot_of[lm], z, self.noise_var, prediction,
+                                              self.camera.stereo_rows)
         except np.linalg.LinAlgError as err:
             raise self._diverged(err, f" ({len(lm)} observations)") from err
         self.world_T_imu, self.landmarks[active] = self.form.retract(self.world_T_imu, self.landmarks[active], delta)
