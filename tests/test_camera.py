@@ -213,6 +213,44 @@ def test_pose_jacobian_matches_design_formula(cam):
         assert rel(J_m[j], cam.Ks @ dpi @ cam.cam_T_imu @ lie.se3_inv(mu) @ P_T) < 1e-12
 
 
+def test_project_points_jacobians_vs_finite_differences(cam):
+    """J_z_point = Ks dpi/dq A P^T and J_z_transform (right perturbation A exp(delta^)) for batched transforms."""
+    rng = np.random.default_rng(11)
+    A = np.stack([[lie.se3_exp(rng.normal(size=6) * 0.1) for _ in range(3)] for _ in range(2)])  # (2, 3, 4, 4)
+    p = np.stack([[points_in_view(rng, 5, (2.0, 60.0)) for _ in range(3)] for _ in range(2)])  # (2, 3, 5, 3)
+    z, q, J_point, J_transform = camera.project_points(cam.Ks, A, p)
+    assert z.shape == (2, 3, 5, 4) and q.shape == (2, 3, 5, 4)
+    assert J_point.shape == (2, 3, 5, 4, 3) and J_transform.shape == (2, 3, 5, 4, 6)
+    z_only, q_only = camera.project_points(cam.Ks, A, p, jacobians=False)
+    np.testing.assert_array_equal(z_only, z)
+    np.testing.assert_array_equal(q_only, q)
+    for i, k, n in [(0, 0, 0), (1, 2, 4), (0, 1, 3)]:
+        np.testing.assert_allclose(z[i, k, n], camera.projection(A[i, k] @ np.r_[p[i, k, n], 1.0]) @ cam.Ks.T,
+                                   rtol=1e-12)
+        fd_p = fd_jacobian(lambda x: camera.project_points(cam.Ks, A[i, k], x[None], False)[0][0], p[i, k, n], 1e-4)
+        assert rel(J_point[i, k, n], fd_p) < FD_REL
+        fd_A = fd_jacobian(lambda d: camera.project_points(cam.Ks, A[i, k] @ lie.se3_exp(d), p[i, k, n][None],
+                                                           False)[0][0], np.zeros(6), 1e-5)
+        assert rel(J_transform[i, k, n], fd_A) < FD_REL
+
+
+def test_stereo_projection_one_pose_or_one_per_landmark(cam):
+    """A pose per landmark gives, landmark by landmark, what the single-pose call gives (the smoother's use)."""
+    rng = np.random.default_rng(12)
+    poses = np.stack([random_pose(rng) for _ in range(4)])
+    m = np.concatenate([to_world(T, points_in_view(rng, 1, (1.0, 80.0))) for T in poses])
+    z, depth, J_m, J_pose = camera.stereo_projection(cam.Ks, cam.cam_T_imu, poses, m)
+    for j, T in enumerate(poses):
+        z_j, J_m_j, J_pose_j = cam.predict_with_jacobians(T, m[j:j + 1])
+        np.testing.assert_allclose(z[j], z_j[0], rtol=1e-12)
+        np.testing.assert_allclose(J_m[j], J_m_j[0], rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(J_pose[j], J_pose_j[0], rtol=1e-10, atol=1e-9)
+        assert abs(depth[j] - cam.points_in_camera(T, m[j:j + 1])[0, 2]) < 1e-9
+    z_only, depth_only = camera.stereo_projection(cam.Ks, cam.cam_T_imu, poses, m, jacobians=False)
+    np.testing.assert_array_equal(z_only, z)
+    np.testing.assert_array_equal(depth_only, depth)
+
+
 # ----------------------------------------------------------------------------- triangulation
 
 
@@ -310,3 +348,155 @@ def test_triangulation_far_limit_is_well_conditioned():
     assert 0 < z[1, 0] - z[1, 2] < 0.2
     for f in (camera.triangulate_disparity, camera.triangulate_bearing):
         assert rel(f(z, K, B), p) < TRI_REL
+
+
+# ----------------------------------------------------------------------------- a rig with two intrinsics
+#
+# The right camera is the left one translated by B along its x axis, with intrinsics of its own:
+# uR = fsu' (x - B) / z + cu', vR = fsv' y / z + cv' (rows 3 and 4 of Ks).
+
+K_R = np.array([[FSU * 1.04, 0.0, CU + 15.0], [0.0, FSV * 1.03, CV - 8.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.fixture
+def cam_two():
+    return StereoCamera(K, B, IMU_T_CAM, K_R)
+
+
+def pixels_two(p_cam):
+    """Noise-free pixels of left-camera points for the two-intrinsics rig, written out by hand."""
+    x, y, d = p_cam.T
+    return np.column_stack([FSU * x / d + CU, FSV * y / d + CV, K_R[0, 0] * (x - B) / d + K_R[0, 2],
+                            K_R[1, 1] * y / d + K_R[1, 2]])
+
+
+def test_stereo_matrix_of_two_intrinsics_puts_the_right_camera_in_rows_3_and_4(cam_two):
+    Ks = camera.stereo_matrix(K, B, K_R)
+    np.testing.assert_array_equal(Ks[:2], camera.stereo_matrix(K, B)[:2])
+    np.testing.assert_array_equal(Ks[2], [K_R[0, 0], 0.0, K_R[0, 2], -K_R[0, 0] * B])
+    np.testing.assert_array_equal(Ks[3], [0.0, K_R[1, 1], K_R[1, 2], 0.0])
+    assert not cam_two.same_intrinsics and not camera.single_intrinsics(Ks)
+    # K_right = K (or None) is the one-intrinsics rig, bit for bit
+    one = StereoCamera(K, B, IMU_T_CAM, K.copy())
+    assert one.same_intrinsics and one.stereo_rows is camera.STEREO_ROWS
+    np.testing.assert_array_equal(one.Ks, camera.stereo_matrix(K, B))
+    with pytest.raises(ValueError, match="K_right"):
+        camera.stereo_matrix(K, B, [[500.0, 1.0, 300.0], [0.0, 500.0, 200.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("regime", sorted(DEPTHS))
+def test_two_intrinsics_predict_and_jacobians_vs_finite_differences(cam_two, regime):
+    rng = np.random.default_rng(21)
+    for _ in range(3):
+        mu = random_pose(rng)
+        p = points_in_view(rng, 5, DEPTHS[regime])
+        m = to_world(mu, p)
+        z, J_m, J_pose = cam_two.predict_with_jacobians(mu, m)
+        np.testing.assert_allclose(z, pixels_two(p), rtol=1e-10)
+        np.testing.assert_allclose(z, cam_two.predict(mu, m), rtol=1e-12)
+        for j in range(len(m)):
+            J_m_fd = fd_jacobian(lambda x: cam_two.predict(mu, x[None])[0], m[j], 1e-4 * p[j, 2])
+            assert rel(J_m[j], J_m_fd) < FD_REL
+            J_pose_fd = fd_jacobian(lambda d: cam_two.predict(mu @ lie.se3_exp(d), m[j:j + 1])[0], np.zeros(6), 1e-4)
+            assert rel(J_pose[j], J_pose_fd) < FD_REL
+
+
+@pytest.mark.parametrize("regime", sorted(DEPTHS))
+def test_two_intrinsics_triangulation_recovers_true_points(regime):
+    rng = np.random.default_rng(22)
+    p = points_in_view(rng, 200, DEPTHS[regime])
+    z = pixels_two(p)
+    for est in (camera.triangulate_disparity(z, K, B, K_R), camera.triangulate_bearing(z, K, B, K_R)):
+        assert (np.linalg.norm(est - p, axis=1) / np.linalg.norm(p, axis=1)).max() < TRI_REL
+    # ...while the one-intrinsics formulas are wrong for these pixels
+    naive = np.linalg.norm(camera.triangulate_disparity(z, K, B) - p, axis=1) / np.linalg.norm(p, axis=1)
+    assert np.mean(~(naive < 1e-3)) > 0.9  # off by far more than rounding, or NaN (no depth)
+    np.testing.assert_allclose(camera.disparity(z, K, K_R), FSU * B / p[:, 2], rtol=1e-9)
+    np.testing.assert_array_equal(camera.disparity(z, K), z[:, 0] - z[:, 2])  # one intrinsics: uL - uR
+
+
+def test_two_intrinsics_triangulation_jacobian_vs_finite_differences(cam_two):
+    rng = np.random.default_rng(23)
+    z = pixels_two(points_in_view(rng, 8, (2.0, 80.0)))
+    J = cam_two.triangulation_jacobian(z)
+    np.testing.assert_array_equal(J, camera.triangulation_jacobian(z, K, B, K_R))
+    for i in range(len(z)):
+        fd = fd_jacobian(lambda zi: camera.triangulate_disparity(zi[None], K, B, K_R)[0], z[i], 1e-4)
+        assert rel(J[i], fd) < FD_REL
+
+
+def test_right_pixels_map_into_the_left_intrinsics_and_back():
+    rng = np.random.default_rng(24)
+    p = points_in_view(rng, 20, (2.0, 80.0))
+    mapped = camera.right_in_left_pixels(pixels_two(p), K, K_R)
+    np.testing.assert_allclose(mapped, pixels(p), rtol=1e-12)  # as if the right camera had K
+    np.testing.assert_allclose(camera.left_in_right_u(mapped[:, 2], K, K_R), pixels_two(p)[:, 2], rtol=1e-12)
+    z = pixels(p)
+    assert camera.right_in_left_pixels(z, K, None) is z and camera.right_in_left_pixels(z, K, K.copy()) is z
+
+
+@pytest.mark.parametrize("f_right", [FSV, FSV * 1.03])
+def test_stereo_rows_are_an_exact_orthonormal_reduction(f_right):
+    """The dropped combination of vL and vR has a zero Jacobian: no information about the state is lost."""
+    K_right = K.copy()
+    K_right[1, 1] = f_right
+    cam = StereoCamera(K, B, IMU_T_CAM, K_right)
+    rows = cam.stereo_rows
+    np.testing.assert_allclose(rows @ rows.T, np.eye(3), atol=1e-15)
+    dropped = np.eye(4) - rows.T @ rows  # projector on the dropped row
+    rng = np.random.default_rng(25)
+    mu = random_pose(rng)
+    _, J_m, J_pose = cam.predict_with_jacobians(mu, to_world(mu, points_in_view(rng, 6, (2.0, 60.0))))
+    assert np.abs(dropped @ J_m).max() < 1e-12 * np.abs(J_m).max()
+    assert np.abs(dropped @ J_pose).max() < 1e-12 * np.abs(J_pose).max()
+
+
+# ----------------------------------------------------------------------------- the rig from two extrinsics
+
+
+def _translation(x, y=0.0, z=0.0):
+    T = np.eye(4)
+    T[:3, 3] = [x, y, z]
+    return T
+
+
+def test_rig_from_extrinsics_derives_the_baseline():
+    imu_T_right = IMU_T_CAM @ _translation(B)
+    cam = StereoCamera.from_extrinsics(K, K_R, IMU_T_CAM, imu_T_right)
+    assert cam.b == pytest.approx(B, rel=1e-12)
+    np.testing.assert_array_equal(cam.imu_T_cam, IMU_T_CAM)
+    np.testing.assert_array_equal(cam.Ks, camera.stereo_matrix(K, cam.b, K_R))
+
+
+@pytest.mark.parametrize("right_in_left, message", [
+    (lie.se3_exp([B, 0, 0, 0, 0.05, 0]), r"rotated 2\.86 deg from the left one"),
+    (_translation(B, 0.1, 0.0), r"0\.1 m off its x axis"),
+    (_translation(-B), r"on the left camera's left \(-x\)"),
+    (np.eye(4), "no baseline"),
+])
+def test_a_pair_that_is_not_rectified_is_refused_with_the_reason(right_in_left, message):
+    with pytest.raises(ValueError, match="not a rectified stereo pair: .*" + message):
+        StereoCamera.from_extrinsics(K, K, IMU_T_CAM, IMU_T_CAM @ right_in_left)
+    # within the tolerances (rounding, the raw poses of a rectified rig) it is accepted
+    slightly = lie.se3_exp([B, 0.002 * B, 0.0, 0.0, 0.5 * camera.MAX_RIG_ROTATION, 0.0])
+    assert camera.rectified_baseline(IMU_T_CAM, IMU_T_CAM @ slightly) == pytest.approx(B, rel=1e-3)
+
+
+@pytest.mark.parametrize("direction", camera.DIRECTIONS)
+@pytest.mark.parametrize("frame", camera.FRAMES)
+def test_each_reading_of_written_extrinsics_gives_back_the_rig(direction, frame):
+    """write_extrinsic and extrinsic_readings are inverse; only the reading written is rectified here."""
+    imu_T_right = IMU_T_CAM @ _translation(B)
+    ext_left = camera.write_extrinsic(IMU_T_CAM, direction, frame)
+    ext_right = camera.write_extrinsic(imu_T_right, direction, frame)
+    readings = {r.name: r for r in camera.extrinsic_readings(ext_left, ext_right)}
+    assert list(readings) == [camera.reading_name(d, f) for d in camera.DIRECTIONS for f in camera.FRAMES]
+    right = readings[camera.reading_name(direction, frame)]
+    np.testing.assert_allclose(right.imu_T_left, IMU_T_CAM, atol=1e-15)
+    np.testing.assert_allclose(right.offset, [B, 0.0, 0.0], atol=1e-15)
+    assert right.rectified and [r.name for r in readings.values() if r.rectified] == [right.name]
+    if frame == "regular":  # the regular frame: x forward, y left, z up
+        np.testing.assert_allclose(lie.se3_inv(ext_left if direction == "IMU->camera" else lie.se3_inv(ext_left))
+                                   [:3, :3] @ IMU_T_CAM[:3, :3] @ [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], atol=1e-15)
+    with pytest.raises(ValueError, match="direction in"):
+        camera.write_extrinsic(IMU_T_CAM, "left->right", frame)

@@ -113,8 +113,8 @@ def test_library_versions_are_hidden(check, answer, hidden_name):
 
 
 def _library_copies():
-    """Answers that take a whole exercise from the capstone's parts or the smoother (library modules)."""
-    from visla_edu import capstone, smoother
+    """Answers that take a whole exercise from the capstone's parts or the camera's batched projection."""
+    from visla_edu import capstone
 
     parts = capstone.library_parts()  # bound in an answer cell, before the check
 
@@ -123,14 +123,14 @@ def _library_copies():
 
     return [
         (checks.check_project, lambda *a: parts.project(*a), "capstone._project"),
-        (checks.check_project, lambda Ks, o, T, p: smoother.reprojection(Ks, o, poses(T, len(p)), p, False)[0],
-         "smoother.reprojection"),
+        (checks.check_project, lambda Ks, o, T, p: cam.stereo_projection(Ks, o, poses(T, len(p)), p, False)[0],
+         "camera.stereo_projection"),
         (checks.check_pose_jacobian, lambda *a: parts.pose_jacobian(*a), "capstone._pose_jacobian"),
-        (checks.check_pose_jacobian, lambda Ks, o, T, m: smoother.reprojection(Ks, o, poses(T, 1), m[None])[3][0],
-         "smoother.reprojection"),
+        (checks.check_pose_jacobian, lambda Ks, o, T, m: cam.stereo_projection(Ks, o, poses(T, 1), m[None])[3][0],
+         "camera.stereo_projection"),
         (checks.check_landmark_jacobian, lambda *a: parts.landmark_jacobian(*a), "capstone._landmark_jacobian"),
-        (checks.check_landmark_jacobian, lambda Ks, o, T, m: smoother.reprojection(Ks, o, poses(T, 1), m[None])[2][0],
-         "smoother.reprojection"),
+        (checks.check_landmark_jacobian, lambda Ks, o, T, m: cam.stereo_projection(Ks, o, poses(T, 1), m[None])[2][0],
+         "camera.stereo_projection"),
         (checks.check_init_landmark, lambda *a: parts.init_landmark(*a), "capstone._init_landmark"),
         (checks.check_pose_update, lambda *a: parts.pose_update(*a), "capstone._pose_update"),
         (checks.check_slam_jacobian, lambda *a: parts.slam_jacobian(*a), "capstone._slam_jacobian"),
@@ -140,7 +140,7 @@ def _library_copies():
 
 @pytest.mark.parametrize("index", range(len(_library_copies())))
 def test_library_copies_of_an_exercise_are_hidden_too(index):
-    """capstone.library_parts() holds the library's version of seven exercises; the smoother computes three."""
+    """capstone.library_parts() holds the library's version of seven exercises; stereo_projection computes three."""
     check, answer, hidden_name = _library_copies()[index]
     err = _failure(check, answer)
     assert _first_line(err).startswith("write your own") and hidden_name in str(err), str(err)

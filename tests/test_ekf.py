@@ -160,6 +160,25 @@ def test_stereo_rows_are_orthonormal():
 
 @pytest.mark.parametrize("seed", range(3))
 def test_joint_update_equals_dense_four_row_update(camera, seed):
+    _assert_joint_update_equals_dense(camera, seed)
+
+
+#: A right camera with intrinsics of its own (focal lengths 4% and 3% longer, principal point moved).
+K_RIGHT = np.asarray(K_RIG, dtype=float) @ np.array([[1.04, 0.0, 0.02], [0.0, 1.03, -0.03], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_joint_update_of_a_rig_with_two_intrinsics_equals_dense_four_row_update(seed):
+    """K_l != K_r: rows vL, vR of Ks differ, and the rig's own 3-row reduction must stay exact."""
+    camera = StereoCamera(K_RIG, B_RIG, IMU_T_CAM, K_RIGHT)
+    assert camera.stereo_rows is not ekf.STEREO_ROWS
+    np.testing.assert_allclose(camera.stereo_rows @ camera.stereo_rows.T, np.eye(3), atol=1e-15)
+    _assert_joint_update_equals_dense(camera, seed)
+    with pytest.raises(AssertionError):  # the one-intrinsics reduction is not exact for this rig
+        _assert_joint_update_equals_dense(camera, seed, rows=ekf.STEREO_ROWS)
+
+
+def _assert_joint_update_equals_dense(camera, seed, rows=None):
     rng = np.random.default_rng(10 + seed)
     world_T_imu, p, Sigma, slots, z = _joint_problem(rng, camera)
     D = Sigma.shape[0]
@@ -175,7 +194,11 @@ def test_joint_update_equals_dense_four_row_update(camera, seed):
     np.testing.assert_allclose(Sigma_ref, Sigma_tb, atol=1e-11)
 
     work = Sigma.copy()
-    T_new, p_new, nis = ekf.joint_update(work, world_T_imu, p.copy(), slots, z, camera, NOISE_VAR)
+    if rows is None:
+        T_new, p_new, nis = ekf.joint_update(work, world_T_imu, p.copy(), slots, z, camera, NOISE_VAR)
+    else:
+        delta, nis = ekf.joint_correction(work, slots, z, NOISE_VAR, (z_pred, J_l, J_p), rows)
+        T_new, p_new = world_T_imu @ lie.se3_exp(delta[:6]), p + delta[6:].reshape(-1, 3)
     np.testing.assert_allclose(T_new, world_T_imu @ lie.se3_exp(delta_ref[:6]), atol=1e-10)
     np.testing.assert_allclose(p_new, p + delta_ref[6:].reshape(-1, 3), atol=1e-9)
     np.testing.assert_allclose(work, Sigma_ref, atol=1e-11)

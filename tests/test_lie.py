@@ -638,3 +638,38 @@ def test_nonrigid_frames_flags_each_way_a_pose_leaves_se3():
     bad, orthogonality = lie.nonrigid_frames(poses, 1e-3)
     assert bad.tolist() == [False, True, True, True, False]
     assert orthogonality[1] > 0.02 and orthogonality[0] < 1e-12
+
+
+RIGHT_JACOBIAN_FD_REL = 1e-6
+
+
+# --- SO(3) and SE(3) right Jacobians (moved here from the smoother's tests with the functions) ---
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.05, 0.0999, 0.1001, 0.7, 2.5])
+def test_right_jacobian_inverse_matches_finite_differences_of_log(angle):
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=6)
+    x[3:] *= angle / np.linalg.norm(x[3:])
+    fd = fd_jacobian(lambda d: lie.se3_log(lie.se3_exp(x) @ lie.se3_exp(d)), np.zeros(6), 1e-5)
+    assert rel(lie.se3_right_jacobian_inv(x), fd) < RIGHT_JACOBIAN_FD_REL
+    fd_r = fd_jacobian(lambda d: lie.se3_log(lie.se3_inv(lie.se3_exp(x)) @ lie.se3_exp(x + d)), np.zeros(6), 1e-5)
+    assert rel(lie.se3_right_jacobian(x), fd_r) < RIGHT_JACOBIAN_FD_REL
+    assert np.allclose(lie.se3_right_jacobian(x) @ lie.se3_right_jacobian_inv(x), np.eye(6), atol=1e-12)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.0999, 0.1001, 2.5])
+def test_so3_right_jacobians_match_finite_differences(angle):
+    """``exp((phi + d)^) ~ exp(phi^) exp((J_r d)^)`` and ``log(exp(phi^) exp(d^)) ~ phi + J_r^{-1} d``."""
+    phi = np.random.default_rng(5).normal(size=3)
+    phi *= angle / np.linalg.norm(phi)
+    R = lie.so3_exp(phi)
+    fd = fd_jacobian(lambda d: lie.so3_log(R.T @ lie.so3_exp(phi + d)), np.zeros(3), 1e-5)
+    assert rel(lie.so3_right_jacobian(phi), fd) < RIGHT_JACOBIAN_FD_REL
+    fd_inv = fd_jacobian(lambda d: lie.so3_log(R @ lie.so3_exp(d)), np.zeros(3), 1e-5)
+    assert rel(lie.so3_right_jacobian_inv(phi), fd_inv) < RIGHT_JACOBIAN_FD_REL
+
+
+def test_right_jacobian_rejects_a_wrong_shape():
+    with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
+        lie.se3_right_jacobian_inv(np.zeros(3))

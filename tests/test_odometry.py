@@ -115,7 +115,7 @@ def test_transfer_information_carries_the_next_frames_pixel_noise_by_finite_diff
     rng = np.random.default_rng(11)
     p_next = np.column_stack([rng.uniform(-10, 10, 5), rng.uniform(-2, 2, 5), rng.uniform(4, 50, 5)])
     z_next = camera.projection(np.c_[p_next, np.ones(5)]) @ KS_RIG.T
-    W = odometry._transfer_information(MOTION, z_next, p_next, K_RIG, B_RIG, KS_RIG)
+    W = odometry._transfer_information(MOTION, z_next, p_next, camera.StereoCamera(K_RIG, B_RIG, np.eye(4)))
     assert W.shape == (5, 4, 4)
     for i in range(5):
         A = fd_jacobian(lambda z: odometry.transfer_pixels(

@@ -13,6 +13,7 @@ from scipy.sparse import linalg as sparse_linalg
 
 from fdiff import fd_jacobian  # tests/fdiff.py
 from visla_edu import lie, metrics, motion, run, settings, simulate, smoother
+from visla_edu.camera import StereoCamera
 from visla_edu.filters import FilterConfig
 from visla_edu.smoother import _batch, _envelope, _normal, _problem
 
@@ -21,40 +22,6 @@ FD_REL = 1e-6
 
 def rel(a, b):
     return np.linalg.norm(np.asarray(a) - np.asarray(b)) / np.linalg.norm(b)
-
-
-# --- SE(3) right Jacobian -------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.05, 0.0999, 0.1001, 0.7, 2.5])
-def test_right_jacobian_inverse_matches_finite_differences_of_log(angle):
-    rng = np.random.default_rng(1)
-    x = rng.normal(size=6)
-    x[3:] *= angle / np.linalg.norm(x[3:])
-    fd = fd_jacobian(lambda d: lie.se3_log(lie.se3_exp(x) @ lie.se3_exp(d)), np.zeros(6), 1e-5)
-    assert rel(smoother.se3_right_jacobian_inv(x), fd) < FD_REL
-    fd_r = fd_jacobian(lambda d: lie.se3_log(lie.se3_inv(lie.se3_exp(x)) @ lie.se3_exp(x + d)), np.zeros(6), 1e-5)
-    assert rel(smoother.se3_right_jacobian(x), fd_r) < FD_REL
-    assert np.allclose(smoother.se3_right_jacobian(x) @ smoother.se3_right_jacobian_inv(x), np.eye(6), atol=1e-12)
-
-
-@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.0999, 0.1001, 2.5])
-def test_so3_right_jacobians_match_finite_differences(angle):
-    """``exp((phi + d)^) ~ exp(phi^) exp((J_r d)^)`` and ``log(exp(phi^) exp(d^)) ~ phi + J_r^{-1} d``."""
-    from visla_edu.smoother import _se3
-
-    phi = np.random.default_rng(5).normal(size=3)
-    phi *= angle / np.linalg.norm(phi)
-    R = lie.so3_exp(phi)
-    fd = fd_jacobian(lambda d: lie.so3_log(R.T @ lie.so3_exp(phi + d)), np.zeros(3), 1e-5)
-    assert rel(_se3.so3_right_jacobian(phi), fd) < FD_REL
-    fd_inv = fd_jacobian(lambda d: lie.so3_log(R @ lie.so3_exp(d)), np.zeros(3), 1e-5)
-    assert rel(_se3.so3_right_jacobian_inv(phi), fd_inv) < FD_REL
-
-
-def test_right_jacobian_rejects_a_wrong_shape():
-    with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
-        smoother.se3_right_jacobian_inv(np.zeros(3))
 
 
 # --- residuals ------------------------------------------------------------------------------
@@ -96,7 +63,7 @@ def rig():
 
 def test_reprojection_equals_the_camera_model_and_its_jacobians(rig):
     rng = np.random.default_rng(4)
-    cam = smoother._problem.StereoCamera(*rig)
+    cam = StereoCamera(*rig)
     poses = lie.se3_exp(np.concatenate([rng.normal(0, 3, (6, 3)), rng.normal(0, 0.2, (6, 3))], 1))
     p_world = np.stack([(T @ cam.imu_T_cam @ np.r_[rng.uniform(-5, 5, 2), rng.uniform(5, 40), 1])[:3]
                         for T in poses])
@@ -139,6 +106,17 @@ def _problem_at(dataset, world_T_imu, config, landmarks=None):
 
 
 def test_normal_equations_are_jtwj_of_the_checked_jacobians(tiny):
+    _assert_normal_equations_are_jtwj(tiny)
+
+
+def test_normal_equations_of_a_rig_with_two_intrinsics_are_jtwj_too():
+    """K_r != K_l: the closed-form blocks (_projection_information_two) against the camera's Jacobians."""
+    K = np.array(simulate.default_rig()[0], dtype=float)
+    K_right = K @ np.array([[1.04, 0.0, 0.02], [0.0, 1.03, -0.03], [0.0, 0.0, 1.0]])
+    _assert_normal_equations_are_jtwj(simulate.simulate_drive("tiny", 3, outlier_share=0.05, K_right=K_right))
+
+
+def _assert_normal_equations_are_jtwj(tiny):
     config = smoother.SmootherConfig(loss="huber", loss_scale=1.0)
     T = tiny.ground_truth.world_T_imu
     problem, m = _problem_at(tiny, T, config)

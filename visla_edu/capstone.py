@@ -29,7 +29,6 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import diagnostics, ekf, lie, motion, run
-from visla_edu.camera import StereoCamera
 from visla_edu.codes import OBS_FAR, OBS_GATED, OBS_NEW, OBS_USED
 from visla_edu.filters._base import _Filter
 
@@ -105,25 +104,18 @@ class Steps:
 
 
 # ---------------------------------------------------------------- the library's parts
+# The projection and its Jacobians are the camera's (visla_edu.camera.stereo_projection), in the
+# exercises' signatures.
 def _project(Ks, cam_T_imu, world_T_imu, p_world):
-    q = np.c_[p_world, np.ones(len(p_world))] @ (cam_T_imu @ lie.se3_inv(world_T_imu)).T
-    return cam.projection(q) @ Ks.T
-
-
-def _in_imu(world_T_imu, m):
-    """Homogeneous coordinates (4,) of the world point ``m`` in the IMU frame (no general inverse)."""
-    R = world_T_imu[:3, :3]
-    return np.concatenate((R.T @ (np.asarray(m, dtype=float) - world_T_imu[:3, 3]), [1.0]))
+    return cam.stereo_projection(Ks, cam_T_imu, world_T_imu, np.asarray(p_world, dtype=float), jacobians=False)[0]
 
 
 def _pose_jacobian(Ks, cam_T_imu, mu, m):
-    s = _in_imu(mu, m)
-    return -Ks @ cam.projection_jacobian(cam_T_imu @ s) @ cam_T_imu @ lie.odot(s)
+    return cam.stereo_projection(Ks, cam_T_imu, mu, np.asarray(m, dtype=float)[None])[3][0]
 
 
 def _landmark_jacobian(Ks, cam_T_imu, world_T_imu, m):
-    q = cam_T_imu @ _in_imu(world_T_imu, m)
-    return Ks @ cam.projection_jacobian(q) @ cam_T_imu[:, :3] @ world_T_imu[:3, :3].T
+    return cam.stereo_projection(Ks, cam_T_imu, world_T_imu, np.asarray(m, dtype=float)[None])[2][0]
 
 
 def _init_landmark(z, K, b, imu_T_cam, world_T_imu):
@@ -132,13 +124,12 @@ def _init_landmark(z, K, b, imu_T_cam, world_T_imu):
 
 
 def _pose_update(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var):
-    s = np.c_[p_world, np.ones(len(p_world))] @ lie.se3_inv(mu).T  # (k, 4) in the IMU frame
-    q = s @ cam_T_imu.T
-    H = (-Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(s)).reshape(-1, POSE_DIM)
+    z_pred, _, _, J_pose = cam.stereo_projection(Ks, cam_T_imu, mu, np.asarray(p_world, dtype=float))
+    H = J_pose.reshape(-1, POSE_DIM)
     S = H @ Sigma @ H.T + noise_var * np.eye(len(H))
     gain = np.linalg.solve(S, H @ Sigma).T
     Sigma_new = (np.eye(POSE_DIM) - gain @ H) @ Sigma
-    r = (np.asarray(z) - cam.projection(q) @ Ks.T).ravel()
+    r = (np.asarray(z) - z_pred).ravel()
     return mu @ lie.se3_exp(gain @ r), 0.5 * (Sigma_new + Sigma_new.T)
 
 
@@ -214,8 +205,12 @@ class CapstoneFilter(_Filter):
         if not isinstance(parts, Parts) or not isinstance(steps, Steps):
             raise TypeError("CapstoneFilter: parts must be a capstone.Parts and steps a capstone.Steps, got "
                             f"{type(parts).__name__} and {type(steps).__name__}")
+        if not cam.same_intrinsics(dataset.K, dataset.K_right):
+            raise ValueError(f"CapstoneFilter: {dataset.name}'s stereo rig has two intrinsics (K_l != K_r), but the "
+                             "notebooks' functions take one K and a baseline b; run the library's filters on it "
+                             "(run.run_filter), or the capstone on a drive with one K")
         imu_T_cam, _ = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
-        super().__init__(dataset, StereoCamera(dataset.K, dataset.b, imu_T_cam), config)
+        super().__init__(dataset, dataset.stereo_camera(imu_T_cam), config)
         self.parts, self.steps, self.joint = parts, steps, bool(joint)
         self.Sigma = config.initial_pose_sigma**2 * np.eye(POSE_DIM)
         M = dataset.num_landmarks

@@ -66,6 +66,10 @@ class _Parser(argparse.ArgumentParser):
         return super().format_help()
 
 
+#: What the dataset argument of ``info`` and ``run`` accepts.
+_DATASET_HELP = "03, 0022, 0020, 10, datasetNN, sim, sim-small, sim-tiny, or a path to an .npz or 2025+ .npy file"
+
+
 def build_parser():
     """The argument parser of ``visla-edu``.
 
@@ -93,7 +97,7 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True)
 
     info = sub.add_parser("info", parents=[common], help="summarise a dataset and diagnose its problems")
-    info.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
+    info.add_argument("dataset", help=_DATASET_HELP)
     info.add_argument("--no-diagnostics", action="store_true", help="skip the visual-odometry diagnostics")
     _add_frames_option(info)
 
@@ -127,7 +131,7 @@ def build_parser():
 def _add_run_parser(sub, common):
     run = sub.add_parser("run", parents=[common], help="run a filter over a dataset", epilog=_options.settings_help,
                          formatter_class=argparse.RawDescriptionHelpFormatter)
-    run.add_argument("dataset", help="03, 0022, 0020, 10, sim, sim-small, sim-tiny or a path to an .npz file")
+    run.add_argument("dataset", help=_DATASET_HELP)
     run.add_argument("--mode", default=SLAM, choices=RUN_MODES, help=RUN_MODES_HELP)
     run.add_argument("--dense", action="store_true", help="textbook dense joint EKF (slam only; use a stride)")
     run.add_argument("--force", action="store_true",

@@ -14,6 +14,7 @@ import numpy as np
 
 from visla_edu import lie
 from visla_edu.camera import StereoCamera
+from visla_edu.camera import disparity as camera_disparity
 
 __all__ = ["Dataset", "GroundTruth", "frame_major_order", "repeated_frames"]
 
@@ -94,6 +95,14 @@ class Dataset:
         Stereo baseline (m).
     imu_T_cam : ndarray, shape (4, 4)
         Pose of the left camera (optical frame) in the IMU frame.
+    K_right : ndarray, shape (3, 3), or None
+        Right camera intrinsics when the file gives them (the 2025+ format; they may differ from
+        ``K``); None: the same as ``K``.
+    extrinsic_readings : tuple of visla_edu.camera.RigReading, or None
+        When the file's extrinsics may be read four ways (the 2025+ format: camera->IMU or
+        IMU->camera, optical or regular frame), every reading and its rig geometry;
+        ``imu_T_cam`` is then the loader's choice by geometry, and
+        :func:`visla_edu.diagnostics.calibrate` decides from the data. None for the other formats.
     num_landmarks : int
         M, the number of landmark tracks.
     frame_ptr : ndarray of int, shape (T + 1,)
@@ -107,7 +116,9 @@ class Dataset:
         A human-readable description; stand-ins say so here.
     extra : dict
         Metadata, empty by default and not written by :func:`visla_edu.data.save`. A loaded
-        course file has ``"sha256"``, ``"format"`` and ``"known_file"``; a simulated drive
+        course file has ``"sha256"``, ``"format"`` and ``"known_file"`` (a 2025+ file also
+        ``"extrinsic_reading"``, ``"ignored_keys"`` and, without features, ``"no_features"``: why,
+        in words); a simulated drive
         ``"preset"``, ``"seed"`` and ``"config"`` (and ``"simulated_imu_T_cam"`` when the
         reported calibration differs from the simulated rig's). Diagnostics keep results here
         (``"calibration"``, ``"visual_odometry"``).
@@ -128,6 +139,8 @@ class Dataset:
     ground_truth: GroundTruth = None
     label: str = ""
     extra: dict = field(default_factory=dict)
+    K_right: np.ndarray = None
+    extrinsic_readings: tuple = None
 
     @property
     def num_frames(self):
@@ -141,8 +154,27 @@ class Dataset:
 
     @property
     def camera(self):
-        """A :class:`~visla_edu.camera.StereoCamera` built from ``K``, ``b``, ``imu_T_cam``."""
-        return StereoCamera(self.K, self.b, self.imu_T_cam)
+        """A :class:`~visla_edu.camera.StereoCamera` built from ``K``, ``b``, ``imu_T_cam`` and ``K_right``."""
+        return self.stereo_camera()
+
+    def stereo_camera(self, imu_T_cam=None):
+        """The drive's stereo rig, with ``imu_T_cam`` replaced if given (e.g. a corrected one).
+
+        Parameters
+        ----------
+        imu_T_cam : array_like, shape (4, 4), optional
+            Pose of the left camera (optical frame) in the IMU frame; default :attr:`imu_T_cam`.
+
+        Returns
+        -------
+        visla_edu.camera.StereoCamera
+            With both intrinsics (``K``, ``K_right``) and the baseline ``b``.
+        """
+        return StereoCamera(self.K, self.b, self.imu_T_cam if imu_T_cam is None else imu_T_cam, self.K_right)
+
+    def disparity(self):
+        """Disparity of every observation in the left camera's pixels (``uL - uR`` for one intrinsics), (N,)."""
+        return camera_disparity(self.obs_z, self.K, self.K_right)
 
     @property
     def twists(self):
@@ -233,7 +265,8 @@ class Dataset:
             frame_ptr=self.frame_ptr[start:stop + 1] - lo, obs_ids=obs_ids.astype(np.int64).reshape(-1),
             obs_z=self.obs_z[lo:hi].copy(),
             ground_truth=_segment_ground_truth(self.ground_truth, start, stop, kept),
-            label=f"frames {start}..{stop - 1} of {self.label or self.name}")
+            label=f"frames {start}..{stop - 1} of {self.label or self.name}",
+            K_right=None if self.K_right is None else self.K_right.copy(), extrinsic_readings=self.extrinsic_readings)
 
     def to_dense_features(self, frames=None, landmarks=None):
         """The course's dense layout: ``(4, M, T)`` with -1 where not observed.

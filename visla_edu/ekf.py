@@ -16,7 +16,7 @@ applied on the right, ``mu <- mu @ se3_exp(delta_pose)``; landmark corrections a
 import numpy as np
 from scipy import linalg
 
-from visla_edu import lie
+from visla_edu import camera, lie
 
 __all__ = [
     "POSE_DIM",
@@ -286,11 +286,12 @@ def pose_update(world_T_imu, Sigma_pose, p_world, z, camera, noise_var, Sigma_la
     return world_T_imu @ lie.se3_exp(delta), 0.5 * (Sigma + Sigma.T), nis
 
 
-#: Stereo rows ``[uL, vL, uR, vR]`` -> ``[uL, (vL + vR)/sqrt(2), uR]``. Rows 2 and 4 of ``Ks``
-#: are equal, so ``vL`` and ``vR`` have the same prediction and Jacobian: with noise
-#: ``sigma^2 I`` their difference carries no information about the state. Rotating the pair
-#: orthonormally and dropping the difference row is an exact reduction from 4 to 3 rows.
-STEREO_ROWS = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)], [0.0, 0.0, 1.0, 0.0]])
+#: Stereo rows ``[uL, vL, uR, vR]`` -> ``[uL, (vL + vR)/sqrt(2), uR]``. Rows 2 and 4 of ``Ks`` are
+#: equal for a rig with one intrinsics, so ``vL`` and ``vR`` have the same prediction and Jacobian:
+#: with noise ``sigma^2 I`` their difference carries no information about the state. Rotating the
+#: pair orthonormally and dropping the difference row is an exact reduction from 4 to 3 rows. A rig
+#: with two intrinsics has its own exact reduction (:func:`visla_edu.camera.stereo_rows`).
+STEREO_ROWS = camera.STEREO_ROWS
 
 
 def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, prediction=None):
@@ -303,8 +304,9 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
 
     so ``Sigma H^T`` and ``H Sigma H^T`` are assembled block by block instead of with the
     mostly-zero ``H``, and each observation's rows are reduced exactly from 4 to 3
-    (:data:`STEREO_ROWS`). Every landmark in the state moves (unobserved ones through their
-    correlation with the pose), so the whole ``p_active`` is corrected.
+    (``camera.stereo_rows``: :data:`STEREO_ROWS` for one intrinsics). Every landmark in the
+    state moves (unobserved ones through their correlation with the pose), so the whole
+    ``p_active`` is corrected.
 
     Parameters
     ----------
@@ -334,12 +336,12 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     """
     if prediction is None:
         prediction = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
-    delta, nis = joint_correction(Sigma, obs_slots, z, noise_var, prediction)
+    delta, nis = joint_correction(Sigma, obs_slots, z, noise_var, prediction, camera.stereo_rows)
     p_new = p_active + delta[POSE_DIM:].reshape(-1, 3)
     return world_T_imu @ lie.se3_exp(delta[:POSE_DIM]), p_new, nis
 
 
-def joint_correction(Sigma, obs_slots, z, noise_var, prediction):
+def joint_correction(Sigma, obs_slots, z, noise_var, prediction, rows=STEREO_ROWS):
     """The gain step of :func:`joint_update`: the state correction ``K r``, covariance in place.
 
     Shared by both forms of the joint filter: the right-perturbation form applies the
@@ -356,18 +358,22 @@ def joint_correction(Sigma, obs_slots, z, noise_var, prediction):
     noise_var : float
     prediction : tuple of ndarray
         ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``.
+    rows : ndarray, shape (3, 4)
+        The rig's exact reduction of the stereo rows (``camera.stereo_rows``); the default
+        :data:`STEREO_ROWS` is that of a rig with one intrinsics.
 
     Returns
     -------
     delta : ndarray, shape (D,)
     nis : float
-        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
+        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom): the reduced
+        rows' part plus the dropped row's ``|r - rows^T rows r|^2 / noise_var``.
     """
     k = len(obs_slots)
     z_pred, J_landmark, J_pose = prediction
     r4 = z - z_pred
-    J_pose3 = (STEREO_ROWS @ J_pose).reshape(3 * k, 6)  # (m, 6), m = 3k
-    J_lm3 = STEREO_ROWS @ J_landmark  # (k, 3, 3)
+    J_pose3 = (rows @ J_pose).reshape(3 * k, 6)  # (m, 6), m = 3k
+    J_lm3 = rows @ J_landmark  # (k, 3, 3)
     lm_cols = slot_columns(obs_slots).ravel()
     D = Sigma.shape[0]
     Sigma_lm = Sigma[:, lm_cols].reshape(D, k, 3)
@@ -376,8 +382,12 @@ def joint_correction(Sigma, obs_slots, z, noise_var, prediction):
     Sigma_Ht = Sigma[:, :6] @ J_pose3.T + lm_part.reshape(D, 3 * k)
     S = J_pose3 @ Sigma_Ht[:6] + (J_lm3 @ Sigma_Ht[lm_cols].reshape(k, 3, 3 * k)).reshape(3 * k, 3 * k)
     S[np.diag_indices(3 * k)] += noise_var
-    delta, nis = gain_update(Sigma, Sigma_Ht, S, (r4 @ STEREO_ROWS.T).ravel())
-    nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
+    r3 = r4 @ rows.T
+    delta, nis = gain_update(Sigma, Sigma_Ht, S, r3.ravel())
+    if rows is STEREO_ROWS:  # the dropped row is (vL - vR) / sqrt(2)
+        nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
+    else:
+        nis += float(np.sum((r4 - r3 @ rows) ** 2)) / noise_var
     return delta, nis
 
 

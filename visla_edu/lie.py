@@ -1,4 +1,4 @@
-"""SO(3) and SE(3) kinematics: hat/vee, exponential and logarithm maps, adjoints.
+"""SO(3) and SE(3) kinematics: hat/vee, exponential and logarithm maps, adjoints, Jacobians.
 
 Conventions (used everywhere in visla-edu)
 -------------------------------------------
@@ -9,6 +9,33 @@ Conventions (used everywhere in visla-edu)
   ``expm(curly_hat(u)) == adjoint(se3_exp(u))``.
 * ``odot(s) = [[s4 * I, -hat(s_xyz)], [0, 0]]`` (4x6) for a homogeneous point
   ``s = [s_xyz; s4]``, so that ``twist_hat(u) @ s == odot(s) @ u``.
+
+Perturbations and Jacobians (stated here once; every module follows it)
+------------------------------------------------------------------------
+* Poses are perturbed on the **right**: ``T = mu exp(twist_hat(delta))``, ``delta = [v; w]``
+  (linear first) in the body frame of ``T``; points and landmarks additively,
+  ``m = mu_m + delta_m``.
+* A Jacobian is named ``J_out_in`` (manif's convention): the derivative of ``out`` with respect
+  to the perturbation of ``in``, one row per entry of ``out``. E.g. ``J_z_pose`` (4, 6): stereo
+  pixels ``z`` with respect to the right perturbation of ``world_T_imu``; ``J_z_landmark``
+  (4, 3); ``J_e_prev`` (6, 6): a motion residual with respect to the earlier pose.
+* The **right Jacobian** ``J_r(x)`` of SO(3) or SE(3) (twist ``x``):
+  ``exp(x + d) ~ exp(x) exp(J_r(x) d)`` and ``log(exp(x) exp(d)) ~ x + J_r(x)^{-1} d`` to first
+  order in ``d``; the **left Jacobian** is ``J_l(x) = J_r(-x)``, ``exp(x + d) ~ exp(J_l(x) d)
+  exp(x)``. SO(3): ``J_l(w) = I + B hat(w) + C hat(w)^2`` (the ``V`` of :func:`se3_exp`),
+  ``J_r(w) = I - B hat(w) + C hat(w)^2``, ``J_r(w)^{-1} = I + hat(w) / 2 + D hat(w)^2``.
+  SE(3), ``x = [rho; phi]``: ``J_r(x) = [[J_r(phi), Q_r], [0, J_r(phi)]]`` and
+  ``J_r(x)^{-1} = [[J_r(phi)^{-1}, -J_r(phi)^{-1} Q_r J_r(phi)^{-1}], [0, J_r(phi)^{-1}]]`` with
+  ``Q_r(rho, phi) = Q_l(-rho, -phi)``::
+
+      Q_l(rho, phi) = rho^ / 2 + c1 (phi^ rho^ + rho^ phi^ + phi^ rho^ phi^)
+                    + c2 (phi^2 rho^ + rho^ phi^2 - 3 phi^ rho^ phi^)
+                    + c3 (phi^ rho^ phi^2 + phi^2 rho^ phi^)
+
+  (Barfoot, *State Estimation for Robotics*, ch. 7), ``t = |phi|``, ``B = (1 - cos t) / t^2``,
+  ``C = c1 = (t - sin t) / t^3``, ``D = (1 - t sin t / (2 (1 - cos t))) / t^2``,
+  ``c2 = (t^2 + 2 cos t - 2) / (2 t^4)``, ``c3 = (2 t - 3 sin t + t cos t) / (2 t^5)``. The
+  closed forms of the inverse hold for ``t < pi``.
 
 Every function accepts a single input or a stack with any leading batch
 dimensions, e.g. ``hat`` maps ``(..., 3) -> (..., 3, 3)``.
@@ -27,10 +54,14 @@ __all__ = [
     "so3_exp",
     "so3_log",
     "so3_left_jacobian",
+    "so3_right_jacobian",
+    "so3_right_jacobian_inv",
     "twist_hat",
     "twist_vee",
     "se3_exp",
     "se3_log",
+    "se3_right_jacobian",
+    "se3_right_jacobian_inv",
     "se3_inv",
     "adjoint",
     "curly_hat",
@@ -183,6 +214,24 @@ def _theta_minus_sin_over_theta3(theta, theta2):
     )
 
 
+def _inverse_jacobian_coefficient(theta, theta2):
+    """``D = (1 - t sin t / (2 (1 - cos t))) / t^2`` of ``J_r(w)^{-1}`` and of ``V^{-1}`` in :func:`se3_log`."""
+    return _series_or_closed(
+        theta, theta2,
+        lambda t: (1 - t * np.sin(t) / (2 * (1 - np.cos(t)))) / t**2,
+        lambda t2: 1 / 12 + t2 / 720 + t2**2 / 30240 + t2**3 / 1209600,
+    )
+
+
+def _q_coefficients(theta, theta2):
+    """``c2 = (t^2 + 2 cos t - 2) / (2 t^4)`` and ``c3 = (2 t - 3 sin t + t cos t) / (2 t^5)`` of ``Q_l``."""
+    c2 = _series_or_closed(theta, theta2, lambda t: (t**2 + 2 * np.cos(t) - 2) / (2 * t**4),
+                           lambda t2: 1 / 24 - t2 / 720 + t2**2 / 40320 - t2**3 / 3628800)
+    c3 = _series_or_closed(theta, theta2, lambda t: (2 * t - 3 * np.sin(t) + t * np.cos(t)) / (2 * t**5),
+                           lambda t2: 1 / 120 - t2 / 2520 + t2**2 / 120960 - t2**3 / 9979200)
+    return c2, c3
+
+
 def so3_exp(w):
     """Rodrigues' formula: ``exp(hat(w)) = I + A hat(w) + B hat(w)^2``.
 
@@ -225,6 +274,39 @@ def so3_left_jacobian(w):
     C = _theta_minus_sin_over_theta3(theta, theta2)[..., None, None]
     W = hat(w)
     return np.eye(3) + B * W + C * (W @ W)
+
+
+def so3_right_jacobian(w):
+    """Right Jacobian of SO(3): ``J_r(w) = J_l(-w) = I - B hat(w) + C hat(w)^2`` (see the module docstring).
+
+    Parameters
+    ----------
+    w : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``exp(hat(w + d)) ~ exp(hat(w)) exp(hat(J_r(w) d))`` to first order.
+    """
+    return so3_left_jacobian(-_as_vectors(w, 3, "so3_right_jacobian"))
+
+
+def so3_right_jacobian_inv(w):
+    """Inverse right Jacobian of SO(3): ``J_r(w)^{-1} = I + hat(w) / 2 + D hat(w)^2``, for ``|w| < pi``.
+
+    Parameters
+    ----------
+    w : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        ``log(exp(hat(w)) exp(hat(d))) ~ w + J_r(w)^{-1} d``; ``D`` as in the module docstring.
+    """
+    w = _as_vectors(w, 3, "so3_right_jacobian_inv")
+    D = _inverse_jacobian_coefficient(*_angle(w))[..., None, None]
+    W = hat(w)
+    return np.eye(3) + 0.5 * W + D * (W @ W)
 
 
 def so3_log(R):
@@ -319,15 +401,64 @@ def se3_log(T):
     T = _as_matrices(T, 4, 4, "se3_log")
     w = so3_log(T[..., :3, :3])
     theta, theta2 = _angle(w)
-    D = _series_or_closed(
-        theta, theta2,
-        lambda t: (1 - t * np.sin(t) / (2 * (1 - np.cos(t)))) / t**2,
-        lambda t2: 1 / 12 + t2 / 720 + t2**2 / 30240 + t2**3 / 1209600,
-    )[..., None, None]
+    D = _inverse_jacobian_coefficient(theta, theta2)[..., None, None]
     W = hat(w)
     V_inv = np.eye(3) - 0.5 * W + D * (W @ W)
     v = np.einsum("...ij,...j->...i", V_inv, T[..., :3, 3])
     return np.concatenate([v, w], axis=-1)
+
+
+def _q_right(x):
+    """``Q_r(rho, phi) = Q_l(-rho, -phi)`` of twists ``x = [rho; phi]`` (..., 6), shape (..., 3, 3)."""
+    theta, theta2 = _angle(x[..., 3:])
+    c1 = _theta_minus_sin_over_theta3(theta, theta2)[..., None, None]
+    c2, c3 = (c[..., None, None] for c in _q_coefficients(theta, theta2))
+    P, R = hat(-x[..., 3:]), hat(-x[..., :3])
+    PR, RP = P @ R, R @ P
+    PRP = PR @ P
+    return 0.5 * R + c1 * (PR + RP + PRP) + c2 * (P @ PR + RP @ P - 3 * PRP) + c3 * (PRP @ P + P @ PRP)
+
+
+def se3_right_jacobian(x):
+    """Right Jacobian of SE(3): ``J_r(x) = [[J_r(phi), Q_r], [0, J_r(phi)]]`` for ``x = [rho; phi]``.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 6)
+        Twists, linear part first.
+
+    Returns
+    -------
+    ndarray, shape (..., 6, 6)
+        ``exp(x + d) ~ exp(x) exp(J_r(x) d)``; ``Q_r`` as in the module docstring.
+    """
+    x = _as_vectors(x, 6, "se3_right_jacobian")
+    A = so3_right_jacobian(x[..., 3:])
+    J = np.zeros(x.shape[:-1] + (6, 6))
+    J[..., :3, :3] = J[..., 3:, 3:] = A
+    J[..., :3, 3:] = _q_right(x)
+    return J
+
+
+def se3_right_jacobian_inv(x):
+    """Inverse right Jacobian of SE(3): ``[[A^{-1}, -A^{-1} Q_r A^{-1}], [0, A^{-1}]]``, ``A = J_r(phi)``.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 6)
+        Twists ``[rho; phi]`` with ``|phi| < pi``.
+
+    Returns
+    -------
+    ndarray, shape (..., 6, 6)
+        ``log(exp(x) exp(d)) ~ x + J_r(x)^{-1} d``.
+    """
+    x = _as_vectors(x, 6, "se3_right_jacobian_inv")
+    A_inv = so3_right_jacobian_inv(x[..., 3:])
+    J = np.zeros(x.shape[:-1] + (6, 6))
+    J[..., :3, :3] = J[..., 3:, 3:] = A_inv
+    J[..., :3, 3:] = -A_inv @ _q_right(x) @ A_inv
+    return J
 
 
 def nonrigid_frames(poses, tolerance):

@@ -16,13 +16,14 @@ The motion ``cam_T_next`` (camera at ``t + 1`` in the camera at ``t``) maps
    ``|r|^2 / 2 < pixel_sigma^2 chi2_4(probability)`` (defaults 1 px and 99%: ``|r| < 5.15``
    px). Most inliers win (ties: the smaller sum of inlier errors).
 3. **Gauss-Newton on SE(3)**, right perturbation ``cam_T_next = mu exp(hat(delta))``, with
-   ``J_z_motion = Ks dpi/dq(q) mu odot(p_next)``: first on the RANSAC inliers; then the
-   inliers again, with each residual's own covariance ``sigma^2 (I + A A^T)`` (``A`` carries
-   frame ``t + 1``'s pixel noise through triangulation and transfer) in the chi-square test,
-   plus a cap on the plain residual in both directions; then weighted by ``W = (I + A
-   A^T)^-1``. The covariance of ``delta`` is ``s^2 H^-1``, ``H = J^T W J``, with ``s^2`` the
-   measured ``sum r^T W r / (4 n - 6)`` of the pair's ``n`` inliers, shrunk toward the drive's
-   pooled value (a pair of 3 points has only 6 residual degrees of freedom).
+   ``J_z_motion = Ks dpi/dq(q) mu odot(p_next)`` (:func:`visla_edu.camera.project_points`): first
+   on the RANSAC inliers; then the inliers again, with each residual's own covariance
+   ``sigma^2 (I + A A^T)`` (``A`` carries frame ``t + 1``'s pixel noise through triangulation and
+   transfer) in the chi-square test, plus a cap on the plain residual in both directions; then
+   weighted by ``W = (I + A A^T)^-1``. The covariance of ``delta`` is ``s^2 H^-1``,
+   ``H = J^T W J``, with ``s^2`` the measured ``sum r^T W r / (4 n - 6)`` of the pair's ``n``
+   inliers, shrunk toward the drive's pooled value (a pair of 3 points has only 6 residual
+   degrees of freedom).
 
 Points whose pixels at ``t + 1`` repeat those at ``t`` bit for bit are stale copies (the course
 files have whole frame pairs of them while the vehicle turns) and are left out. Pairs with
@@ -36,7 +37,7 @@ import numpy as np
 
 from visla_edu import lie
 from visla_edu.metrics import chi2_quantile
-from visla_edu.camera import stereo_matrix, triangulate_disparity, triangulation_jacobian
+from visla_edu.camera import StereoCamera, project_points, single_intrinsics
 
 __all__ = ["VisualOdometry", "visual_odometry", "align_triples", "transfer_pixels", "camera_motion", "motion_errors"]
 
@@ -159,10 +160,11 @@ def _plane_frame(p):
 def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
     """Stereo pixels in frame ``t`` of points triangulated in frame ``t + 1``, and their Jacobian.
 
-    ``q = cam_T_next p_next``, ``z = Ks pi(q)``; for the right perturbation
-    ``cam_T_next = mu exp(hat(delta))``, ``delta = [v; w]``::
+    ``q = cam_T_next p_next``, ``z = Ks pi(q)``: :func:`visla_edu.camera.project_points` with the
+    motion as the transform, so for the right perturbation ``cam_T_next = mu exp(hat(delta))``,
+    ``delta = [v; w]``::
 
-        J_z_motion = Ks dpi/dq(q) mu odot(p_next) = Ks dpi/dq(q)[:, :3] [R, -R hat(p_next)]
+        J_z_motion = Ks dpi/dq(q) mu odot(p_next) = [J_z_point, -J_z_point hat(p_next)]
 
     Parameters
     ----------
@@ -182,39 +184,10 @@ def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
     J_z_motion : ndarray, shape (..., N, 4, 6)
         Only when ``jacobian`` is true.
     """
-    z, p_prev = _transfer(cam_T_next, p_next, Ks)
     if not jacobian:
-        return z
-    return z, _transfer_jacobian(cam_T_next[..., None, :3, :3], p_next, p_prev, Ks)
-
-
-def _transfer_jacobian(R, p_next, p_prev, Ks):
-    """``J_z_motion`` of :func:`transfer_pixels` (..., N, 4, 6), built from (..., N) arrays.
-
-    ``d pi / dp_j = d[x/z, y/z, 1, 1/z] / dq  R e_j``; the rotation block's rows are
-    ``a^T R (-hat(p_next)) = cross(p_next, R^T a)^T`` for the rows ``a`` of ``Ks dpi/dq``.
-    """
-    inv_depth = 1.0 / p_prev[..., 2]
-    x_n, y_n = p_prev[..., 0] * inv_depth, p_prev[..., 1] * inv_depth
-    dpi = []  # for each column j of R: (d x/z, d y/z, d 1/z) / dp_j
-    for j in range(3):
-        r0, r1, r2 = R[..., 0, j], R[..., 1, j], R[..., 2, j]
-        dpi.append(((r0 - x_n * r2) * inv_depth, (r1 - y_n * r2) * inv_depth, -r2 * inv_depth**2))
-    p = [p_next[..., j] for j in range(3)]
-    columns = []
-    for k in range(4):  # row k of Ks dpi/dq R, skipping the zero entries of Ks (the third row of dpi/dq is 0)
-        a = [sum((Ks[k, m] * dpi[j][i] for i, m in enumerate((0, 1, 3)) if Ks[k, m] != 0), np.zeros_like(x_n))
-             for j in range(3)]
-        columns += a + [p[1] * a[2] - p[2] * a[1], p[2] * a[0] - p[0] * a[2], p[0] * a[1] - p[1] * a[0]]
-    return np.stack(columns, axis=-1).reshape(inv_depth.shape + (4, 6))
-
-
-def _transfer(cam_T_next, p_next, Ks):
-    """Predicted pixels ``Ks pi(q)`` (..., N, 4) and the moved points ``q`` (..., N, 3)."""
-    p_prev = p_next @ np.swapaxes(cam_T_next[..., :3, :3], -1, -2) + cam_T_next[..., None, :3, 3]
-    inv_depth = 1.0 / p_prev[..., 2:3]
-    pi = np.concatenate([p_prev[..., :2] * inv_depth, np.ones_like(inv_depth), inv_depth], axis=-1)
-    return pi @ Ks.T, p_prev
+        return project_points(Ks, cam_T_next, p_next, jacobians=False)[0]
+    z, _, _, J_z_motion = project_points(Ks, cam_T_next, p_next)
+    return z, J_z_motion
 
 
 def camera_motion(world_T_imu, imu_T_cam):
@@ -306,7 +279,7 @@ def _sample_triples(counts, hypotheses, rng):
     return np.stack([i, j, k], axis=-1)
 
 
-def _transfer_information(cam_T_next, z_next, p_next, K, b, Ks):
+def _transfer_information(cam_T_next, z_next, p_next, rig):
     """Inverse of the transfer residual's covariance in units of the pixel variance.
 
     The residual ``z_prev - Ks pi(cam_T_next p_next(z_next))`` carries the noise of both
@@ -320,9 +293,8 @@ def _transfer_information(cam_T_next, z_next, p_next, K, b, Ks):
     -------
     ndarray, shape (..., N, 4, 4)
     """
-    _, J_z_motion = transfer_pixels(cam_T_next, p_next, Ks)
-    J_z_q = J_z_motion[..., :3]  # Ks dpi/dq R, the derivative w.r.t. the point p_next
-    A = J_z_q @ triangulation_jacobian(z_next, K, b)
+    J_z_point = project_points(rig.Ks, cam_T_next, p_next)[2]  # Ks dpi/dq R, the derivative w.r.t. p_next
+    A = J_z_point @ rig.triangulation_jacobian(z_next)
     finite = np.all(np.isfinite(A), axis=(-2, -1))
     A[~finite] = 0.0
     return np.linalg.inv(np.eye(4) + A @ np.swapaxes(A, -1, -2)) * finite[..., None, None]
@@ -333,15 +305,19 @@ def _errors(cam_T_next, z_prev, p_next, Ks):
     ``W = I / 2``); inf for points moved behind the camera.
 
     Computed component by component for the stereo matrix of
-    :func:`visla_edu.camera.stereo_matrix`: the hot loop of the hypothesis scoring.
+    :func:`visla_edu.camera.stereo_matrix` (one or two intrinsics): the hot loop of the
+    hypothesis scoring.
     """
     p_prev = p_next @ np.swapaxes(cam_T_next[..., :3, :3], -1, -2)
     inv_depth = 1.0 / (p_prev[..., 2] + cam_T_next[..., None, 2, 3])
-    u_left = (p_prev[..., 0] + cam_T_next[..., None, 0, 3]) * inv_depth * Ks[0, 0] + Ks[0, 2]
-    v_left = (p_prev[..., 1] + cam_T_next[..., None, 1, 3]) * inv_depth * Ks[1, 1] + Ks[1, 2]
+    x = (p_prev[..., 0] + cam_T_next[..., None, 0, 3]) * inv_depth
+    y = (p_prev[..., 1] + cam_T_next[..., None, 1, 3]) * inv_depth
+    u_left, v_left = x * Ks[0, 0] + Ks[0, 2], y * Ks[1, 1] + Ks[1, 2]
+    one = single_intrinsics(Ks)
+    u_right, v_right = (u_left, v_left) if one else (x * Ks[2, 0] + Ks[2, 2], y * Ks[3, 1] + Ks[3, 2])
     du_left, dv_left = z_prev[..., 0] - u_left, z_prev[..., 1] - v_left
-    du_right = z_prev[..., 2] - u_left - Ks[2, 3] * inv_depth
-    dv_right = z_prev[..., 3] - v_left
+    du_right = z_prev[..., 2] - u_right - Ks[2, 3] * inv_depth
+    dv_right = z_prev[..., 3] - v_right
     squared = 0.5 * (du_left**2 + dv_left**2 + du_right**2 + dv_right**2)
     return np.where(inv_depth > 0, squared, np.inf)
 
@@ -354,7 +330,7 @@ def _inliers(cam_T_next, batch, information, Ks, threshold):
     camera, where their expected transfer error is large) from buying itself a lenient test.
     """
     z_prev, z_next, p_prev, p_next, mask = batch
-    z, p_moved = _transfer(cam_T_next, p_next, Ks)
+    z, p_moved = project_points(Ks, cam_T_next, p_next, jacobians=False)
     residual = z_prev - z
     mahalanobis = np.einsum("...i,...ij,...j->...", residual, information, residual)
     cap = _MAX_MAGNIFICATION**2 * threshold
@@ -421,7 +397,7 @@ def _gauss_newton(cam_T_next, z_prev, p_next, weight, Ks, iterations):
     return cam_T_next
 
 
-def _estimate(batch, camera, settings, rng):
+def _estimate(batch, rig, settings, rng):
     """RANSAC; Gauss-Newton on its inliers; the inliers again (:func:`_inliers`); Gauss-Newton
     on them weighted by the information of their transfer residuals.
 
@@ -429,11 +405,11 @@ def _estimate(batch, camera, settings, rng):
     first refinement. Returns what :func:`_summary` returns.
     """
     z_prev, z_next, _, p_next, _ = batch
-    K, b, Ks = camera
+    Ks = rig.Ks
     cam_T_next, inlier = _ransac(batch, Ks, settings, rng)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         cam_T_next = _gauss_newton(cam_T_next, z_prev, p_next, 0.5 * inlier, Ks, _ITERATIONS)
-        information = _transfer_information(cam_T_next, z_next, p_next, K, b, Ks)
+        information = _transfer_information(cam_T_next, z_next, p_next, rig)
         inlier = _inliers(cam_T_next, batch, information, Ks, settings.threshold)
         weight = np.where(inlier[..., None, None], information, 0.0)
         cam_T_next = _gauss_newton(cam_T_next, z_prev, p_next, weight, Ks, _ITERATIONS)
@@ -476,8 +452,8 @@ def _pixel_variance(chi2, dof, valid):
 # ------------------------------------------------------------------------ drivers
 
 
-def _pair_matches(dataset):
-    """Points seen in frames t and t + 1 with positive disparity in both, and stale copies.
+def _pair_matches(dataset, rig):
+    """Points seen in frames t and t + 1 with positive disparity in both (``rig.disparity``), and stale copies.
 
     A point whose four pixels at ``t + 1`` are bit-identical to those at ``t`` is a stale
     copy, not a measurement (the course files have whole frame pairs of them, while the
@@ -502,7 +478,7 @@ def _pair_matches(dataset):
     z_prev = dataset.obs_z[order[pos[found]]]
     pair = frames[found] - 1
     stale = np.all(z_prev == z_next, axis=1)
-    keep = ~stale & (z_prev[:, 0] > z_prev[:, 2]) & (z_next[:, 0] > z_next[:, 2])
+    keep = ~stale & (rig.disparity(z_prev) > 0) & (rig.disparity(z_next) > 0)
     return pair[keep], z_prev[keep], z_next[keep], pair[stale]
 
 
@@ -572,13 +548,12 @@ def visual_odometry(dataset, pixel_sigma=1.0, probability=0.99, hypotheses=16, m
     settings = _settings(pixel_sigma, probability, hypotheses, min_inliers, seed)
     _check_dataset(dataset)
     pairs = max(dataset.num_frames - 1, 0)
-    pair, z_prev, z_next, stale_pair = _pair_matches(dataset)
+    rig = StereoCamera(dataset.K, dataset.b, np.eye(4), getattr(dataset, "K_right", None))  # motion needs no extrinsic
+    pair, z_prev, z_next, stale_pair = _pair_matches(dataset, rig)
     tracked = np.bincount(pair, minlength=pairs)[:pairs]
     stale = np.bincount(stale_pair, minlength=pairs)[:pairs]
     ptr = np.concatenate([[0], np.cumsum(tracked)])
-    arrays = (z_prev, z_next, triangulate_disparity(z_prev, dataset.K, dataset.b),
-              triangulate_disparity(z_next, dataset.K, dataset.b))
-    camera = (dataset.K, dataset.b, stereo_matrix(dataset.K, dataset.b))
+    arrays = (z_prev, z_next, rig.triangulate(z_prev), rig.triangulate(z_next))
     out = VisualOdometry(np.broadcast_to(np.eye(4), (pairs, 4, 4)).copy(),
                          np.broadcast_to(np.diag(np.full(6, np.inf)), (pairs, 6, 6)).copy(),
                          np.zeros(pairs, bool), np.zeros(pairs, np.int64), tracked, stale,
@@ -590,7 +565,7 @@ def visual_odometry(dataset, pixel_sigma=1.0, probability=0.99, hypotheses=16, m
     chi2, dof = np.zeros(pairs), np.zeros(pairs, np.int64)
     for chunk in _chunks(candidates, tracked, settings.hypotheses):
         motion, H_inv, valid, inlier, rms, chi2[chunk], dof[chunk] = _estimate(
-            _padded(chunk, ptr, tracked, arrays), camera, settings, rng)
+            _padded(chunk, ptr, tracked, arrays), rig, settings, rng)
         out.cam_T_next[chunk], out.covariance[chunk], out.valid[chunk] = motion, H_inv, valid
         out.inliers[chunk], out.rms_px[chunk] = inlier.sum(axis=1), rms
     out.pixel_variance = _pixel_variance(chi2, dof, out.valid)

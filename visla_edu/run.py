@@ -27,7 +27,6 @@ from visla_edu import data, diagnostics, filters, metrics, motion
 from visla_edu._blas import check_blas_threads as _check_blas_threads
 from visla_edu._blas import limit_blas_threads
 from visla_edu._files import atomic_write, expand_user, format_bytes
-from visla_edu.camera import StereoCamera
 from visla_edu.codes import (DEADRECKON, MAPPING, MODES, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED, SLAM, SMOOTH,
                              SMOOTHER_MODES, STATUS_NAMES, VIO, WINDOW)
 from visla_edu.filters import FilterConfig
@@ -80,7 +79,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
         raise ValueError(f"cannot run the filter: {problems[0]}")
     _check_enough_data(dataset, mode)
     config = resolve_config(dataset, config or FilterConfig())
-    camera = StereoCamera(dataset.K, dataset.b, _imu_T_cam(dataset, config, verbose))
+    camera = dataset.stereo_camera(_imu_T_cam(dataset, config, verbose))
     if mode == SLAM:
         return filters.JointSlam(dataset, camera, config, dense=dense)
     return _MODE_CLASSES[mode](dataset, camera, config)
@@ -95,8 +94,9 @@ def _check_enough_data(dataset, mode):
     if mode == DEADRECKON:
         return
     if dataset.num_observations == 0:
-        raise ValueError(f"mode {mode} needs stereo observations and {dataset.name!r} has none (every feature is -1, "
-                         "not observed); use mode deadreckon")
+        why = dataset.extra.get("no_features") or "every feature is -1, not observed"
+        raise ValueError(f"mode {mode} needs stereo observations and {dataset.name!r} has none ({why}); use mode "
+                         "deadreckon")
     if mode in SMOOTHER_MODES and dataset.num_frames < 2:
         raise ValueError(f"mode {mode} needs at least 2 frames, {dataset.name!r} has {dataset.num_frames}")
 

@@ -4,7 +4,6 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import capstone, ekf, lie
-from visla_edu.smoother import _factors
 from visla_edu.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, project_with,
                                       random_pose, rig, rotation_transposed, stereo_camera, wrong_inverses)
@@ -98,7 +97,7 @@ def check_project(project, hidden=False):
     ``world_T_imu`` used without its inverse, ``imu_T_cam`` for ``cam_T_imu``, a division by
     ``q4`` and a transposed rotation. Hides ``StereoCamera.predict``, ``predict_with_jacobians``
     and ``points_in_camera``, and the same computation in ``capstone.library_parts()`` and
-    ``smoother.reprojection``.
+    ``camera.stereo_projection`` / ``camera.project_points`` (the smoother's reprojection).
 
     Parameters
     ----------
@@ -125,7 +124,8 @@ def check_project(project, hidden=False):
     generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(project, name, hide=[cam.StereoCamera.predict, cam.StereoCamera.predict_with_jacobians,
-                                        cam.StereoCamera.points_in_camera, capstone._project, _factors.reprojection])
+                                        cam.StereoCamera.points_in_camera, capstone._project, cam.stereo_projection,
+                                        cam.project_points])
     for trial in range(6 if hidden else 4):
         world_T_imu = np.eye(4) if trial == 0 else random_pose(generator)
         M = 1 if hidden and trial == 1 else 12

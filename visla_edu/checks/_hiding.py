@@ -145,8 +145,12 @@ def _visla_modules(include_checks=True):
 
 
 def _functions_of(module):
-    """``(short name, function)`` for the functions and methods defined in ``module``'s namespace."""
-    short = module.__name__.removeprefix("visla_edu.")
+    """``(short name, function)`` for the functions and methods defined in ``module``'s namespace.
+
+    The short name leaves out ``visla_edu`` and private module names, as :func:`label` does
+    (``camera.StereoCamera.predict``, whether found in ``visla_edu.camera`` or ``visla_edu.camera._rig``).
+    """
+    short = ".".join(part for part in module.__name__.split(".")[1:] if not part.startswith("_")) or module.__name__
     for attr, value in list(vars(module).items()):
         if isinstance(value, types.FunctionType):
             yield f"{short}.{attr}", value

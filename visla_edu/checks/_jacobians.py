@@ -4,7 +4,6 @@ import numpy as np
 
 from visla_edu import camera as cam
 from visla_edu import capstone, lie, numdiff
-from visla_edu.smoother import _factors
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
 from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, random_pose,
                                       rotation_transposed, stereo_camera, wrong_inverses)
@@ -247,7 +246,8 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
     ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point or with the
     wrong sign of its hat block, ``dpi/dq`` left out (or replaced by ``1/q3``), and transposed
     rotations. Hides ``StereoCamera.jacobian_pose`` and ``StereoCamera.predict_with_jacobians``,
-    and the same computation in ``capstone.library_parts()`` and ``smoother.reprojection``.
+    and the same computation in ``capstone.library_parts()`` and ``camera.stereo_projection`` /
+    ``camera.project_points``.
 
     Parameters
     ----------
@@ -275,7 +275,8 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
     generator, camera = rng(hidden), stereo_camera(hidden)
     imu_T_cam = camera.imu_T_cam
     call = student(pose_jacobian, name, hide=[cam.StereoCamera.jacobian_pose, cam.StereoCamera.predict_with_jacobians,
-                                              capstone._pose_jacobian, _factors.reprojection])
+                                              capstone._pose_jacobian, cam.stereo_projection,
+                                              cam.project_points])
     for trial in range(6 if hidden else 4):
         mu = np.eye(4) if trial == 0 else random_pose(generator)
         m = points_in_view(generator, mu, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
@@ -319,7 +320,7 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     ``world_T_imu`` without its inverse, a missing ``Ks``, a flipped sign, ``dpi/dq`` left out
     (or replaced by ``1/q3``) and transposed rotations. Hides ``StereoCamera.jacobian_landmark``
     and ``StereoCamera.predict_with_jacobians``, and the same computation in
-    ``capstone.library_parts()`` and ``smoother.reprojection``.
+    ``capstone.library_parts()`` and ``camera.stereo_projection`` / ``camera.project_points``.
 
     Parameters
     ----------
@@ -347,7 +348,8 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     imu_T_cam = camera.imu_T_cam
     call = student(landmark_jacobian, name, hide=[cam.StereoCamera.jacobian_landmark,
                                                   cam.StereoCamera.predict_with_jacobians,
-                                                  capstone._landmark_jacobian, _factors.reprojection])
+                                                  capstone._landmark_jacobian, cam.stereo_projection,
+                                                  cam.project_points])
     for trial in range(6 if hidden else 4):
         T = np.eye(4) if trial == 0 else random_pose(generator)
         m = points_in_view(generator, T, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]

@@ -129,13 +129,6 @@ def _check_tiny_rotation(name, R, w):
         raise _tiny_angle_failure(name, t, error)
 
 
-def _se3_jacobians():
-    """The smoother's SE(3) Jacobians: the left-Jacobian block of one is the V of ``se3_exp``."""
-    from visla_edu.smoother import _se3
-
-    return [_se3.se3_right_jacobian, _se3.se3_right_jacobian_inv]
-
-
 @exercise_check
 def check_so3_exp(so3_exp, hidden=False):
     """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
@@ -238,8 +231,8 @@ def check_se3_exp(se3_exp, hidden=False):
     the inverse pose, the translation ``v`` instead of ``V v`` or ``V^T v``, a transposed rotation
     block, NaN near 0 and a result that is not a pose.
 
-    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the smoother's SE(3) right
-    Jacobian and its inverse and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
+    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the SE(3) right Jacobian and its
+    inverse and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
 
     Parameters
     ----------
@@ -264,7 +257,7 @@ def check_se3_exp(se3_exp, hidden=False):
     name = "se3_exp"
     generator = rng(hidden)
     call = student(se3_exp, name, hide=[lie.se3_exp, lie._theta_minus_sin_over_theta3,
-                                         *_se3_jacobians(), scipy.linalg.expm])
+                                         lie.se3_right_jacobian, lie.se3_right_jacobian_inv, scipy.linalg.expm])
     for u in twists(generator, hidden):
         got = as_array(call(u), name, (4, 4))
         ref = lie.se3_exp(u)

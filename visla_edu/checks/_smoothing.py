@@ -9,7 +9,7 @@ import numpy as np
 from visla_edu import lie, numdiff
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.checks._inputs import random_pose, swap_twist
-from visla_edu.smoother import _factors, _se3
+from visla_edu.smoother import motion_residuals
 
 __all__ = ["check_motion_residual", "check_schur_reduce", "check_gauss_newton_step",
            "reference_motion_residual", "reference_schur_reduce", "reference_gauss_newton_step"]
@@ -35,9 +35,9 @@ def reference_motion_residual(world_T_prev, world_T_next, step_inv):
     J_prev, J_next : ndarray, shape (6, 6)
         Its Jacobians with respect to the right perturbations of the two poses:
         ``J_next = J_r(e)^-1`` and ``J_prev = -J_r(e)^-1 Ad(T_next^-1 T_prev)``
-        (:func:`visla_edu.smoother._factors.motion_residuals`).
+        (:func:`visla_edu.smoother.motion_residuals`).
     """
-    e, J_prev, J_next = _factors.motion_residuals(np.stack([world_T_prev, world_T_next]), step_inv[None])
+    e, J_prev, J_next = motion_residuals(np.stack([world_T_prev, world_T_next]), step_inv[None])
     return e[0], J_prev[0], J_next[0]
 
 
@@ -56,7 +56,7 @@ def _motion_cases(generator, hidden):
 def _motion_variants(T_prev, T_next, step_inv):
     """Deliberate mistakes of each output: ``(e variants, J_prev variants, J_next variants)``."""
     e, J_prev, J_next = reference_motion_residual(T_prev, T_next, step_inv)
-    Jinv, Ad = _se3.se3_right_jacobian_inv(e), lie.adjoint(lie.se3_inv(T_next) @ T_prev)
+    Jinv, Ad = lie.se3_right_jacobian_inv(e), lie.adjoint(lie.se3_inv(T_next) @ T_prev)
     e_variants = [
         ("the residual has the wrong sign: e = log(exp(-tau u^) T_t^-1 T_t+1)", lambda: -e),
         ("the IMU increment exp(-tau u^) is missing from the residual",
@@ -67,9 +67,9 @@ def _motion_variants(T_prev, T_next, step_inv):
     ]
     next_variants = [
         ("J_next is missing J_r(e)^-1\nperturbing T_t+1 by exp(b^) moves e by J_r(e)^-1 b", lambda: np.eye(6)),
-        ("J_next uses J_r(e), not its inverse J_r(e)^-1", lambda: _se3.se3_right_jacobian(e)),
+        ("J_next uses J_r(e), not its inverse J_r(e)^-1", lambda: lie.se3_right_jacobian(e)),
         ("J_next uses the left Jacobian J_r(-e)^-1; use J_r(e)^-1",
-         lambda: _se3.se3_right_jacobian_inv(-e)),
+         lambda: lie.se3_right_jacobian_inv(-e)),
     ]
     prev_variants = [
         ("J_prev is missing the adjoint Ad(T_t+1^-1 T_t)", lambda: -Jinv),
@@ -117,7 +117,7 @@ def check_motion_residual(motion_residual, hidden=False):
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
     name = "motion_residual"
-    call = student(motion_residual, name, hide=[_factors.motion_residuals, reference_motion_residual,
+    call = student(motion_residual, name, hide=[motion_residuals, reference_motion_residual,
                                                              numdiff.central_jacobian])
     for T_prev, T_next, step_inv in _motion_cases(rng(hidden), hidden):
         out = call(T_prev, T_next, step_inv)

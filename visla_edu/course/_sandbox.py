@@ -33,13 +33,15 @@ import types
 
 from visla_edu.checks._hiding import LibraryFunctionHidden, label
 
-__all__ = ["ALLOWED_MODULES", "ALLOWED_NAMES", "HIDDEN_CALLS", "SubmissionUsedLibrary", "is_hidden", "hide_library",
+__all__ = ["ALLOWED_MODULES", "ALLOWED_PACKAGES", "ALLOWED_NAMES", "HIDDEN_CALLS", "SubmissionUsedLibrary", "is_hidden", "hide_library",
            "block_imports", "scan_source"]
 
 #: visla_edu modules a submission may use while it is graded.
 ALLOWED_MODULES = ("visla_edu", "visla_edu.lie", "visla_edu.camera", "visla_edu.dataset", "visla_edu.codes",
                    "visla_edu.metrics", "visla_edu.numdiff", "visla_edu.kalman", "visla_edu.filters",
                    "visla_edu.filters._config", "visla_edu.settings")
+#: Packages whose every submodule a submission may use (the camera model is a package).
+ALLOWED_PACKAGES = ("visla_edu.camera",)
 #: Names a submission may use from otherwise hidden modules (the interface's types).
 ALLOWED_NAMES = {"visla_edu.filters._base": ("StepRecord", "FilterDivergedError", "MIN_DEPTH", "MAX_DISTANCE")}
 #: The names of the ``visla_edu.filters`` package a submission may import (the rest are its filters).
@@ -85,7 +87,8 @@ def is_hidden(module_name):
         A dotted module name, e.g. ``"visla_edu.filters._slam"``.
     """
     inside = module_name == "visla_edu" or module_name.startswith("visla_edu.")
-    return inside and module_name not in ALLOWED_MODULES + GRADER_MODULES
+    in_package = any(module_name.startswith(package + ".") for package in ALLOWED_PACKAGES)
+    return inside and not in_package and module_name not in ALLOWED_MODULES + GRADER_MODULES
 
 
 def _stub_code(fn, name):

@@ -14,8 +14,8 @@ Course files are never copied into the project: point ``VISLA_EDU_DATA`` at them
     >>> ds.ground_truth.num_frames          # the KITTI pose files are in the data dir
     1101
 
-The two course formats
-----------------------
+The two npz course formats (2019-2024)
+--------------------------------------
 Both store ``time_stamps`` (1, T), ``features`` (4, M, T) with ``[uL, vL, uR, vR]``
 pixels (all four -1 where landmark i is not seen at frame t), ``linear_velocity``
 (3, T), ``K`` (3, 3) and ``b`` (). The 2021+ format adds ``angular_velocity`` (3, T)
@@ -24,6 +24,15 @@ and ``cam_T_imu`` (4, 4), the inverse transform. :func:`load` converts both to t
 time-major :class:`~visla_edu.dataset.Dataset` once, and keeps the features sparse:
 the dense array is streamed from the file in chunks of landmark rows (dataset 10's
 is 1.3 GB), never held in memory as a whole.
+
+The 2025+ format
+----------------
+The current edition ships ``datasetNN/datasetNN.npy``: ``np.save`` of a dict with ``timestamps``
+(T,), ``v_t`` and ``w_t`` (T, 3) or (3, T), ``features`` (4, M, T) or None (a dataset of images),
+the two intrinsics ``K_l``, ``K_r`` and the two extrinsics ``extL_T_imu``, ``extR_T_imu``, whose
+direction and camera frame the data decide (:func:`load_course2025`, module ``_format2025``; read
+without unpickling anything but plain arrays, module ``_pickle``). :func:`save_course2025` writes
+a drive in it (module ``_save2025``).
 
 When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
 dataset 10's real IMU drive with simulated stereo tracks. :func:`course_standin10` builds
@@ -50,7 +59,8 @@ one ``.npz`` reader: course files to Datasets, named arrays of any archive), ``_
 (the dataset-10 stand-in), ``_load`` (:func:`load`), ``_save`` (:func:`save`), ``_summary``
 (:func:`summarize`, :func:`format_summary`), ``_groundtruth`` (KITTI ground truth), ``_zip`` (zip
 members and ``.npy`` headers, read before any data), ``_plausible`` (plausible ranges,
-:func:`dataset_problems`).
+:func:`dataset_problems`), ``_pickle`` (the restricted unpickler of the 2025+ files),
+``_format2025`` (:func:`load_course2025`), ``_save2025`` (:func:`save_course2025`).
 """
 
 from visla_edu.data._format import (
@@ -61,6 +71,7 @@ from visla_edu.data._format import (
     RIGID_TOL,
     TEXT_KEYS,
 )
+from visla_edu.data._format2025 import FORMAT_2025, KEYS_2025, NO_FEATURES, READING_ORDER, load_course2025
 from visla_edu.data._groundtruth import (
     TIME_TOLERANCE,
     attach_ground_truth,
@@ -75,6 +86,7 @@ from visla_edu.data._load import input_files, load
 from visla_edu.data._plausible import calibration_problems, dataset_problems, magnitude
 from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir, ground_truth_files
 from visla_edu.data._save import save
+from visla_edu.data._save2025 import VELOCITY_LAYOUTS, save_course2025
 from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, course_standin10, standin_dataset10
 from visla_edu.data._summary import format_summary, summarize
 from visla_edu.dataset import repeated_frames
@@ -83,7 +95,12 @@ __all__ = [
     "ENV_VAR",
     "FORMAT_2021",
     "FORMAT_2019",
+    "FORMAT_2025",
     "FORMAT_KEYS",
+    "KEYS_2025",
+    "READING_ORDER",
+    "NO_FEATURES",
+    "VELOCITY_LAYOUTS",
     "REGISTRY",
     "SIMULATED",
     "GROUND_TRUTH_KEYS",
@@ -93,11 +110,13 @@ __all__ = [
     "STANDIN_NUM_LANDMARKS",
     "data_dir",
     "load",
+    "load_course2025",
     "input_files",
     "dataset_problems",
     "calibration_problems",
     "magnitude",
     "save",
+    "save_course2025",
     "available",
     "repeated_frames",
     "standin_dataset10",

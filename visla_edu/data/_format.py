@@ -167,7 +167,7 @@ def check_course_arrays(arrays, fmt, path):
     return T
 
 
-def check_features_header(header, T, path):
+def check_features_header(header, T, path, stamps_key="time_stamps"):
     """Shape ``(4, M, T)``, a dtype that can hold -1 and pixels, and a bounded size; return M.
 
     Parameters
@@ -178,6 +178,8 @@ def check_features_header(header, T, path):
         Frames, from ``time_stamps``.
     path : pathlib.Path or str
         The file, for messages.
+    stamps_key : str
+        The key T comes from, for messages.
 
     Returns
     -------
@@ -196,7 +198,7 @@ def check_features_header(header, T, path):
         swapped = len(shape) == 3 and shape[0] == 4 and shape[1] == T
         hint = (f"; its landmark and frame axes look swapped ((4, T, M) = {shape}): store it as (4, M, T), "
                 "e.g. features.transpose(0, 2, 1)") if swapped else ""
-        raise ValueError(f"{path}: key 'features' expected shape (4, M, T) with T = {T} from time_stamps, "
+        raise ValueError(f"{path}: key 'features' expected shape (4, M, T) with T = {T} from {stamps_key}, "
                          f"got {shape}{hint}")
     if dtype.kind in "ub":
         raise ValueError(f"{path}: key 'features' has dtype {dtype}, which cannot hold -1, the course's marker "
@@ -291,7 +293,7 @@ def check_finite(arr, key, path):
         raise ValueError(f"{path}: key '{key}' has a non-finite value {arr[index]} at index {index}")
 
 
-def check_increasing(stamps, path):
+def check_increasing(stamps, path, key="time_stamps", index="[0, {}]"):
     """``stamps`` (T,) strictly increasing; indices are reported as in the file's (1, T) key.
 
     Parameters
@@ -299,6 +301,10 @@ def check_increasing(stamps, path):
     stamps : ndarray, shape (T,)
         ``time_stamps[0]``.
     path : pathlib.Path or str
+    key : str
+        The key of the stamps in the file, for the message.
+    index : str
+        How an entry ``i`` is written after the key (``"[0, {}]"``: the (1, T) layout).
 
     Raises
     ------
@@ -309,12 +315,12 @@ def check_increasing(stamps, path):
     if bad.size:
         i = int(bad[0])
         raise ValueError(
-            f"{path}: key 'time_stamps' must be strictly increasing, but time_stamps[0, {i + 1}] = "
-            f"{float(stamps[i + 1])!r} is not after time_stamps[0, {i}] = {float(stamps[i])!r}"
+            f"{path}: key '{key}' must be strictly increasing, but {key}{index.format(i + 1)} = "
+            f"{float(stamps[i + 1])!r} is not after {key}{index.format(i)} = {float(stamps[i])!r}"
         )
 
 
-def check_intrinsics(K, path):
+def check_intrinsics(K, path, key="K"):
     """``K`` (3, 3) is ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths.
 
     A skew ``K[0, 1] != 0`` is refused: the stereo model (:func:`visla_edu.camera.stereo_matrix`)
@@ -324,6 +330,8 @@ def check_intrinsics(K, path):
     ----------
     K : ndarray, shape (3, 3)
     path : pathlib.Path or str
+    key : str
+        Its key in the file, for the message.
 
     Raises
     ------
@@ -334,16 +342,16 @@ def check_intrinsics(K, path):
     lower = K[np.tril_indices(3, -1)]
     if np.any(lower != 0) or K[2, 2] != 1:
         raise ValueError(
-            f"{path}: key 'K' must be upper triangular with K[2, 2] = 1 "
+            f"{path}: key '{key}' must be upper triangular with K[2, 2] = 1 "
             f"([[fsu, s, cu], [0, fsv, cv], [0, 0, 1]]), got {K.tolist()}"
         )
     if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"{path}: key 'K' needs positive focal lengths, got fsu = {K[0, 0]}, fsv = {K[1, 1]}")
+        raise ValueError(f"{path}: key '{key}' needs positive focal lengths, got fsu = {K[0, 0]}, fsv = {K[1, 1]}")
     if K[0, 1] != 0:
         raise ValueError(
-            f"{path}: key 'K' has a skew K[0, 1] = {float(K[0, 1])!r}, but the stereo camera model has none "
+            f"{path}: key '{key}' has a skew {key}[0, 1] = {float(K[0, 1])!r}, but the stereo camera model has none "
             "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]; rectified stereo images have zero skew), so it would "
-            "be ignored. Rectify the images, or set K[0, 1] = 0 if the skew is a rounding artefact")
+            f"be ignored. Rectify the images, or set {key}[0, 1] = 0 if the skew is a rounding artefact")
 
 
 def check_baseline(b, path):

@@ -4,10 +4,11 @@ import os
 from pathlib import Path
 
 from visla_edu._files import expand_user, file_kind
+from visla_edu.data._format2025 import load_course2025
 from visla_edu.data._groundtruth import attach_registered_ground_truth
 from visla_edu.data._npz import load_npz
-from visla_edu.data._registry import (COURSE_NAMES, ENV_VAR, REGISTRY, SIMULATED, STANDIN_INPUTS, ground_truth_files,
-                                      resolve_dir)
+from visla_edu.data._registry import (COURSE2025_NAME, COURSE_NAMES, ENV_VAR, REGISTRY, SIMULATED, STANDIN_INPUTS,
+                                      course2025_files, ground_truth_files, resolve_dir)
 from visla_edu.data._standin import load_dataset10
 
 __all__ = ["load", "input_files"]
@@ -19,9 +20,12 @@ def load(name_or_path, data_dir=None):
     Parameters
     ----------
     name_or_path : str or os.PathLike
-        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"10"``: the file ``<data dir>/<name>.npz``),
-        ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated with seed 0), or a path to
-        an ``.npz`` file in either course format or written by :func:`~visla_edu.data.save`.
+        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"10"``: the file ``<data dir>/<name>.npz``;
+        ``"datasetNN"``: the 2025+ file ``<data dir>/datasetNN/datasetNN.npy``, else
+        ``<data dir>/datasetNN.npy``), ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated
+        with seed 0), or a path to an ``.npz`` file in either 2019-2024 course format or written
+        by :func:`~visla_edu.data.save`, or to a 2025+ ``.npy`` file
+        (:func:`~visla_edu.data.load_course2025`).
         ``"10"`` falls back to a stand-in when ``10.npz`` is absent: simulated stereo
         tracks on dataset 10's real IMU drive (``10_imu_only.npz`` + ``03.npz``'s rig).
     data_dir : str or os.PathLike, optional
@@ -48,7 +52,7 @@ def load(name_or_path, data_dir=None):
         ``name_or_path`` is neither a string nor a path.
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
-        return attach_registered_ground_truth(load_npz(_find_file(name_or_path, data_dir)))
+        return _load_file(_find_file(name_or_path, data_dir))
     name = _check_name(name_or_path)
     if name in SIMULATED:
         from visla_edu import simulate  # lazy: simulation is optional for loading files
@@ -58,9 +62,21 @@ def load(name_or_path, data_dir=None):
     _check_data_dir(directory, how)
     if name == "10":
         return load_dataset10(directory, how)
+    if COURSE2025_NAME.match(name):
+        found = [p for p in course2025_files(name, directory) if os.path.lexists(p)]
+        if not found:
+            raise FileNotFoundError(_not_found_message(f"{name}/{name}.npy (or {name}.npy)", directory, how))
+        return load_course2025(found[0])
     path = directory / f"{name}.npz"
     if not os.path.lexists(path):
         raise FileNotFoundError(_not_found_message(f"{name}.npz", directory, how))
+    return attach_registered_ground_truth(load_npz(path))
+
+
+def _load_file(path):
+    """A course file by its suffix: ``.npy`` the 2025+ format, anything else an ``.npz``."""
+    if path.suffix.lower() == ".npy":
+        return load_course2025(path)
     return attach_registered_ground_truth(load_npz(path))
 
 
@@ -74,7 +90,8 @@ def input_files(name_or_path, data_dir=None):
     name_or_path : str or os.PathLike
         As in :func:`load`. A relative path counts both as given and under the data
         directory; a course name gives ``<data dir>/<name>.npz`` (and for ``"10"`` the
-        stand-in's inputs, ``10_imu_only.npz`` and ``03.npz``); anything else gives no files.
+        stand-in's inputs, ``10_imu_only.npz`` and ``03.npz``; for ``"datasetNN"`` both places of
+        its ``.npy``); anything else gives no files.
     data_dir : str or os.PathLike, optional
         Folder of the course files, see :func:`~visla_edu.data.data_dir`.
 
@@ -92,6 +109,8 @@ def input_files(name_or_path, data_dir=None):
         directory = resolve_dir(data_dir)[0]
         name = name_or_path.strip()
         candidates = [directory / f"{name}.npz"] + ([directory / f for f in STANDIN_INPUTS] if name == "10" else [])
+    elif isinstance(name_or_path, str) and COURSE2025_NAME.match(name_or_path.strip()):
+        candidates = course2025_files(name_or_path.strip(), resolve_dir(data_dir)[0])
     else:
         candidates = []
     files = [c for c in candidates if c.exists()]
@@ -114,19 +133,19 @@ def _registered_ground_truth_beside(npz):
 
 
 def _looks_like_path(value):
-    return isinstance(value, str) and (value.endswith(".npz") or "/" in value or os.sep in value)
+    return isinstance(value, str) and (value.endswith((".npz", ".npy")) or "/" in value or os.sep in value)
 
 
 def _check_name(value):
     if not isinstance(value, str):
         raise TypeError(f"load: expected a dataset name or a path, got {type(value).__name__} {value!r}")
     if not value.strip():
-        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '0020', '10' or 'sim'")
+        raise ValueError("load: empty dataset name; use e.g. '03', '0022', '0020', '10', 'dataset01' or 'sim'")
     return value.strip()
 
 
 def _not_found_message(filename, directory, how):
-    known = ", ".join(repr(n) for n in (*COURSE_NAMES, *SIMULATED))
+    known = ", ".join(repr(n) for n in (*COURSE_NAMES, *SIMULATED)) + ", 'datasetNN' (2025+ files)"
     here = (f" A file {filename} is in the current folder: give it as a path, ./{filename}."
             if Path(filename).is_file() else "")
     return (

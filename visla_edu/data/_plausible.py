@@ -37,6 +37,8 @@ silently turn into a garbage map, and names the others when a run diverges).
 
 import numpy as np
 
+from visla_edu.camera import right_in_left_pixels
+
 __all__ = [
     "FOCAL_RANGE",
     "ASPECT_RANGE",
@@ -89,7 +91,7 @@ _TIME_UNITS = ((1e-3, "milliseconds", "/ 1e3"), (1e-6, "microseconds", "/ 1e6"),
                (60.0, "minutes", "* 60"), (3600.0, "hours", "* 3600"))
 
 
-def check_time_stamps(stamps, path):
+def check_time_stamps(stamps, path, key="time_stamps", index="[0, {}]"):
     """Seconds, at a camera's frame rate, without long gaps (``stamps`` (T,), increasing).
 
     The median step must lie in :data:`FRAME_STEP_RANGE` (else the stamps are probably in
@@ -101,6 +103,8 @@ def check_time_stamps(stamps, path):
     stamps : ndarray, shape (T,)
     path : pathlib.Path or str
         The file (or dataset name), for messages.
+    key, index : str
+        The stamps' key in the file and how its entry ``i`` is written (the (1, T) layout by default).
 
     Raises
     ------
@@ -118,16 +122,16 @@ def check_time_stamps(stamps, path):
         fits = [(unit, name, fix) for unit, name, fix in _TIME_UNITS if low <= median * unit <= high]
         guess = min(fits, key=lambda f: abs(np.log10(median * f[0] / _TYPICAL_STEP)), default=None)
         hint = (f"; they look like {guess[1]} ({median * guess[0]:.4g} s per frame): store seconds, "
-                f"time_stamps {guess[2]}") if guess else "; store the time stamps in seconds"
-        raise ValueError(f"{path}: key 'time_stamps': the median step between frames is {median:.6g}, but a camera "
+                f"{key} {guess[2]}") if guess else "; store the time stamps in seconds"
+        raise ValueError(f"{path}: key '{key}': the median step between frames is {median:.6g}, but a camera "
                          f"frame comes every {low:g} to {high:g} s{hint}")
     limit = max(MAX_GAP_SECONDS, MAX_GAP_STEPS * median)
     gaps = np.flatnonzero(steps > limit)
     if gaps.size:
         i = int(gaps[0])
         raise ValueError(
-            f"{path}: key 'time_stamps' has a gap of {steps[i]:.6g} s between frames {i} and {i + 1} "
-            f"(time_stamps[0, {i}] = {float(stamps[i])!r}, time_stamps[0, {i + 1}] = {float(stamps[i + 1])!r}; "
+            f"{path}: key '{key}' has a gap of {steps[i]:.6g} s between frames {i} and {i + 1} "
+            f"({key}{index.format(i)} = {float(stamps[i])!r}, {key}{index.format(i + 1)} = {float(stamps[i + 1])!r}; "
             f"the median step "
             f"is {median:.4g} s, the most allowed {limit:.4g} s): dead reckoning would carry one velocity sample "
             f"across it. Split the drive at frame {i + 1}, or fix the stamp")
@@ -216,7 +220,7 @@ def magnitude(vectors):
     return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
 
 
-def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
+def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam", K_key="K", b_key="b"):
     """Focal lengths, aspect, principal point, baseline and extrinsic translation in their plausible ranges.
 
     ``K`` (3, 3) must already be ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal
@@ -231,7 +235,8 @@ def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
     path : pathlib.Path or str
     pose : ndarray, shape (4, 4), optional
         The extrinsics (``imu_T_cam`` or ``cam_T_imu``).
-    pose_key : str
+    pose_key, K_key, b_key : str
+        The keys of the extrinsics, the intrinsics and the baseline in the file, for messages.
 
     Raises
     ------
@@ -245,18 +250,18 @@ def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam"):
     fsu, fsv, cu, cv = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     for name, value in (("fsu = K[0, 0]", fsu), ("fsv = K[1, 1]", fsv)):
         if not FOCAL_RANGE[0] <= value <= FOCAL_RANGE[1]:
-            raise ValueError(f"{path}: key 'K': focal length {name} = {value:.6g} px is implausible; a camera's "
+            raise ValueError(f"{path}: key '{K_key}': focal length {name} = {value:.6g} px is implausible; a camera's "
                              f"focal length is {FOCAL_RANGE[0]:g} to {FOCAL_RANGE[1]:g} px ((W/2) / tan(FOV/2) for "
                              "images 100 to 20,000 px wide and fields of view 5 to 170 deg). Is it in mm or "
                              "metres instead of pixels?")
     if not ASPECT_RANGE[0] <= fsv / fsu <= ASPECT_RANGE[1]:
-        raise ValueError(f"{path}: key 'K': fsv / fsu = {fsv / fsu:.4g} is implausible (pixels are close to square: "
-                         f"{ASPECT_RANGE[0]:g} to {ASPECT_RANGE[1]:g}); are two entries of K swapped?")
+        raise ValueError(f"{path}: key '{K_key}': fsv / fsu = {fsv / fsu:.4g} is implausible (pixels are close to "
+                         f"square: {ASPECT_RANGE[0]:g} to {ASPECT_RANGE[1]:g}); are two entries of K swapped?")
     for name, value in (("cu = K[0, 2]", cu), ("cv = K[1, 2]", cv)):
         if not PRINCIPAL_POINT_RANGE[0] < value <= PRINCIPAL_POINT_RANGE[1]:
-            raise ValueError(f"{path}: key 'K': principal point {name} = {value:.6g} px is outside any image (it "
+            raise ValueError(f"{path}: key '{K_key}': principal point {name} = {value:.6g} px is outside any image (it "
                              f"lies near the image centre, above 0 and at most {PRINCIPAL_POINT_RANGE[1]:g} px)")
-    _check_length(b, BASELINE_RANGE, "b", "the stereo baseline", "(from a phone's stereo pair to a rig across a "
+    _check_length(b, BASELINE_RANGE, b_key, "the stereo baseline", "(from a phone's stereo pair to a rig across a "
                   "truck)", path)
     if pose is None:
         return
@@ -274,7 +279,7 @@ def _check_length(value, plausible, key, what, why, path):
                      f"{why}.{mm}")
 
 
-def check_observations(K, obs_z, path):
+def check_observations(K, obs_z, path, K_right=None, K_key="K"):
     """The observed pixels fit the intrinsics: principal point among them, angles below :data:`MAX_OFF_AXIS_DEG`.
 
     Parameters
@@ -283,10 +288,16 @@ def check_observations(K, obs_z, path):
     obs_z : ndarray, shape (N, 4)
         ``[uL, vL, uR, vR]`` of every observation.
     path : pathlib.Path or str
+    K_right : ndarray, shape (3, 3), optional
+        The right camera's intrinsics when they differ from ``K``: the right pixels are checked in
+        the left camera's (:func:`visla_edu.camera.right_in_left_pixels`).
+    K_key : str
+        The key of ``K`` in the file, for messages.
     """
     if len(obs_z) == 0:
         return
     _check_marker(obs_z, path)
+    obs_z = right_in_left_pixels(obs_z, K, K_right)
     _check_disparity_sign(obs_z, path)
     f = np.array([K[0, 0], K[1, 1]])
     c = np.array([K[0, 2], K[1, 2]])
@@ -296,7 +307,7 @@ def check_observations(K, obs_z, path):
     for axis, name in enumerate(("u (cu, fsu)", "v (cv, fsv)")):
         if angle[axis] > MAX_OFF_AXIS_DEG:
             raise ValueError(
-                f"{path}: key 'K': observed pixels lie up to {np.max(np.abs(pixels[:, axis] - c[axis])):.6g} px "
+                f"{path}: key '{K_key}': observed pixels lie up to {np.max(np.abs(pixels[:, axis] - c[axis])):.6g} px "
                 f"from the principal point along {name}, {angle[axis]:.2f} deg off the optical axis with focal "
                 f"length {f[axis]:.6g} px; a camera sees less than {2 * MAX_OFF_AXIS_DEG:g} deg, so the focal "
                 "length is too small (another unit?) or the principal point is wrong")
@@ -306,7 +317,8 @@ def check_observations(K, obs_z, path):
     for axis, name in enumerate(("cu", "cv")):
         if not low[axis] - margin[axis] <= c[axis] <= high[axis] + margin[axis]:
             raise ValueError(
-                f"{path}: key 'K': the principal point {name} = {c[axis]:.6g} px lies outside the observed pixels "
+                f"{path}: key '{K_key}': the principal point {name} = {c[axis]:.6g} px lies outside the observed "
+                "pixels "
                 f"({low[axis]:.6g} to {high[axis]:.6g} px, {len(obs_z)} observations); it should be near the "
                 "image centre. Are cu and cv swapped, or K from another camera?")
 
@@ -400,8 +412,12 @@ def calibration_problems(dataset):
     list of str
         Empty when the calibration is plausible.
     """
-    return _problems([lambda: check_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
-                                                np.asarray(dataset.imu_T_cam, dtype=float))])
+    checks = [lambda: check_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
+                                        np.asarray(dataset.imu_T_cam, dtype=float))]
+    if dataset.K_right is not None:
+        checks.append(lambda: check_calibration(np.asarray(dataset.K_right, dtype=float), float(dataset.b),
+                                                dataset.name, K_key="K_r"))
+    return _problems(checks)
 
 
 def dataset_problems(dataset):
@@ -422,7 +438,7 @@ def dataset_problems(dataset):
         lambda: check_time_stamps(np.asarray(dataset.time_stamps, dtype=float), name),
         lambda: check_velocities(np.asarray(dataset.linear_velocity).T, np.asarray(dataset.angular_velocity).T,
                                  ("linear_velocity", "angular_velocity"), name),
-        lambda: check_observations(np.asarray(dataset.K, dtype=float), dataset.obs_z, name),
+        lambda: check_observations(np.asarray(dataset.K, dtype=float), dataset.obs_z, name, dataset.K_right),
     ])
 
 

@@ -5,6 +5,7 @@ The data directory, the names :func:`~visla_edu.data.load` answers, the known co
 """
 
 import os
+import re
 from pathlib import Path
 
 from visla_edu._files import expand_user
@@ -15,6 +16,7 @@ __all__ = [
     "REGISTRY",
     "SIMULATED",
     "COURSE_NAMES",
+    "COURSE2025_NAME",
     "STANDIN_INPUTS",
     "data_dir",
     "resolve_dir",
@@ -23,6 +25,7 @@ __all__ = [
     "missing_standin_inputs",
     "identify",
     "ground_truth_files",
+    "course2025_files",
 ]
 
 #: Environment variable naming the folder with the course files.
@@ -79,6 +82,9 @@ REGISTRY = {
 COURSE_NAMES = ("03", "10", "0022", "0020", "0042")
 #: Files the dataset-10 stand-in is built from when ``10.npz`` is absent.
 STANDIN_INPUTS = ("10_imu_only.npz", "03.npz")
+#: Names of the 2025+ course files (``datasetNN``): found as ``<data dir>/datasetNN/datasetNN.npy``
+#: (the course's layout), else ``<data dir>/datasetNN.npy``; none is registered (no known copy).
+COURSE2025_NAME = re.compile(r"^dataset\d+$")
 
 
 def resolve_dir(path=None):
@@ -133,14 +139,37 @@ def available(data_dir=None):
     -------
     list of str
         Course names whose files exist (``"10"`` also when only the stand-in inputs
-        ``10_imu_only.npz`` and ``03.npz`` exist), then ``"sim"``.
+        ``10_imu_only.npz`` and ``03.npz`` exist), the 2025+ files ``datasetNN`` found (either
+        layout of :func:`course2025_files`), then ``"sim"``.
     """
     directory, _ = resolve_dir(data_dir)
     names = []
     for name in COURSE_NAMES:
         if (directory / f"{name}.npz").is_file() or (name == "10" and has_standin_inputs(directory)):
             names.append(name)
-    return names + ["sim"]
+    candidates = [*directory.glob("dataset*/dataset*.npy"), *directory.glob("dataset*.npy")] if directory.is_dir() \
+        else []
+    found = {p.stem for p in candidates if COURSE2025_NAME.match(p.stem) and p in course2025_files(p.stem, directory)
+             and p.is_file()}
+    return names + sorted(found) + ["sim"]
+
+
+def course2025_files(name, directory):
+    """Where a 2025+ course name ``datasetNN`` is looked for, in order (see :data:`COURSE2025_NAME`).
+
+    Parameters
+    ----------
+    name : str
+        ``datasetNN``.
+    directory : pathlib.Path
+        The data directory.
+
+    Returns
+    -------
+    list of pathlib.Path
+        ``[<directory>/datasetNN/datasetNN.npy, <directory>/datasetNN.npy]`` (not checked to exist).
+    """
+    return [directory / name / f"{name}.npy", directory / f"{name}.npy"]
 
 
 def missing_standin_inputs(directory):

@@ -4,6 +4,7 @@
 import numpy as np
 
 from visla_edu._files import atomic_write, expand_user
+from visla_edu.camera import same_intrinsics
 from visla_edu.data._format import GROUND_TRUTH_KEYS
 
 __all__ = ["save"]
@@ -13,7 +14,9 @@ def save(dataset, path):
     """Write a dataset as a 2021+ course file (plus ground truth and its name and label).
 
     The ground truth of a simulated drive is written with it; a real drive's KITTI poses
-    (landmarks unknown, possibly fewer frames) are not: load them again from their files.
+    (landmarks unknown, possibly fewer frames) are not: load them again from their files. A
+    drive of a 2025+ file keeps its one reading of the extrinsics (``imu_T_cam``); one with two
+    intrinsics is refused (the format has one ``K``).
 
     Parameters
     ----------
@@ -28,6 +31,9 @@ def save(dataset, path):
     pathlib.Path
         The absolute path written. :func:`~visla_edu.data.load` on it gives back identical arrays.
     """
+    if not same_intrinsics(dataset.K, dataset.K_right):
+        raise ValueError(f"save: {dataset.name} has two intrinsics (K_l != K_r), but the 2021+ format holds one K; "
+                         "write it in the 2025+ format with data.save_course2025")
     path = expand_user(path)
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")

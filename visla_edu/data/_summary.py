@@ -40,7 +40,11 @@ def summarize(dataset):
         (bool), ``ground_truth_frames`` (frames its poses cover, or None),
         ``ground_truth_simulated`` (bool), ``ground_truth_source`` (file, or ``""``),
         ``ground_truth_rows`` (:attr:`~visla_edu.dataset.GroundTruth.rows_text`, ``""`` when the
-        file's rows are all used).
+        file's rows are all used), ``K``, ``K_right`` (nested lists; None for one intrinsics),
+        ``baseline_m``, ``extrinsic_readings`` (for a 2025+ file: name -> ``{"offset",
+        "rotation_deg", "problem"}`` of each reading of its extrinsics, else None),
+        ``extrinsic_reading`` (the loader's reading, or None), ``no_features`` (why a file has no
+        feature tracks, or ``""``), ``ignored_keys`` (keys of a 2025+ file visla-edu does not read).
     """
     ds = dataset
     steps = ds.time_steps
@@ -49,7 +53,7 @@ def summarize(dataset):
     observed = lengths > 0
     spans = ds.track_spans()
     gaps = (spans[:, 1] - spans[:, 0] + 1 != lengths) & observed
-    disparity = ds.obs_z[:, 0] - ds.obs_z[:, 2]
+    disparity = ds.disparity()
     nonpositive = int(np.count_nonzero(disparity <= 0))
     speed = np.linalg.norm(ds.linear_velocity, axis=1)
     return {
@@ -76,6 +80,22 @@ def summarize(dataset):
         "speed_m_s": _mean_min_max(speed),
         "distance_m": float(np.sum(speed[:-1] * steps)),
         **_ground_truth_facts(ds.ground_truth),
+        **_rig_facts(ds),
+    }
+
+
+def _rig_facts(ds):
+    readings = ds.extrinsic_readings
+    return {
+        "K": np.asarray(ds.K, dtype=float).tolist(),
+        "K_right": None if ds.K_right is None else np.asarray(ds.K_right, dtype=float).tolist(),
+        "baseline_m": float(ds.b),
+        "extrinsic_readings": None if not readings else {
+            r.name: {"offset": [float(x) for x in r.offset], "rotation_deg": float(np.degrees(r.rotation)),
+                     "problem": r.problem} for r in readings},
+        "extrinsic_reading": ds.extra.get("extrinsic_reading"),
+        "no_features": ds.extra.get("no_features", ""),
+        "ignored_keys": list(ds.extra.get("ignored_keys", [])),
     }
 
 
@@ -113,9 +133,38 @@ def format_summary(dataset):
     """
     s = summarize(dataset)
     lines = [f"{s['name']}: {s['label']}" if s["label"] else s["name"], f"  source        {_shorten(s['source'])}"]
-    lines += _time_lines(s) + _observation_lines(s) + _track_lines(s) + _disparity_lines(s)
+    lines += _rig_lines(s) + _time_lines(s) + _observation_lines(s) + _track_lines(s) + _disparity_lines(s)
     lines += _motion_lines(s)
     return "\n".join(lines)
+
+
+def _intrinsics_text(K):
+    return f"fsu {K[0][0]:.2f}, fsv {K[1][1]:.2f}, cu {K[0][2]:.2f}, cv {K[1][2]:.2f} px"
+
+
+def _rig_lines(s):
+    """Both intrinsics, the baseline and the readings of the extrinsics: for a file that gives two cameras (2025+)."""
+    if s["K_right"] is None and s["extrinsic_readings"] is None:
+        return []
+    same = s["K_right"] is None or s["K_right"] == s["K"]
+    lines = [f"  rig           left  K_l {_intrinsics_text(s['K'])}",
+             f"                right K_r {_intrinsics_text(s['K_right'] or s['K'])}"
+             + (" (the same as K_l)" if same else " (differs from K_l: each image is modelled with its own)"),
+             f"                baseline {s['baseline_m']:.4f} m (the distance between the two cameras of extL_T_imu, "
+             "extR_T_imu)"]
+    if s["extrinsic_readings"]:
+        lines.append("  extrinsics    the right camera in the left camera frame (m) under each reading of extL_T_imu, "
+                     "extR_T_imu:")
+        for name, g in s["extrinsic_readings"].items():
+            offset = "[" + ", ".join(f"{x:+.3f}" for x in g["offset"]) + "]"
+            verdict = "a rectified pair" if not g["problem"] else "not rectified"
+            mark = "  <- the loader's" if name == s["extrinsic_reading"] else ""
+            lines.append(f"                {name:22s} {offset}, rotated {g['rotation_deg']:.2f} deg: {verdict}{mark}")
+        lines.append("                the diagnostics decide the reading from the data (the calibration below shows "
+                     "the evidence)")
+    if s["ignored_keys"]:
+        lines.append(f"  ignored keys  {', '.join(s['ignored_keys'])} (not part of the format visla-edu reads)")
+    return lines
 
 
 def _fmt_stats(stats, unit=""):
@@ -146,6 +195,8 @@ def _observation_lines(s):
 
 
 def _track_lines(s):
+    if s["no_features"]:
+        return [f"  tracks        none: {s['no_features']}; dead reckoning only (--mode deadreckon)"]
     if s["track_length_frames"]["max"] is None:
         return ["  tracks        none: no landmark is observed (every feature is -1)"]
     lines = [

@@ -22,10 +22,16 @@ cached per dataset content in the user cache folder. The single checks stay avai
 :func:`check_extrinsics`, :func:`resolve_extrinsics`, :func:`check_time_alignment`,
 :func:`imu_noise_and_bias`, :func:`outlier_indicators`, :func:`diagnose`.
 
+A 2025+ file's extrinsics may be read four ways (camera->IMU or IMU->camera, optical or
+"regular" camera frame): :func:`choose_reading` (module ``_readings``) decides from the rig
+geometry and the same two kinds of evidence, before the axis flips, and the
+:class:`Calibration` keeps its :class:`ReadingEvidence`.
+
 Modules: ``_vo`` (odometry access, corrections, extrinsic check, time alignment), ``_motion``
 (gyro bias, velocity scale), ``_noise`` (white and hold noise), ``_bootstrap`` (cluster
-bootstrap of medians), ``_tracks`` (track reprojection), ``_calibration`` (the decision and the
-cache), ``_report`` (its text), ``_checks`` (the single checks with calibrated defaults).
+bootstrap of medians), ``_tracks`` (track reprojection), ``_readings`` (the reading of a 2025+
+file's extrinsics), ``_calibration`` (the decision and the cache), ``_report`` (its text),
+``_checks`` (the single checks with calibrated defaults).
 """
 
 from visla_edu.diagnostics._calibration import (
@@ -41,6 +47,7 @@ from visla_edu.diagnostics._checks import check_time_alignment, diagnose, imu_no
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR, UNMEASURED_SIGMA_ANGULAR,
                                           UNMEASURED_SIGMA_LINEAR, imu_noise)
+from visla_edu.diagnostics._readings import ReadingEvidence, choose_reading
 from visla_edu.diagnostics._tracks import TrackChoice, TrackEvidence, TrackScorer, track_pairs
 from visla_edu.diagnostics._vo import (
     CORRECTIONS,
@@ -66,12 +73,14 @@ __all__ = [
     "CACHED_ARRAYS",
     "Calibration",
     "VoEvidence",
+    "ReadingEvidence",
     "TrackEvidence",
     "TrackChoice",
     "TrackScorer",
     "VisualOdometry",
     "ExtrinsicCheck",
     "calibrate",
+    "choose_reading",
     "cache_path",
     "visual_odometry",
     "check_extrinsics",

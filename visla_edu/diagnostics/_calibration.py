@@ -22,10 +22,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from visla_edu import cache as user_cache
+from visla_edu.camera import right_in_left_pixels
 from visla_edu.dataset import Dataset, repeated_frames
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR,
                                           UNMEASURED_SIGMA_ANGULAR, UNMEASURED_SIGMA_LINEAR, imu_noise)
+from visla_edu.diagnostics._readings import ReadingEvidence, choose_reading
 from visla_edu.diagnostics._report import calibration_report
 from visla_edu.diagnostics._tracks import NOT_ENOUGH, TrackEvidence, TrackScorer
 from visla_edu.diagnostics._vo import (
@@ -33,6 +35,7 @@ from visla_edu.diagnostics._vo import (
     DISAGREES,
     LAGS,
     check_extrinsics,
+    corrections_of,
     odometry_of,
     time_alignment,
     vo_pairs,
@@ -43,8 +46,9 @@ __all__ = ["CALIBRATION_VERSION", "CACHED_ARRAYS", "VoEvidence", "Calibration", 
 
 #: Bump whenever the diagnostics change what they compute: cached calibrations of older
 #: versions are then ignored.
-CALIBRATION_VERSION = 4
-#: The dataset arrays the cache key is computed from.
+CALIBRATION_VERSION = 5
+#: The dataset arrays the cache key is computed from (with ``K_right`` and the readings' left
+#: cameras, ``extrinsic_readings``, when the dataset has them).
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
                  "obs_ids", "obs_z")
 
@@ -105,9 +109,11 @@ class Calibration:
     Attributes
     ----------
     extrinsic_correction : str
-        Key of :data:`CORRECTIONS` applied to the file's ``imu_T_cam``.
+        Key of :data:`CORRECTIONS` applied to the file's ``imu_T_cam`` (to the chosen reading's,
+        for a file whose extrinsics have several readings).
     imu_T_cam : ndarray, shape (4, 4)
-        The calibration to use, ``CORRECTIONS[extrinsic_correction] @ dataset.imu_T_cam``.
+        The calibration to use, ``CORRECTIONS[extrinsic_correction] @ dataset.imu_T_cam`` (the
+        chosen reading's left camera in place of ``dataset.imu_T_cam``).
     imu_lag : int
         The step ``t -> t+1`` uses the velocity sample ``u[t + imu_lag]``.
     sigma_linear_velocity, sigma_angular_velocity : ndarray, shape (3,)
@@ -128,6 +134,9 @@ class Calibration:
         ``"computed"`` or ``"cache <path>"``.
     version : int
         :data:`CALIBRATION_VERSION` of the code that computed it.
+    reading : ReadingEvidence or None
+        For a file whose extrinsics may be read several ways (``dataset.extrinsic_readings``):
+        the evidence and the reading chosen (:func:`~._readings.choose_reading`); else None.
     """
 
     extrinsic_correction: str
@@ -145,6 +154,7 @@ class Calibration:
     seconds: float = 0.0
     source: str = "computed"
     version: int = CALIBRATION_VERSION
+    reading: ReadingEvidence = None
 
     _ARRAYS = {"imu_T_cam": (4, 4), "sigma_linear_velocity": (3,), "sigma_angular_velocity": (3,),
                "white_noise": (6,), "hold_noise": (6,)}
@@ -156,11 +166,12 @@ class Calibration:
 
     def to_dict(self):
         """JSON-safe dict (arrays as nested lists); :meth:`from_dict` inverts it."""
-        out = {key: value for key, value in asdict(self).items() if key not in ("tracks", "vo", "source")}
+        out = {key: value for key, value in asdict(self).items() if key not in ("tracks", "vo", "source", "reading")}
         for key in self._ARRAYS:
             out[key] = np.asarray(getattr(self, key), dtype=float).tolist()
         out["tracks"] = self.tracks.to_dict()
         out["vo"] = asdict(self.vo)
+        out["reading"] = None if self.reading is None else self.reading.to_dict()
         return out
 
     @classmethod
@@ -174,6 +185,7 @@ class Calibration:
                     raise ValueError(f"{key} must be finite with shape {shape}, got {fields[key].shape}")
             fields["tracks"] = TrackEvidence.from_dict(fields["tracks"])
             fields["vo"] = VoEvidence(**fields["vo"])
+            fields["reading"] = None if fields.get("reading") is None else ReadingEvidence.from_dict(fields["reading"])
             if fields["extrinsic_correction"] not in CORRECTIONS:
                 raise ValueError(f"unknown extrinsic_correction {fields['extrinsic_correction']!r}")
             _check_decisions(fields)
@@ -230,9 +242,10 @@ def outlier_indicators(dataset, epipolar_px=3.0):
     dict
         ``non_positive_disparity`` (uL - uR <= 0), ``epipolar`` (|vL - vR| > epipolar_px),
         and ``vo_rejected`` (share of the tracked points of the valid odometry pairs that are
-        not inliers), each in [0, 1].
+        not inliers), each in [0, 1]; with two intrinsics the right pixels are first mapped
+        into the left camera's (:func:`visla_edu.camera.right_in_left_pixels`).
     """
-    z = dataset.obs_z
+    z = right_in_left_pixels(dataset.obs_z, dataset.K, dataset.K_right)
     n = max(len(z), 1)
     vo = odometry_of(dataset)
     tracked = int(vo.tracked[vo.valid].sum())
@@ -316,15 +329,18 @@ def _compute(dataset):
     """The calibration of ``dataset`` from its data (no cache)."""
     start = time.perf_counter()
     odometry_of(dataset)  # checks the pixels
-    scorer = TrackScorer(dataset)
+    base, reading = dataset.imu_T_cam, None
+    if dataset.extrinsic_readings:
+        chosen, reading = choose_reading(dataset)
+        base = chosen.imu_T_left
+    scorer = TrackScorer(dataset, corrections_of(base))
     correction_choice = scorer.choose_correction()
-    best = correction_choice.best or "none"
-    slope_lag = LAGS[int(np.argmin(scorer.scores[:, list(CORRECTIONS).index(best)]))] if scorer.enough else 0
-    check = check_extrinsics(dataset, slope_lag)
+    slope_lag = scorer.best_lag(correction_choice.best or "none")
+    check = check_extrinsics(dataset, slope_lag, corrections_of(base))
     correction, why_correction = _decide_correction(correction_choice, check)
     lag_choice = scorer.choose_lag(correction)
     lag, why_lag = _decide_lag(lag_choice)
-    imu_T_cam = CORRECTIONS[correction] @ dataset.imu_T_cam
+    imu_T_cam = CORRECTIONS[correction] @ base
     noise = imu_noise(dataset.twists)
     return Calibration(
         extrinsic_correction=correction, imu_T_cam=imu_T_cam, imu_lag=lag,
@@ -335,13 +351,14 @@ def _compute(dataset):
         tracks=scorer.evidence(correction_choice, lag_choice),
         vo=_vo_evidence(dataset, check, slope_lag, imu_T_cam, lag),
         repeated_frames=repeated_frames(dataset), outliers=outlier_indicators(dataset),
-        seconds=time.perf_counter() - start)
+        seconds=time.perf_counter() - start, reading=reading)
 
 
 def cache_path(dataset):
     """The cache file of ``dataset``'s calibration: ``<cache dir>/calibration-<content hash>.json``.
 
-    The hash covers :data:`CACHED_ARRAYS` and :data:`CALIBRATION_VERSION`.
+    The hash covers :data:`CACHED_ARRAYS` (with ``K_right`` and the readings' left cameras when
+    the dataset has them) and :data:`CALIBRATION_VERSION`.
 
     Parameters
     ----------
@@ -359,8 +376,12 @@ def cache_path(dataset):
     ValueError
         The cache folder's name cannot be expanded (:func:`visla_edu.cache.cache_dir`).
     """
-    key = user_cache.content_hash({name: getattr(dataset, name) for name in CACHED_ARRAYS},
-                                  f"visla-edu calibration {CALIBRATION_VERSION}")
+    arrays = {name: getattr(dataset, name) for name in CACHED_ARRAYS}
+    if dataset.K_right is not None:
+        arrays["K_right"] = dataset.K_right
+    if dataset.extrinsic_readings:
+        arrays["extrinsic_readings"] = np.stack([r.imu_T_left for r in dataset.extrinsic_readings])
+    key = user_cache.content_hash(arrays, f"visla-edu calibration {CALIBRATION_VERSION}")
     return user_cache.cache_dir() / f"calibration-{key}.json"
 
 

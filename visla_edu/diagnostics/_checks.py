@@ -30,7 +30,10 @@ def resolve_extrinsics(dataset, correction="auto"):
     evidence : str
         Why a correction was applied; with ``"auto"`` keeping the file's calibration, a
         warning when the odometry contradicts it and every correction of it (an inverted or
-        foreign extrinsic, see :data:`UNEXPLAINED_SLOPE`); empty otherwise.
+        foreign extrinsic, see :data:`UNEXPLAINED_SLOPE`); for a file whose extrinsics have
+        several readings (2025+), first the reading chosen and why (and any warning). Empty
+        otherwise. An explicit ``correction`` applies to ``dataset.imu_T_cam``, the loader's
+        reading.
 
     Raises
     ------
@@ -39,16 +42,29 @@ def resolve_extrinsics(dataset, correction="auto"):
     """
     if correction == "auto":
         calibration = calibrate(dataset)
+        reading = _reading_lines(calibration)
         if calibration.extrinsic_correction == "none":
+            if calibration.reading is not None:
+                warning = _unexplained_extrinsic_warning(calibration)
+                return calibration.imu_T_cam, "\n".join(filter(None, [reading, warning]))
             return dataset.imu_T_cam, _unexplained_extrinsic_warning(calibration)
-        return calibration.imu_T_cam, (
+        return calibration.imu_T_cam, "\n".join(filter(None, [reading, (
             f"applied extrinsic correction {calibration.extrinsic_correction!r} (extrinsic_correction='auto'): "
-            f"{calibration.reasons['extrinsic_correction']}")
+            f"{calibration.reasons['extrinsic_correction']}")]))
     if correction not in CORRECTIONS:
         raise ValueError(f"extrinsic_correction must be 'auto' or one of {list(CORRECTIONS)}, got {correction!r}")
     if correction == "none":
         return dataset.imu_T_cam, ""
     return CORRECTIONS[correction] @ dataset.imu_T_cam, f"applied extrinsic correction {correction!r} as requested"
+
+
+def _reading_lines(calibration):
+    """The reading of a 2025+ file's extrinsics the calibration chose, and its warning (``""`` for other files)."""
+    reading = calibration.reading
+    if reading is None:
+        return ""
+    line = f"extrinsics read as {reading.chosen!r} (extL_T_imu, extR_T_imu): {reading.reason}"
+    return line + (f"\n{reading.warning}" if reading.warning else "")
 
 
 #: Largest |rotation slope| (odometry vs IMU) of every correction below which the extrinsic is

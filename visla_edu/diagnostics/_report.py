@@ -74,6 +74,29 @@ def _vo_lines(vo, repeated):
     return lines
 
 
+def _reading_lines(reading):
+    """The four readings of a 2025+ file's extrinsics, their evidence, the choice and any warning."""
+    lines = ["extrinsics: extL_T_imu, extR_T_imu read four ways (camera->IMU or IMU->camera, optical or regular "
+             "camera frame); the evidence for each:",
+             f"  {'reading':22s} {'right camera in the left camera':>32s} {'rotation':>11s} {'track px':>9s} "
+             f"{'odometry slopes rot/trans':>26s}"]
+    for name in reading.names:
+        geometry, scores = reading.geometry[name], [x for x in reading.track_scores[name] if x is not None]
+        offset = "[" + ", ".join(f"{x:+.3f}" for x in geometry["offset"]) + "] m"
+        track = f"{min(scores):.2f}" if scores else "n/a"
+        slopes = "/".join("n/a" if v is None else f"{v:+.2f}" for v in (reading.rotation_slope[name],
+                                                                         reading.translation_slope[name]))
+        rig = "rectified" if not geometry["problem"] else "not rectified"
+        lines.append(f"  {name:22s} {offset:>32s} {geometry['rotation_deg']:7.2f} deg {track:>9s} {slopes:>14s} "
+                     f"{reading.vo_verdict[name]:>11s}; {rig}")
+    margins = ", ".join(f"{k} +{d:.2f} px (95% lower bound {lo:+.2f})" for k, (d, lo) in reading.track.margins.items())
+    best = "no scored pairs" if reading.track.best is None else f"best {reading.track.best!r}"
+    lines.append(f"  track reprojection among the readings: {best}, {reading.track.verdict}"
+                 + (f"; others: {margins}" if margins else ""))
+    lines.append(f"  read as {reading.chosen!r} (the loader started from {reading.loader!r}): {reading.reason}")
+    return lines + ([f"  {reading.warning}"] if reading.warning else [])
+
+
 def calibration_report(calibration, name=""):
     """Readable lines of a calibration's evidence, ending with "the filter will use: ...".
 
@@ -91,6 +114,7 @@ def calibration_report(calibration, name=""):
     origin = ("computed" if c.source == "computed" else f"reused from the {c.source}")
     lines = [f"calibration from the data{' of ' + name if name else ''} ({origin}; "
              f"computing it took {c.seconds:.2f} s)"]
+    lines += _reading_lines(c.reading) if c.reading is not None else []
     lines += _track_lines(c.tracks)
     lines += _vo_lines(c.vo, c.repeated_frames)
     noise_reason = c.reasons.get("noise", "")

@@ -27,9 +27,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from visla_edu import lie
-from visla_edu.camera import triangulate_disparity
 from visla_edu.diagnostics._bootstrap import cluster_resamples, resampled_medians
-from visla_edu.diagnostics._vo import CORRECTIONS, LAGS
+from visla_edu.diagnostics._vo import LAGS, corrections_of
 from visla_edu.motion import select_twists
 
 __all__ = ["TrackChoice", "TrackEvidence", "TrackScorer", "track_pairs", "reprojection_errors", "MIN_DISPARITY",
@@ -147,7 +146,7 @@ def track_pairs(dataset):
     same[1:] = ids_sorted[1:] == ids_sorted[:-1]
     stale = same.copy()
     stale[1:] &= np.all(z_sorted[1:] == z_sorted[:-1], axis=1)
-    disparity = z_sorted[:, 0] - z_sorted[:, 2]
+    disparity = dataset.disparity()[order]
     can_anchor = disparity > MIN_DISPARITY
     # the first anchor-able observation of each landmark (big: none)
     track = np.cumsum(~same) - 1
@@ -204,7 +203,7 @@ def reprojection_errors(dataset, imu_T_cams, lags=LAGS):
     frames = dataset.observation_frames()[anchor]
     imu_T_cams = np.asarray(imu_T_cams, dtype=float)[:, None]  # (C, 1, 4, 4): broadcast over pairs
     cam_T_imus = lie.se3_inv(imu_T_cams)
-    p_cam = triangulate_disparity(dataset.obs_z[anchor], dataset.K, dataset.b)
+    p_cam = dataset.camera.triangulate(dataset.obs_z[anchor])
     p_imu = _apply(imu_T_cams[..., :3, :3], imu_T_cams[..., :3, 3], p_cam)  # (C, P, 3)
     K, z_later = dataset.K, dataset.obs_z[later, :2]
     errors = np.empty((len(lags), len(imu_T_cams), len(anchor)))
@@ -231,20 +230,28 @@ class TrackScorer:
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
+    candidates : dict of str to ndarray (4, 4), optional
+        Name -> candidate ``imu_T_cam``; default :func:`corrections_of` the dataset's
+        ``imu_T_cam`` (the axis flips). The readings of a 2025+ file's extrinsics are scored the
+        same way (:mod:`._readings`).
 
     Attributes
     ----------
-    errors : ndarray, shape (len(LAGS), len(CORRECTIONS), P)
+    names : list of str
+        The candidates, in order.
+    errors : ndarray, shape (len(LAGS), len(names), P)
     group : ndarray of int, shape (P,)
         Resampling group of each pair (its anchor frame's block), ``0 <= group < num_groups``.
     num_groups, num_landmarks : int
         Groups and landmarks with scored pairs.
-    scores : ndarray, shape (len(LAGS), len(CORRECTIONS))
+    scores : ndarray, shape (len(LAGS), len(names))
         Median error of each candidate (NaN without pairs).
     """
 
-    def __init__(self, dataset):
-        imu_T_cams = np.stack([C @ dataset.imu_T_cam for C in CORRECTIONS.values()])
+    def __init__(self, dataset, candidates=None):
+        candidates = corrections_of(dataset.imu_T_cam) if candidates is None else candidates
+        self.names = list(candidates)
+        imu_T_cams = np.stack([np.asarray(candidates[name], dtype=float) for name in self.names])
         self.errors, anchor_frame, landmark = reprojection_errors(dataset, imu_T_cams, LAGS)
         blocks, self.group = np.unique(anchor_frame // BLOCK, return_inverse=True)
         self.num_groups, self.num_landmarks = len(blocks), len(np.unique(landmark))
@@ -290,14 +297,17 @@ class TrackScorer:
         return TrackChoice(best, best, "chosen", margins)
 
     def choose_correction(self):
-        """The correction whose best lag beats every other correction's best lag."""
-        names = list(CORRECTIONS)
+        """The candidate (a correction, or a reading) whose best lag beats every other candidate's best lag."""
         finite = np.where(np.isfinite(self.scores), self.scores, np.inf)
-        return self._choice({name: (int(np.argmin(finite[:, c])), c) for c, name in enumerate(names)})
+        return self._choice({name: (int(np.argmin(finite[:, c])), c) for c, name in enumerate(self.names)})
+
+    def best_lag(self, name):
+        """The lag with the smallest median error for candidate ``name`` (0 without enough evidence)."""
+        return LAGS[int(np.argmin(self.scores[:, self.names.index(name)]))] if self.enough else 0
 
     def choose_lag(self, correction):
-        """The lag that beats every other lag, all with ``correction``."""
-        c = list(CORRECTIONS).index(correction)
+        """The lag that beats every other lag, all with candidate ``correction``."""
+        c = self.names.index(correction)
         choice = self._choice({lag: (i, c) for i, lag in enumerate(LAGS)})
         choice.margins = {f"{int(k):+d}": v for k, v in choice.margins.items()}
         return choice
@@ -305,6 +315,6 @@ class TrackScorer:
     def evidence(self, correction_choice, lag_choice):
         """The :class:`TrackEvidence` with both verdicts."""
         scores = {name: [None if not np.isfinite(s) else float(s) for s in self.scores[:, c]]
-                  for c, name in enumerate(CORRECTIONS)}
+                  for c, name in enumerate(self.names)}
         return TrackEvidence(list(LAGS), scores, int(self.errors.shape[-1]), self.num_landmarks, self.num_groups,
                              RESAMPLES if self._weights is not None else 0, correction_choice, lag_choice)

@@ -29,6 +29,7 @@ __all__ = [
     "MIN_SIGNIFICANCE",
     "ExtrinsicCheck",
     "check_extrinsics",
+    "corrections_of",
     "time_alignment",
     "odometry_of",
     "vo_pairs",
@@ -58,6 +59,11 @@ MIN_SLOPE = 0.5
 MIN_SIGNIFICANCE = 3.0
 #: Verdicts of the extrinsic check, per correction.
 AGREES, DISAGREES, UNDECIDED = "agrees", "disagrees", "not enough evidence"
+
+
+def corrections_of(imu_T_cam):
+    """Every axis-flip candidate of a calibration: name -> ``CORRECTIONS[name] @ imu_T_cam``, shape (4, 4) each."""
+    return {name: C @ np.asarray(imu_T_cam, dtype=float) for name, C in CORRECTIONS.items()}
 
 
 def odometry_of(dataset):
@@ -205,7 +211,7 @@ class ExtrinsicCheck:
             return head + f": not enough evidence (fewer than {MIN_VO_PAIRS} pairs)"
         lines = [head + f", slope standard errors: rotation {self.rotation_slope_error:.2f}, "
                  f"translation {self.translation_slope_error:.2f}"]
-        for key in CORRECTIONS:
+        for key in self.verdict:
             mark = "  <- recommended by the odometry" if key == self.recommended and key != "none" else ""
             lines.append(f"  {key:8s} rotation slope {self.rotation_slope[key]:+6.2f} "
                          f"(rms {1e3 * self.rotation_rms[key]:6.2f} mrad/frame)   "
@@ -225,8 +231,8 @@ def _verdict(rotation, translation, rotation_error, translation_error, pairs):
     return UNDECIDED
 
 
-def check_extrinsics(dataset, lag=0):
-    """Score each axis-flip correction of ``imu_T_cam`` against the IMU's motion.
+def check_extrinsics(dataset, lag=0, candidates=None):
+    """Score each axis-flip correction of ``imu_T_cam`` (or other candidates) against the IMU's motion.
 
     For every usable frame pair (:func:`vo_pairs`), the VO twist mapped into the IMU frame is
     regressed on ``tau u[t + lag]``: a calibration whose axes disagree with the IMU's shows up
@@ -237,27 +243,31 @@ def check_extrinsics(dataset, lag=0):
     dataset : visla_edu.dataset.Dataset
     lag : int
         Velocity sample used per interval (see :func:`visla_edu.motion.select_twists`).
+    candidates : dict of str to ndarray (4, 4), optional
+        Name -> candidate ``imu_T_cam``; default :func:`corrections_of` the dataset's.
 
     Returns
     -------
     ExtrinsicCheck
+        Keyed by the candidates' names.
     """
+    candidates = corrections_of(dataset.imu_T_cam) if candidates is None else candidates
     vo = odometry_of(dataset)
     used = vo_pairs(vo)
     imu = imu_step_twists(dataset, lag)[used]
     rot_slope, trans_slope, rot_rms, rot_err, trans_err = {}, {}, {}, {}, {}
-    for key, C in CORRECTIONS.items():
-        vo_imu = vo_in_imu_frame(vo, C @ dataset.imu_T_cam)[used]
+    for key, imu_T_cam in candidates.items():
+        vo_imu = vo_in_imu_frame(vo, imu_T_cam)[used]
         rot_slope[key], rot_err[key] = _slope(vo_imu[:, 3:], imu[:, 3:])
         trans_slope[key], trans_err[key] = _slope(vo_imu[:, :3], imu[:, :3])
         rot_rms[key] = _rms(vo_imu[:, 3:] - imu[:, 3:])
     pairs = int(used.sum())
     rotation_error, translation_error = min(rot_err.values()), min(trans_err.values())
     verdict = {key: _verdict(rot_slope[key], trans_slope[key], rotation_error, translation_error, pairs)
-               for key in CORRECTIONS}
+               for key in candidates}
     recommended = "none"
-    agreeing = [key for key in CORRECTIONS if verdict[key] == AGREES]
-    if verdict["none"] == DISAGREES and agreeing:
+    agreeing = [key for key in candidates if verdict[key] == AGREES]
+    if verdict.get("none") == DISAGREES and agreeing:
         recommended = max(agreeing, key=lambda k: rot_slope[k] + trans_slope[k])
     return ExtrinsicCheck(rot_slope, trans_slope, rot_rms, rotation_error, recommended, pairs,
                           translation_error, verdict)

@@ -203,7 +203,7 @@ class _Filter(abc.ABC):
     def _usable(self, ids, z, status):
         """Mark no-depth observations; return the mask of usable ones (in the stride, positive disparity)."""
         in_stride = ids % self.config.landmark_stride == 0
-        disparity = z[:, 0] - z[:, 2]
+        disparity = self.camera.disparity(z)
         status[in_stride & (disparity <= 0)] = OBS_NO_DEPTH
         return in_stride & (disparity > 0)
 
@@ -227,7 +227,7 @@ class _Filter(abc.ABC):
             Their covariance from the pixels: ``inflation^2 C_tri + sigma^2 I``.
         """
         cfg = self.config
-        disparity = z[:, 0] - z[:, 2]
+        disparity = self.camera.disparity(z)
         new = candidates & (disparity >= cfg.min_init_disparity)
         status[candidates & ~new] = OBS_FAR
         status[new] = OBS_NEW
@@ -242,8 +242,8 @@ class _Filter(abc.ABC):
         predicted disparity ``fsu b / depth`` is not in ``(0, fsu b / MIN_DEPTH)``) has no
         usable linearisation: its observation is rejected with distance ``inf``.
         """
-        fsu_b = self.camera.K[0, 0] * self.camera.b
-        disparity = z_pred[:, 0] - z_pred[:, 2]
+        fsu_b = self.camera.fsu_b
+        disparity = self.camera.disparity(z_pred)
         valid = (disparity > 0) & (disparity < fsu_b / MIN_DEPTH) & np.isfinite(S).all(axis=(1, 2))
         d2 = np.full(len(S), np.inf)
         if np.any(valid):

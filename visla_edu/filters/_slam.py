@@ -188,7 +188,8 @@ class JointSlam(CloneWindow, _Filter):
     def _joint_update(self, lm, z, prediction):
         """The joint EKF update with the observations of landmarks ``lm``; returns the NIS."""
         try:
-            delta, nis = ekf.joint_correction(self.state.Sigma, self.state.slot_of[lm], z, self.noise_var, prediction)
+            delta, nis = ekf.joint_correction(self.state.Sigma, self.state.slot_of[lm], z, self.noise_var, prediction,
+                                              self.camera.stereo_rows)
         except np.linalg.LinAlgError as err:
             raise self._diverged(err, f" ({len(lm)} observations)") from err
         self._retract(delta)

@@ -26,6 +26,7 @@ Everything is batched over the tracks of a frame.
 
 import numpy as np
 
+from visla_edu.camera import stereo_projection
 from visla_edu.metrics import chi2_quantile
 
 __all__ = ["TrackBuffer", "triangulate_tracks", "track_systems", "project_out_point", "gate_tracks", "delayed_entry",
@@ -99,24 +100,8 @@ class TrackBuffer:
 
 
 def _project(camera, world_T_imu, p_world):
-    """Stereo pixels of points ``p_world`` (N, 3) seen from poses ``world_T_imu`` (N, 4, 4).
-
-    Returns ``z`` (N, 4), the depth in the left camera (N,), ``J_z_landmark`` (N, 4, 3) and the
-    right-perturbation ``J_z_pose`` (N, 4, 6), as :meth:`StereoCamera.predict_with_jacobians` for
-    one pose per point.
-    """
-    from visla_edu.camera import projection, projection_jacobian
-    from visla_edu import lie
-
-    R, t = world_T_imu[:, :3, :3], world_T_imu[:, :3, 3]
-    p_imu = np.einsum("nji,nj->ni", R, p_world - t)  # inv(T) m
-    q = p_imu @ camera.cam_T_imu[:3, :3].T + camera.cam_T_imu[:3, 3]
-    q = np.concatenate([q, np.ones((len(q), 1))], axis=1)
-    z = projection(q) @ camera.Ks.T
-    J_z_q3 = (camera.Ks @ projection_jacobian(q)) @ camera.cam_T_imu[:, :3]  # (N, 4, 3): d z / d p_imu
-    J_z_landmark = J_z_q3 @ np.swapaxes(R, 1, 2)
-    J_z_pose = np.concatenate([-J_z_q3, J_z_q3 @ lie.hat(p_imu)], axis=-1)
-    return z, q[:, 2], J_z_landmark, J_z_pose
+    """:func:`visla_edu.camera.stereo_projection` of points ``p_world`` (N, 3) from poses ``world_T_imu`` (N, 4, 4)."""
+    return stereo_projection(camera.Ks, camera.cam_T_imu, world_T_imu, p_world)
 
 
 def _segment_sum(values, owner, count):
@@ -158,7 +143,7 @@ def triangulate_tracks(camera, world_T_imu, z, owner, count, sigma_pixel):
     ok : ndarray of bool, shape (count,)
         Finite, and at least :data:`MIN_POINT_DEPTH` in front of every camera that saw it.
     """
-    disparity = z[:, 0] - z[:, 2]
+    disparity = camera.disparity(z)
     anchor = np.zeros(count, dtype=np.int64)
     best = np.full(count, -np.inf)
     np.maximum.at(best, owner, disparity)

@@ -108,6 +108,9 @@ class SimulationConfig:
     nonpositive_disparity_share : float
         Share of observations with ``uL - uR <= 0``: noise on far points, topped up by
         forcing the farthest inlier observations to disparities in ``(-1, 0]``.
+    K_right : ndarray (3, 3) or None
+        The right camera's own intrinsics (a rig with two, as a 2025+ file describes:
+        :class:`visla_edu.camera.StereoCamera`); None: the same as ``K``.
     """
 
     num_frames: int = 1010
@@ -154,6 +157,7 @@ class SimulationConfig:
     outlier_kind: str = "offset"
     outlier_offset_range: tuple = (20.0, 60.0)
     nonpositive_disparity_share: float = 0.01
+    K_right: object = None
 
     def validate(self):
         """Raise ``ValueError`` naming the first field with an impossible value."""

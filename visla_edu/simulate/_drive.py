@@ -29,7 +29,7 @@ def _rig(config, default):
     K = default[0] if config.K is None else np.asarray(config.K, dtype=float)
     b = default[1] if config.b is None else float(config.b)
     imu_T_cam = default[2] if config.imu_T_cam is None else np.asarray(config.imu_T_cam, dtype=float)
-    StereoCamera(K, b, imu_T_cam)  # validates shapes and the baseline
+    StereoCamera(K, b, imu_T_cam, config.K_right)  # validates shapes, the baseline and K_right
     return K, b, imu_T_cam
 
 
@@ -49,10 +49,11 @@ def _build(time_stamps, true_v, true_w, rig, config, rngs, **fields):
     if config.reported_imu_T_cam is not None:  # the file's calibration differs from the rig's
         reported = np.array(config.reported_imu_T_cam, dtype=float)
         fields["extra"] = {**fields.get("extra", {}), "simulated_imu_T_cam": imu_T_cam}
+    K_right = None if config.K_right is None else np.array(config.K_right, dtype=float)
     return Dataset(time_stamps=time_stamps, linear_velocity=meas_v, angular_velocity=meas_w,
                    K=K, b=b, imu_T_cam=reported, num_landmarks=len(tracks.landmarks),
                    frame_ptr=tracks.frame_ptr, obs_ids=tracks.obs_ids, obs_z=tracks.obs_z,
-                   ground_truth=truth, **fields)
+                   ground_truth=truth, K_right=K_right, **fields)
 
 
 def simulate_drive(preset="course", seed=0, **overrides):

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from visla_edu import lie
-from visla_edu.camera import StereoCamera, projection
+from visla_edu.camera import StereoCamera, left_in_right_u, projection, single_intrinsics
 from visla_edu.dataset import frame_major_order
 from visla_edu.simulate._landmarks import check_poses, default_time_stamps, scene_change
 
@@ -46,9 +46,14 @@ def _visible(q, Ks, config):
     safe = np.where(ok, depth, 1.0)
     uL = Ks[0, 0] * q[:, 0] / safe + Ks[0, 2]
     vL = Ks[1, 1] * q[:, 1] / safe + Ks[1, 2]
-    uR = uL + Ks[2, 3] / safe
     width, height = config.image_size
-    return ok & (uR >= 0) & (uL < width) & (uL >= 0) & (uR < width) & (vL >= 0) & (vL < height)
+    if single_intrinsics(Ks):
+        uR = uL + Ks[2, 3] / safe
+        return ok & (uR >= 0) & (uL < width) & (uL >= 0) & (uR < width) & (vL >= 0) & (vL < height)
+    uR = Ks[2, 0] * q[:, 0] / safe + Ks[2, 2] + Ks[2, 3] / safe
+    vR = Ks[3, 1] * q[:, 1] / safe + Ks[3, 2]
+    return (ok & (uR >= 0) & (uL < width) & (uL >= 0) & (uR < width) & (vL >= 0) & (vL < height)
+            & (vR >= 0) & (vR < height))
 
 
 def _march(cam_T_world, landmarks, appear, clock, budget, Ks, config):
@@ -156,37 +161,51 @@ def _outlier_offsets(num_landmarks, config, rng):
     return np.where(outlier[:, None], offsets, 0.0), outlier
 
 
-def _force_nonpositive_disparity(z, true_disparity, inlier, config, rng):
-    """Top up non-positive disparities to the configured share on the farthest inliers (in place)."""
+def _force_nonpositive_disparity(z, true_disparity, inlier, camera, config, rng):
+    """Top up non-positive disparities (``camera.disparity``) to the configured share on the farthest inliers.
+
+    In place; a forced one sets ``uR`` to ``uL + U(0, 1)`` px in the left camera's pixels (then mapped into the
+    right camera's).
+    """
     target = int(round(config.nonpositive_disparity_share * len(z)))
-    need = target - int(np.count_nonzero(z[:, 0] - z[:, 2] <= 0))
-    candidates = np.flatnonzero(inlier & (z[:, 0] - z[:, 2] > 0))
+    disparity = camera.disparity(z)
+    need = target - int(np.count_nonzero(disparity <= 0))
+    candidates = np.flatnonzero(inlier & (disparity > 0))
     if need <= 0 or candidates.size == 0:
         return
     pool = candidates[np.argsort(true_disparity[candidates], kind="stable")[: 5 * need]]
     chosen = rng.choice(pool, size=min(need, len(pool)), replace=False)
-    z[chosen, 2] = z[chosen, 0] + rng.uniform(0.0, 1.0, len(chosen))
+    z[chosen, 2] = left_in_right_u(z[chosen, 0] + rng.uniform(0.0, 1.0, len(chosen)), camera.K, camera.K_right)
 
 
-def _uniform_pixels(count, config, rng):
-    """Random stereo pixels ``[uL, vL, uR, vR]`` in the image, ``uL > uR``, ``vR = vL`` + noise, (count, 4)."""
+def _uniform_pixels(count, camera, config, rng):
+    """Random stereo pixels ``[uL, vL, uR, vR]`` in the image, ``uL > uR``, ``vR = vL`` + noise, (count, 4).
+
+    For a rig with two intrinsics ``uR`` and ``vR`` are drawn in the left camera's pixels and
+    mapped into the right camera's (a match that still passes the rectified-stereo check).
+    """
     width, height = config.image_size
     u = np.sort(rng.uniform(0.0, width, (count, 2)), axis=1)
     v = rng.uniform(0.0, height, count)
-    return np.stack([u[:, 1], v, u[:, 0], v + config.pixel_sigma * rng.standard_normal(count)], axis=1)
+    z = np.stack([u[:, 1], v, u[:, 0], v + config.pixel_sigma * rng.standard_normal(count)], axis=1)
+    if not camera.same_intrinsics:
+        K, R = camera.K, camera.K_right
+        z[:, 2] = left_in_right_u(z[:, 2], K, R)
+        z[:, 3] = R[1, 2] + R[1, 1] * (z[:, 3] - K[1, 2]) / K[1, 1]
+    return z
 
 
-def _measure(q, ids, num_landmarks, Ks, config, rng):
+def _measure(q, ids, num_landmarks, camera, config, rng):
     """Noisy pixels with outliers and non-positive disparities, shapes (N, 4), (M,)."""
     q_h = np.concatenate([q, np.ones((len(q), 1))], axis=1)
-    z_true = projection(q_h) @ Ks.T
+    z_true = projection(q_h) @ camera.Ks.T
     z = z_true + config.pixel_sigma * rng.standard_normal(z_true.shape)
     offsets, outlier = _outlier_offsets(num_landmarks, config, rng)
     z += offsets[ids]
     if config.outlier_kind == "uniform":
         hit = outlier[ids]
-        z[hit] = _uniform_pixels(int(hit.sum()), config, rng)
-    _force_nonpositive_disparity(z, z_true[:, 0] - z_true[:, 2], ~outlier[ids], config, rng)
+        z[hit] = _uniform_pixels(int(hit.sum()), camera, config, rng)
+    _force_nonpositive_disparity(z, camera.disparity(z_true), ~outlier[ids], camera, config, rng)
     return z, outlier
 
 
@@ -237,7 +256,7 @@ def simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng, appear
     appear = np.zeros(n, dtype=np.int64) if appear is None else np.asarray(appear, dtype=np.int64)
     if appear.shape != (n,):
         raise ValueError(f"simulate_tracks: appear must have shape ({n},), got {appear.shape}")
-    camera = StereoCamera(K, b, imu_T_cam)
+    camera = StereoCamera(K, b, imu_T_cam, config.K_right)
     cam_T_world = camera.cam_T_imu @ lie.se3_inv(world_T_imu)
     change = scene_change(world_T_imu, default_time_stamps(time_stamps, T, config), config)
     clock = np.concatenate([[0.0], np.cumsum(change)])
@@ -247,5 +266,5 @@ def simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng, appear
     rows, frames, q = rows[keep], frames[keep], q[keep]
     source, ids = _renumber(rows, frames, n)
     order, frame_ptr = frame_major_order(ids, frames, T)
-    z, outlier = _measure(q[order], ids[order], len(source), camera.Ks, config, rng)
+    z, outlier = _measure(q[order], ids[order], len(source), camera, config, rng)
     return SimulatedTracks(landmarks[source], source, frame_ptr, ids[order], z, outlier)

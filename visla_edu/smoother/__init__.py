@@ -33,20 +33,23 @@ complement; the smoothers never form it).
     True
 
 Modules (private; the public names are re-exported here): ``_config``
-(:class:`SmootherConfig`), ``_se3`` (the SE(3) right Jacobian and its inverse), ``_factors``
-(residuals, Jacobians, robust losses), ``_problem`` (observations and structure),
-``_envelope`` (the block envelope Cholesky, solve and selected inverse), ``_normal``
-(linearisation, the Schur step, marginals), ``_result`` (:class:`SmootherResult`),
-``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window`` (:func:`smooth_window`).
+(:class:`SmootherConfig`), ``_factors`` (the motion residual and its Jacobians, robust losses),
+``_problem`` (observations and structure), ``_envelope`` (the block envelope Cholesky, solve and
+selected inverse), ``_normal`` (linearisation, the Schur step, marginals), ``_result``
+(:class:`SmootherResult`), ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window``
+(:func:`smooth_window`). The reprojection factor and its Jacobians are the camera's
+(:func:`visla_edu.camera.stereo_projection`, re-exported here as ``reprojection``), the SE(3)
+right Jacobians lie's (re-exported for notebook 08).
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth, start_cost
 from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, FROM_FILTER, LOSSES, OWN_SETTINGS, WINDOW_MODES,
                                         WINDOW_ONLY, SmootherConfig, check_own_settings)
-from visla_edu.smoother._factors import motion_residuals, reprojection, robust_loss
+from visla_edu.camera import stereo_projection as reprojection
+from visla_edu.lie import se3_right_jacobian, se3_right_jacobian_inv
+from visla_edu.smoother._factors import motion_residuals, robust_loss
 from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
 from visla_edu.smoother._result import HISTORY_FIELDS, STOP_REASONS, SmootherResult
-from visla_edu.smoother._se3 import se3_right_jacobian, se3_right_jacobian_inv
 from visla_edu.smoother._window import smooth_window
 
 __all__ = [

@@ -218,7 +218,7 @@ def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
     starts = problem.landmark_start[:-1]
     count = np.add.reduceat(problem.active.astype(np.int64), starts)
     close = np.add.reduceat((problem.active & ~(depth >= problem.min_depth)).astype(np.int64), starts) > 0
-    disparity = np.where(problem.active, -problem.Ks[2, 3] / np.where(depth > 0, depth, np.inf), -np.inf)
+    disparity = np.where(problem.active, problem.fsu_b / np.where(depth > 0, depth, np.inf), -np.inf)
     far = np.maximum.reduceat(disparity, starts) < problem.min_disparity / 2
     behind = problem.landmark_active & close
     too_far = problem.landmark_active & ~behind & far & (count > 0)

@@ -1,11 +1,8 @@
-"""The smoother's two residuals and their analytic Jacobians, vectorised over factors.
+"""The smoother's motion residual and its analytic Jacobians, vectorised over factors; robust losses.
 
-Reprojection (one per stereo observation of landmark ``m`` from pose ``T``)::
-
-    r = h(T, m) - z,       h(T, m) = Ks pi(cam_T_imu T^{-1} m)
-
-with the Jacobians of :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians` (right
-perturbation ``T <- T exp(delta^)``), here for a different pose per observation.
+The other residual, the reprojection ``r = h(T, m) - z`` with ``h(T, m) = Ks pi(cam_T_imu T^{-1} m)``
+(one per stereo observation, a different pose per observation), and its Jacobians are the
+camera's: :func:`visla_edu.camera.stereo_projection`.
 
 Motion (one per step ``t -> t+1`` with twist ``u_t`` over ``tau_t``)::
 
@@ -16,15 +13,15 @@ Perturbing ``T_t <- T_t exp(a^)`` and ``T_{t+1} <- T_{t+1} exp(b^)`` gives
 
     J_e_next = J_r(e_t)^{-1},      J_e_prev = -J_r(e_t)^{-1} Ad(T_{t+1}^{-1} T_t)
 
-with the SE(3) right Jacobian of :mod:`visla_edu.smoother._se3`.
+with the SE(3) right Jacobian of :mod:`visla_edu.lie` (its perturbation convention and
+``J_out_in`` names).
 """
 
 import numpy as np
 
-from visla_edu import camera, lie
-from visla_edu.smoother._se3 import se3_right_jacobian_inv
+from visla_edu import lie
 
-__all__ = ["motion_steps", "motion_residuals", "reprojection", "robust_loss"]
+__all__ = ["motion_steps", "motion_residuals", "robust_loss"]
 
 
 def motion_steps(time_stamps, twists, lag):
@@ -72,49 +69,9 @@ def motion_residuals(world_T_imu, step_inv, jacobians=True):
     e = lie.se3_log(E)
     if not jacobians:
         return e
-    J_e_next = se3_right_jacobian_inv(e)
+    J_e_next = lie.se3_right_jacobian_inv(e)
     J_e_prev = -J_e_next @ lie.adjoint(next_T_prev)
     return e, J_e_prev, J_e_next
-
-
-def reprojection(Ks, cam_T_imu, world_T_imu, p_world, jacobians=True):
-    """Predicted stereo pixels of landmarks, each from its own pose, and the Jacobians.
-
-    ``q = cam_T_imu T^{-1} m``, ``z = Ks pi(q)``; as in
-    :meth:`~visla_edu.camera.StereoCamera.predict_with_jacobians`,
-    ``J_z_landmark = Ks dpi/dq(q) cam_T_imu T^{-1} P^T`` and
-    ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(T^{-1} m)``.
-
-    Parameters
-    ----------
-    Ks : ndarray, shape (4, 4)
-    cam_T_imu : ndarray, shape (4, 4)
-    world_T_imu : ndarray, shape (N, 4, 4)
-        The pose of each observation.
-    p_world : ndarray, shape (N, 3)
-        The landmark of each observation.
-    jacobians : bool
-
-    Returns
-    -------
-    z : ndarray, shape (N, 4)
-    depth : ndarray, shape (N,)
-        ``q3``, the landmark's depth in the left camera.
-    J_z_landmark : ndarray, shape (N, 4, 3)
-    J_z_pose : ndarray, shape (N, 4, 6)
-        (the Jacobians only if asked)
-    """
-    R = world_T_imu[:, :3, :3]
-    p_imu = np.einsum("nji,nj->ni", R, p_world - world_T_imu[:, :3, 3])
-    q = p_imu @ cam_T_imu[:3, :3].T + cam_T_imu[:3, 3]
-    q = np.concatenate([q, np.ones((len(q), 1))], axis=1)
-    z = camera.projection(q) @ Ks.T
-    if not jacobians:
-        return z, q[:, 2]
-    J_z_q3 = (Ks @ camera.projection_jacobian(q))[:, :, :3] @ cam_T_imu[:3, :3]
-    J_z_landmark = J_z_q3 @ np.swapaxes(R, 1, 2)
-    J_z_pose = np.concatenate([-J_z_q3, J_z_q3 @ lie.hat(p_imu)], axis=-1)
-    return z, q[:, 2], J_z_landmark, J_z_pose
 
 
 def robust_loss(s, loss, scale):

@@ -25,9 +25,9 @@ import numpy as np
 from scipy import sparse
 
 from visla_edu import lie
+from visla_edu.camera import single_intrinsics
 from visla_edu.smoother import _envelope
 from visla_edu.smoother._factors import motion_residuals, robust_loss
-from visla_edu.smoother._se3 import se3_right_jacobian_inv
 
 __all__ = ["Linearization", "Step", "observation_errors", "evaluate", "linearize", "solve_step",
            "apply_step", "marginals", "normal_equations"]
@@ -115,12 +115,19 @@ def _camera_points(problem, world_T_imu, landmarks):
 
 
 def _pixels(problem, q):
-    """Stereo pixels ``Ks pi(q)`` of camera points ``q`` (3, N) as ``[uL, vL, uR, vR]``, shape (N, 4)."""
+    """Stereo pixels ``Ks pi(q)`` of camera points ``q`` (3, N) as ``[uL, vL, uR, vR]``, shape (N, 4).
+
+    Written out per row of ``Ks`` (:func:`visla_edu.camera.stereo_matrix`); a rig with one
+    intrinsics reuses the left camera's ``u`` and ``v`` for the right image (the same numbers).
+    """
     Ks = problem.Ks
     inv_z = 1.0 / q[2]
     u = Ks[0, 0] * q[0] * inv_z + Ks[0, 2]
     v = Ks[1, 1] * q[1] * inv_z + Ks[1, 2]
-    return np.stack([u, v, u + Ks[2, 3] * inv_z, v], axis=1)
+    if single_intrinsics(Ks):
+        return np.stack([u, v, u + Ks[2, 3] * inv_z, v], axis=1)
+    u_right = Ks[2, 0] * q[0] * inv_z + Ks[2, 2] + Ks[2, 3] * inv_z
+    return np.stack([u, v, u_right, Ks[3, 1] * q[1] * inv_z + Ks[3, 2]], axis=1)
 
 
 def observation_errors(problem, world_T_imu, landmarks):
@@ -160,7 +167,7 @@ def _prior_residual(problem, world_T_imu):
     if prior is None:
         return None
     e = lie.se3_log(lie.se3_inv(prior.mean) @ world_T_imu[prior.frame])
-    return prior.sqrt_information @ e, prior.sqrt_information @ se3_right_jacobian_inv(e)
+    return prior.sqrt_information @ e, prior.sqrt_information @ lie.se3_right_jacobian_inv(e)
 
 
 def evaluate(problem, world_T_imu, landmarks, errors=None):
@@ -205,8 +212,11 @@ def _projection_information(problem, q, wr, w):
     """``A^T w A`` (3, 3, N) and ``A^T w r`` (3, N) with ``A = d(Ks pi(q)) / d q_xyz``.
 
     ``A`` has rows ``fu/z [1, 0, -x/z]`` (uL), ``fv/z [0, 1, -y/z]`` (vL and vR) and
-    ``fu/z [1, 0, -(x - b)/z]`` (uR), so both products have closed forms.
+    ``fu/z [1, 0, -(x - b)/z]`` (uR), so both products have closed forms (a rig with two
+    intrinsics: :func:`_projection_information_two`).
     """
+    if not single_intrinsics(problem.Ks):
+        return _projection_information_two(problem, q, wr, w)
     fu, fv = problem.Ks[0, 0], problem.Ks[1, 1]
     inv_z = 1.0 / q[2]
     a, c = fu * inv_z, fv * inv_z
@@ -220,6 +230,29 @@ def _projection_information(problem, q, wr, w):
     B[2, 2] = w * (e_left**2 + e_right**2 + 2 * e_v**2)
     Atr = np.stack([a * (wr[:, 0] + wr[:, 2]), c * (wr[:, 1] + wr[:, 3]),
                     e_left * wr[:, 0] + e_right * wr[:, 2] + e_v * (wr[:, 1] + wr[:, 3])])
+    return B, Atr
+
+
+def _projection_information_two(problem, q, wr, w):
+    """:func:`_projection_information` for a rig with two intrinsics (rows 3 and 4 of ``Ks`` the right camera's).
+
+    ``A`` has rows ``a_k [1, 0, -x/z]`` for ``uL`` (``a_1 = fu/z``) and ``[0, c_k, e_k]`` for the
+    ``v`` rows, and ``uR`` the row ``fu'/z [1, 0, -(x - b)/z]``: each product is a sum over rows.
+    """
+    Ks = problem.Ks
+    inv_z = 1.0 / q[2]
+    a, a_r = Ks[0, 0] * inv_z, Ks[2, 0] * inv_z
+    c, c_r = Ks[1, 1] * inv_z, Ks[3, 1] * inv_z
+    e_left, e_right = -a * q[0] * inv_z, -a_r * q[0] * inv_z - Ks[2, 3] * inv_z * inv_z
+    e_v, e_v_r = -c * q[1] * inv_z, -c_r * q[1] * inv_z
+    B = np.zeros((3, 3, len(w)))
+    B[0, 0] = w * (a * a + a_r * a_r)
+    B[0, 2] = B[2, 0] = w * (a * e_left + a_r * e_right)
+    B[1, 1] = w * (c * c + c_r * c_r)
+    B[1, 2] = B[2, 1] = w * (c * e_v + c_r * e_v_r)
+    B[2, 2] = w * (e_left**2 + e_right**2 + e_v**2 + e_v_r**2)
+    Atr = np.stack([a * wr[:, 0] + a_r * wr[:, 2], c * wr[:, 1] + c_r * wr[:, 3],
+                    e_left * wr[:, 0] + e_right * wr[:, 2] + e_v * wr[:, 1] + e_v_r * wr[:, 3]])
     return B, Atr
 
 
@@ -248,7 +281,7 @@ def _observation_blocks(problem, world_T_imu, landmarks):
     """Per-observation weighted blocks (component-first layout) and the robust cost.
 
     With ``J_q = A R_c`` (``R_c`` the camera's rotation from the IMU), the Jacobians of
-    :func:`~._factors.reprojection` are ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``,
+    :func:`visla_edu.camera.stereo_projection` are ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``,
     ``P = hat(p_imu)``; so with ``K = J_q^T w J_q`` and ``h = J_q^T w r``::
 
         J_p^T w J_p = [[K, -K P], [P K, -P K P]]     J_p^T w r = [-h; -P h]

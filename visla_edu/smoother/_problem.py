@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from visla_edu.camera import StereoCamera
 from visla_edu.dataset import repeated_frames
 
 __all__ = ["PosePrior", "Problem", "build_problem", "STATUS_NAMES", "observation_status",
@@ -89,6 +88,8 @@ class Problem:
         Sums per-observation pose terms into their block rows.
     dropped_in_steps : int
         Landmarks the solver dropped because a step would bring them behind a camera.
+    fsu_b : float
+        ``fsu b`` of the rig: a landmark at depth ``d`` has disparity ``fsu b / d`` (left pixels).
     """
 
     Ks: np.ndarray
@@ -121,6 +122,7 @@ class Problem:
     num_slots: int = 0
     frame_sum: object = None
     dropped_in_steps: int = 0
+    fsu_b: float = None
 
     @property
     def num_vars(self):
@@ -169,7 +171,8 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
     first_frame, first_var, last_frame = frames
     motion_from, step_inv, sqrt_info = motion
     problem = Problem(
-        Ks=camera.Ks, cam_T_imu=camera.cam_T_imu, sigma_pixel=float(config.sigma_pixel), loss=config.loss,
+        Ks=camera.Ks, cam_T_imu=camera.cam_T_imu, fsu_b=camera.fsu_b, sigma_pixel=float(config.sigma_pixel),
+        loss=config.loss,
         loss_scale=float(config.loss_scale), min_depth=float(config.min_depth),
         min_disparity=float(config.min_disparity), first_frame=first_frame,
         first_var=first_var, last_frame=last_frame, motion_from=motion_from, step_inv=step_inv,
@@ -221,7 +224,7 @@ def observation_status(dataset, config, frames=None):
     """
     frames = dataset.observation_frames() if frames is None else frames
     status = np.full(dataset.num_observations, USED, dtype=np.int8)
-    status[dataset.obs_z[:, 0] - dataset.obs_z[:, 2] <= 0] = NONPOSITIVE
+    status[dataset.disparity() <= 0] = NONPOSITIVE
     if config.skip_repeated_frames:
         status[np.isin(frames, repeated_frames(dataset))] = REPEATED
     return status
@@ -230,7 +233,8 @@ def observation_status(dataset, config, frames=None):
 def far_landmarks(dataset, usable, min_disparity):
     """Landmarks whose usable observations all have a disparity below ``min_disparity`` px, (M,) bool.
 
-    The disparity is ``uL - uR`` of the observed pixels.
+    The disparity is ``uL - uR`` of the observed pixels (in the left camera's pixels,
+    :meth:`~visla_edu.dataset.Dataset.disparity`).
 
     Parameters
     ----------
@@ -246,7 +250,7 @@ def far_landmarks(dataset, usable, min_disparity):
         True for a landmark with at least one usable observation, all of them below
         ``min_disparity``; False for landmarks without any.
     """
-    disparity = np.where(usable, dataset.obs_z[:, 0] - dataset.obs_z[:, 2], -np.inf)
+    disparity = np.where(usable, dataset.disparity(), -np.inf)
     best = np.full(dataset.num_landmarks, -np.inf)
     np.maximum.at(best, dataset.obs_ids, disparity)
     return np.isfinite(best) & (best < min_disparity)
@@ -277,7 +281,7 @@ def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):
     out = np.full((M, 3), np.nan) if landmarks is None else np.array(landmarks, dtype=float, copy=True)
     if out.shape != (M, 3):
         raise ValueError(f"initial landmarks must have shape ({M}, 3) for {dataset.name}, got {out.shape}")
-    disparity = np.where(usable, dataset.obs_z[:, 0] - dataset.obs_z[:, 2], -np.inf)
+    disparity = np.where(usable, dataset.disparity(), -np.inf)
     order = np.lexsort((-disparity, dataset.obs_ids))  # per landmark, largest disparity first
     first = order[np.r_[True, dataset.obs_ids[order][1:] != dataset.obs_ids[order][:-1]]]
     first = first[np.isfinite(disparity[first])]
@@ -295,17 +299,18 @@ def rig_camera(dataset, imu_T_cam=None):
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
-        Gives ``K``, ``b`` and the default ``imu_T_cam``.
+        Gives ``K``, ``K_right``, ``b`` and the default ``imu_T_cam``.
     imu_T_cam : array_like, shape (4, 4), optional
         Pose of the left camera (optical frame) in the IMU frame.
 
     Returns
     -------
     StereoCamera
+        :meth:`visla_edu.dataset.Dataset.stereo_camera`.
 
     Raises
     ------
     ValueError
         ``imu_T_cam`` is not (4, 4), or ``K`` or ``b`` is not a valid calibration.
     """
-    return StereoCamera(dataset.K, dataset.b, dataset.imu_T_cam if imu_T_cam is None else imu_T_cam)
+    return dataset.stereo_camera(imu_T_cam)

@@ -41,12 +41,13 @@ import time
 import numpy as np
 
 from visla_edu import lie
+from visla_edu.camera import stereo_projection
 from visla_edu.smoother import _envelope, _normal
 from visla_edu.smoother._batch import levenberg_marquardt, motion_information
 from visla_edu._blas import limit_blas_threads
 from visla_edu.metrics import chi2_quantile
 from visla_edu.smoother._config import as_smoother_config
-from visla_edu.smoother._factors import motion_steps, reprojection, robust_loss
+from visla_edu.smoother._factors import motion_steps, robust_loss
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, PosePrior,
                                          build_problem, observation_status, rig_camera)
 from visla_edu.smoother._result import SmootherResult, check_trajectory, empty_history, finish_history
@@ -93,7 +94,7 @@ class _WindowState:
         lo, hi = self.dataset.frame_ptr[k], self.dataset.frame_ptr[k + 1]
         idx = np.arange(lo, hi)
         ids = self.dataset.obs_ids[idx]
-        disparity = self.dataset.obs_z[idx, 0] - self.dataset.obs_z[idx, 2]
+        disparity = self.camera.disparity(self.dataset.obs_z[idx])
         new = idx[(self.status[idx] == USED) & np.isnan(self.landmarks[ids, 0])
                   & (disparity >= self.config.min_disparity)]
         if len(new):
@@ -156,8 +157,7 @@ class _WindowState:
         if not len(idx):
             return
         m0 = self.landmarks[ids]
-        z, _, J, _ = reprojection(self.camera.Ks, self.camera.cam_T_imu,
-                                  np.broadcast_to(self.world_T_imu[v], (len(idx), 4, 4)), m0)
+        z, _, J, _ = stereo_projection(self.camera.Ks, self.camera.cam_T_imu, self.world_T_imu[v], m0)
         r = z - ds.obs_z[idx]
         s = (r * r).sum(axis=1) / self.config.sigma_pixel**2
         w = robust_loss(s, self.config.loss, self.config.loss_scale)[1] / self.config.sigma_pixel**2

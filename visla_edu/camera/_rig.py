@@ -1,0 +1,264 @@
+"""The calibrated stereo rig mounted on the IMU: :class:`StereoCamera`."""
+
+import numpy as np
+
+from visla_edu import lie
+from visla_edu.camera._extrinsics import rectified_baseline
+from visla_edu.camera._intrinsics import disparity, same_intrinsics, stereo_matrix, stereo_rows
+from visla_edu.camera._projection import projection, stereo_projection
+from visla_edu.camera._triangulation import triangulate_bearing, triangulate_disparity, triangulation_jacobian
+
+__all__ = ["StereoCamera"]
+
+
+def _check_points(p_world, name):
+    p_world = np.asarray(p_world, dtype=float)
+    if p_world.ndim != 2 or p_world.shape[1] != 3:
+        raise ValueError(f"{name}: landmarks must have shape (M, 3) in world coordinates, got {p_world.shape}")
+    return p_world
+
+
+class StereoCamera:
+    """A calibrated stereo rig mounted on the IMU (a rectified pair, one or two intrinsics).
+
+    Parameters
+    ----------
+    K : array_like, shape (3, 3)
+        Left camera intrinsics.
+    b : float
+        Baseline in metres.
+    imu_T_cam : array_like, shape (4, 4)
+        Pose of the left camera (optical frame) in the IMU frame.
+    K_right : array_like, shape (3, 3), optional
+        Right camera intrinsics (default: ``K``); see :mod:`visla_edu.camera._intrinsics`.
+
+    Attributes
+    ----------
+    Ks : ndarray, shape (4, 4)
+        Stereo matrix, see :func:`~visla_edu.camera.stereo_matrix`.
+    cam_T_imu : ndarray, shape (4, 4)
+        ``inv(imu_T_cam)``, written ``o_T_i`` in the course.
+    K_right : ndarray, shape (3, 3)
+        ``K`` itself (a copy) for a single-intrinsics rig.
+    same_intrinsics : bool
+        ``K_right == K``: every computation is the single-intrinsics one, bit for bit.
+    stereo_rows : ndarray, shape (3, 4)
+        The exact reduction of the four stereo rows (:func:`~visla_edu.camera.stereo_rows`).
+    fsu_b : float
+        ``fsu b``: a landmark at depth ``d`` has :meth:`disparity` ``fsu b / d`` (px).
+    """
+
+    def __init__(self, K, b, imu_T_cam, K_right=None):
+        self.K = np.array(K, dtype=float)
+        self.b = float(b)
+        self.Ks = stereo_matrix(self.K, self.b, K_right)
+        self.same_intrinsics = same_intrinsics(self.K, K_right)
+        self.K_right = self.K.copy() if self.same_intrinsics else np.array(K_right, dtype=float)
+        self.stereo_rows = stereo_rows(self.Ks)
+        self.fsu_b = self.K[0, 0] * self.b
+        self.imu_T_cam = np.array(imu_T_cam, dtype=float)
+        if self.imu_T_cam.shape != (4, 4):
+            raise ValueError(f"StereoCamera: imu_T_cam must have shape (4, 4), got {self.imu_T_cam.shape}")
+        self.cam_T_imu = lie.se3_inv(self.imu_T_cam)
+
+    @classmethod
+    def from_extrinsics(cls, K, K_right, imu_T_left, imu_T_right):
+        """The rig of two cameras given by their poses, the baseline derived (a rectified pair only).
+
+        Parameters
+        ----------
+        K, K_right : array_like, shape (3, 3)
+        imu_T_left, imu_T_right : array_like, shape (4, 4)
+            Both cameras' optical frames in the IMU frame.
+
+        Returns
+        -------
+        StereoCamera
+            ``b = |inv(imu_T_left) imu_T_right|`` (:func:`~visla_edu.camera.rectified_baseline`).
+
+        Raises
+        ------
+        ValueError
+            The cameras are rotated against each other, or the right one is not on the left
+            one's x axis, beyond the tolerances (the message says which and by how much).
+        """
+        return cls(K, rectified_baseline(imu_T_left, imu_T_right), imu_T_left, K_right)
+
+    def __repr__(self):
+        right = "" if self.same_intrinsics else f", right fsu={self.K_right[0, 0]:.2f}, fsv={self.K_right[1, 1]:.2f}"
+        return f"StereoCamera(fsu={self.K[0, 0]:.2f}, fsv={self.K[1, 1]:.2f}{right}, b={self.b:.4f} m)"
+
+    def disparity(self, z):
+        """Disparity in the left camera's pixels (``uL - uR`` for one intrinsics), shape (...).
+
+        Parameters
+        ----------
+        z : array_like, shape (..., 4)
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``fsu b / depth`` on noise-free pixels (:func:`~visla_edu.camera.disparity`).
+        """
+        return disparity(z, self.K, None if self.same_intrinsics else self.K_right)
+
+    def points_in_camera(self, world_T_imu, p_world):
+        """Homogeneous landmark coordinates in the left camera, ``q = cam_T_imu inv(T) m``.
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+        p_world : array_like, shape (M, 3)
+
+        Returns
+        -------
+        ndarray, shape (M, 4)
+        """
+        cam_T_world = self.cam_T_imu @ lie.se3_inv(world_T_imu)
+        p_world = _check_points(p_world, "points_in_camera")
+        return p_world @ cam_T_world[:, :3].T + cam_T_world[:, 3]
+
+    def predict(self, world_T_imu, p_world):
+        """Predicted stereo pixels ``z = Ks pi(cam_T_imu inv(world_T_imu) m)`` (``pi`` of :meth:`points_in_camera`).
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+        p_world : array_like, shape (M, 3)
+
+        Returns
+        -------
+        ndarray, shape (M, 4)
+        """
+        return projection(self.points_in_camera(world_T_imu, p_world)) @ self.Ks.T
+
+    def predict_with_jacobians(self, world_T_imu, p_world):
+        """Predicted pixels and both observation Jacobians (:func:`~visla_edu.camera.stereo_projection`).
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+            Pose mean ``mu``.
+        p_world : array_like, shape (M, 3)
+
+        Returns
+        -------
+        z : ndarray, shape (M, 4)
+        J_z_landmark : ndarray, shape (M, 4, 3)
+            ``Ks dpi/dq(q) cam_T_imu inv(mu) P^T``.
+        J_z_pose : ndarray, shape (M, 4, 6)
+            ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` for the right perturbation.
+        """
+        p_world = _check_points(p_world, "predict_with_jacobians")
+        z, _, J_z_landmark, J_z_pose = stereo_projection(self.Ks, self.cam_T_imu, np.asarray(world_T_imu, float),
+                                                         p_world)
+        return z, J_z_landmark, J_z_pose
+
+    def jacobian_landmark(self, world_T_imu, p_world):
+        """``J_z_landmark`` of :meth:`predict_with_jacobians`, shape (M, 4, 3).
+
+        ``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` with ``P = [I 0]``: the derivative of
+        the predicted pixels with respect to each landmark's world position.
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+            Pose mean ``mu``, the IMU in the world frame.
+        p_world : array_like, shape (M, 3)
+            Landmark positions ``m`` in the world frame, in metres.
+
+        Returns
+        -------
+        ndarray, shape (M, 4, 3)
+            One 4x3 block per landmark, pixels per metre.
+
+        Raises
+        ------
+        ValueError
+            ``world_T_imu`` is not (4, 4) or ``p_world`` is not (M, 3).
+        """
+        return self.predict_with_jacobians(world_T_imu, p_world)[1]
+
+    def jacobian_pose(self, world_T_imu, p_world):
+        """``J_z_pose`` of :meth:`predict_with_jacobians`, shape (M, 4, 6).
+
+        ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``: the derivative of the predicted
+        pixels with respect to the right perturbation ``world_T_imu = mu exp(delta^)``,
+        ``delta = [v; w]`` (linear first).
+
+        Parameters
+        ----------
+        world_T_imu : array_like, shape (4, 4)
+            Pose mean ``mu``, the IMU in the world frame.
+        p_world : array_like, shape (M, 3)
+            Landmark positions ``m`` in the world frame, in metres.
+
+        Returns
+        -------
+        ndarray, shape (M, 4, 6)
+            One 4x6 block per landmark; columns 0-2 for ``v``, 3-5 for ``w``.
+
+        Raises
+        ------
+        ValueError
+            ``world_T_imu`` is not (4, 4) or ``p_world`` is not (M, 3).
+        """
+        return self.predict_with_jacobians(world_T_imu, p_world)[2]
+
+    def triangulate(self, z, world_T_imu=None, method="disparity"):
+        """Landmark positions from stereo pixels.
+
+        Parameters
+        ----------
+        z : array_like, shape (M, 4)
+        world_T_imu : array_like, shape (4, 4), optional
+            If given, points are returned in the world frame, else in the left camera frame.
+        method : {"disparity", "bearing"}
+
+        Returns
+        -------
+        ndarray, shape (M, 3)
+            NaN rows where the disparity is not positive.
+        """
+        if method == "disparity":
+            p_cam = triangulate_disparity(z, self.K, self.b, self._right())
+        elif method == "bearing":
+            p_cam = triangulate_bearing(z, self.K, self.b, self._right())
+        else:
+            raise ValueError(f"triangulate: method must be 'disparity' or 'bearing', got {method!r}")
+        if world_T_imu is None:
+            return p_cam
+        world_T_cam = np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam
+        return p_cam @ world_T_cam[:3, :3].T + world_T_cam[:3, 3]
+
+    def triangulation_jacobian(self, z):
+        """:func:`~visla_edu.camera.triangulation_jacobian` of the rig's disparity triangulation, (..., 3, 4)."""
+        return triangulation_jacobian(z, self.K, self.b, self._right())
+
+    def triangulation_covariance(self, z, noise_var, world_T_imu=None):
+        """Covariance of triangulated points from pixel noise ``noise_var I4``.
+
+        ``J (noise_var I) J^T`` with ``J`` from :func:`triangulation_jacobian`, rotated into the
+        world frame (``R Sigma_cam R^T`` with ``R`` the rotation of ``world_T_imu @ imu_T_cam``)
+        when a pose is given.
+
+        Parameters
+        ----------
+        z : array_like, shape (M, 4)
+        noise_var : float
+        world_T_imu : array_like, shape (4, 4), optional
+
+        Returns
+        -------
+        ndarray, shape (M, 3, 3)
+        """
+        J = self.triangulation_jacobian(z)
+        cov = noise_var * J @ np.swapaxes(J, -1, -2)
+        if world_T_imu is None:
+            return cov
+        R = (np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam)[:3, :3]
+        return R @ cov @ R.T
+
+    def _right(self):
+        """``K_right`` for the triangulation functions (None for one intrinsics: their bit-identical path)."""
+        return None if self.same_intrinsics else self.K_right

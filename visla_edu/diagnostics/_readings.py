@@ -1,0 +1,176 @@
+"""Which way a 2025+ file's extrinsics point and which camera frame they use, decided from evidence.
+
+The file's ``extL_T_imu``, ``extR_T_imu`` may be read four ways
+(:func:`visla_edu.camera.extrinsic_readings`: camera->IMU or IMU->camera, optical or regular camera
+frame). Three kinds of evidence speak to the reading, and :func:`choose_reading` weighs them:
+
+* **Rig geometry** (the loader's, ``RigReading.problem``): under the right reading the right
+  camera is the left one moved along the left camera's x axis. A wrong camera frame puts it on
+  another axis, a wrong direction usually does too (the offset then lies along the camera's x axis
+  seen from the IMU).
+* **Track reprojection** (:class:`~._tracks.TrackScorer` with the readings as candidates): each
+  reading's left camera, moved by the dead-reckoned IMU motion, must land each track's first
+  observation on its later ones. The reading chosen is the one every other is worse than with
+  95% confidence.
+* **Visual odometry** (:func:`~._vo.check_extrinsics` with the readings as candidates): the
+  camera's own motion mapped into the IMU frame must agree with the IMU's (slopes near 1).
+
+Rules (the rig geometry first: it is exact when both extrinsics are written the same way, while
+a file's IMU axes may be flipped, dataset 03's are, which the motion would read as another
+reading; the axis flips are decided afterwards, on the chosen reading): the only reading under
+which the pair is rectified; among several, the one the tracks choose; else the loader's (the
+first rectified one of :data:`visla_edu.data.READING_ORDER`), with a warning. The motion evidence
+checks the choice: when the tracks choose another reading, or the odometry disagrees with the
+chosen one and agrees with another, or disagrees with all four while the tracks do not confirm
+the choice, the extrinsics match no reading consistently, and a warning says so.
+"""
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from visla_edu.diagnostics._tracks import TrackChoice, TrackScorer
+from visla_edu.diagnostics._vo import AGREES, DISAGREES, check_extrinsics
+
+__all__ = ["ReadingEvidence", "choose_reading"]
+
+
+@dataclass
+class ReadingEvidence:
+    """The evidence on the reading of a file's extrinsics, and the decision (JSON-safe).
+
+    Attributes
+    ----------
+    names : list of str
+        The four readings, in :func:`visla_edu.camera.extrinsic_readings`'s order.
+    geometry : dict
+        Name -> ``{"offset": [x, y, z] (m, the right camera in the left camera frame),
+        "rotation_deg": angle between the cameras, "problem": "" or why the pair is not
+        rectified}``.
+    loader : str
+        The reading the loader started from.
+    track : TrackChoice
+        Track reprojection among the readings (each at its best lag).
+    track_scores : dict
+        Name -> median left-image error (px) per lag of :data:`~._vo.LAGS` (None without pairs).
+    slope_lag : int
+        The lag of the odometry's slopes.
+    rotation_slope, translation_slope : dict
+        Name -> slope of the odometry's motion on the IMU's (1 = agreement; None without pairs).
+    vo_verdict : dict
+        Name -> "agrees", "disagrees" or "not enough evidence".
+    chosen : str
+        The reading used.
+    reason : str
+        Why, in one line.
+    warning : str
+        ``""``, or what the user should check (a conflict, or extrinsics that match no reading).
+    """
+
+    names: list
+    geometry: dict
+    loader: str
+    track: TrackChoice
+    track_scores: dict
+    slope_lag: int
+    rotation_slope: dict
+    translation_slope: dict
+    vo_verdict: dict
+    chosen: str
+    reason: str
+    warning: str
+
+    def to_dict(self):
+        """JSON-safe dict; :meth:`from_dict` inverts it."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d):
+        """A :class:`ReadingEvidence` from :meth:`to_dict`'s output; ValueError if it is malformed."""
+        fields = dict(d)
+        fields["track"] = TrackChoice(**fields["track"])
+        evidence = cls(**fields)
+        texts = [evidence.loader, evidence.chosen, evidence.reason, evidence.warning]
+        if evidence.chosen not in evidence.names or not all(isinstance(t, str) for t in texts):
+            raise ValueError(f"malformed reading evidence (chosen {evidence.chosen!r} of {evidence.names!r})")
+        return evidence
+
+
+def _finite_or_none(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def _decide(readings, loader, track):
+    """``(chosen name, reason)``: geometry first, the track reprojection among several rectified readings."""
+    rectified = [r.name for r in readings if r.rectified]
+    if len(rectified) == 1:
+        return rectified[0], "the only reading under which the right camera lies on the left camera's x axis"
+    if track.chosen in rectified:
+        return track.chosen, (f"the right camera lies on the left camera's x axis under {rectified}; track "
+                              "reprojection: every other reading has a larger error with 95% confidence")
+    return loader, (f"the right camera lies on the left camera's x axis under {rectified}, and the track reprojection "
+                    f"cannot tell them apart ({track.verdict}); kept the loader's {loader!r} (the course's order)")
+
+
+def _motion_warning(chosen, rectified, track, vo_verdict):
+    """``""``, or a warning when the motion evidence contradicts the chosen reading or matches no reading."""
+    others_agree = [k for k, v in vo_verdict.items() if v == AGREES and k != chosen]
+    if len(rectified) > 1 and track.chosen not in rectified:
+        return (f"warning: the data cannot tell the readings {rectified} of extL_T_imu, extR_T_imu apart; visla-edu "
+                f"uses {chosen!r}. Check the course's documentation of the extrinsics")
+    if track.chosen not in (None, chosen) or (vo_verdict[chosen] == DISAGREES and others_agree):
+        motion = track.chosen if track.chosen not in (None, chosen) else others_agree[0]
+        return (f"warning: the extrinsics match neither reading consistently: the rig geometry reads them as "
+                f"{chosen!r}, the motion the IMU and the camera see as {motion!r}. Are extL_T_imu and extR_T_imu from this drive's "
+                "rig and written the same way? Expect a poor estimate")
+    if all(v == DISAGREES for v in vo_verdict.values()) and track.chosen != chosen:
+        return ("warning: the extrinsics match none of the four readings: the visual odometry contradicts every one "
+                "and the track reprojection does not confirm the chosen one. Are extL_T_imu, extR_T_imu from this "
+                "drive's rig (or the angular velocity in deg/s)? Expect a poor estimate")
+    return ""
+
+
+def _motion_words(chosen, track, vo_verdict):
+    """What the motion evidence says of the chosen reading, for the reason line."""
+    if track.chosen == chosen:
+        tracks = "track reprojection confirms it (every other reading worse with 95% confidence)"
+    elif track.chosen is None:
+        tracks = f"track reprojection: {track.verdict}"
+    else:
+        tracks = f"track reprojection prefers {track.chosen!r}"
+    return f"{tracks}; visual odometry: {vo_verdict[chosen]}"
+
+
+def choose_reading(dataset):
+    """The reading of ``dataset``'s extrinsics to use, and its :class:`ReadingEvidence`.
+
+    Parameters
+    ----------
+    dataset : visla_edu.dataset.Dataset
+        With ``extrinsic_readings`` (a 2025+ file).
+
+    Returns
+    -------
+    reading : visla_edu.camera.RigReading
+    evidence : ReadingEvidence
+    """
+    readings = dataset.extrinsic_readings
+    loader = next((r.name for r in readings if np.array_equal(r.imu_T_left, dataset.imu_T_cam)),
+                  next((r.name for r in readings if r.rectified), readings[0].name))
+    scorer = TrackScorer(dataset, {r.name: r.imu_T_left for r in readings})
+    track = scorer.choose_correction()
+    slope_lag = scorer.best_lag(track.best) if track.best is not None else 0
+    check = check_extrinsics(dataset, slope_lag, {r.name: r.imu_T_left for r in readings})
+    chosen, reason = _decide(readings, loader, track)
+    reason = f"{reason}; {_motion_words(chosen, track, check.verdict)}"
+    warning = _motion_warning(chosen, [r.name for r in readings if r.rectified], track, check.verdict)
+    rotation = {k: _finite_or_none(v) for k, v in check.rotation_slope.items()}
+    evidence = ReadingEvidence(
+        names=[r.name for r in readings],
+        geometry={r.name: {"offset": [float(x) for x in r.offset], "rotation_deg": float(np.degrees(r.rotation)),
+                           "problem": r.problem} for r in readings},
+        loader=loader, track=track, track_scores=scorer.evidence(track, None).scores, slope_lag=int(slope_lag),
+        rotation_slope=rotation, translation_slope={k: _finite_or_none(v) for k, v in check.translation_slope.items()},
+        vo_verdict=dict(check.verdict), chosen=chosen, reason=reason, warning=warning)
+    return next(r for r in readings if r.name == chosen), evidence
