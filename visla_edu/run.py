@@ -197,6 +197,8 @@ class RunResult:
         :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
     start_world_T_imu : ndarray, shape (T, 4, 4), or None
         Batch smoother: the trajectory it started from (None otherwise).
+    track_counts : dict of str -> int
+        Joint SLAM with clones: :attr:`visla_edu.filters.JointSlam.track_counts` (empty otherwise).
     start_mode : str
         Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``, the
         lowest objective of the three), else ``""``.
@@ -222,11 +224,22 @@ class RunResult:
     evaluation: dict = field(default_factory=dict)
     start_world_T_imu: np.ndarray = None
     start_mode: str = ""
+    track_counts: dict = field(default_factory=dict)
     notes: str = ""
 
     def status_totals(self):
-        """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``."""
-        return dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
+        """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``.
+
+        With clones, the ``delayed`` observations of the tracks that were used or gated later
+        count as ``used`` or ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (tracks
+        too short, without a point in front of their cameras, or still open at the end).
+        """
+        totals = dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
+        used, gated = (int(self.track_counts.get(k, 0)) for k in ("observations_used", "observations_gated"))
+        totals["used"] += used
+        totals["gated"] += gated
+        totals["delayed"] -= used + gated
+        return totals
 
     def summary(self):
         """A few lines a student can read: mode, counts, timing."""
@@ -239,6 +252,10 @@ class RunResult:
         ]
         if seen:
             lines.append(f"gated as outliers: {100 * totals['gated'] / seen:.2f}% of observations")
+        if self.track_counts:
+            c = self.track_counts
+            lines.append(f"tracks: {c['tracks_used']} used in multi-frame updates, {c['tracks_gated']} gated whole, "
+                         f"{c['entered']} entered the state, {c['tracks_short']} too short")
         if self.notes:
             lines.append(self.notes)
         else:
@@ -303,6 +320,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
         landmarks=landmarks, landmark_cov=landmark_cov,
         dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=config.imu_lag),
         config=config.to_dict(), imu_T_cam=flt.camera.imu_T_cam.copy(), **arrays.as_dict(),
+        track_counts={k: int(v) for k, v in getattr(flt, "track_counts", {}).items()} if getattr(flt, "window", 0) else {},
     )
 
 

@@ -73,8 +73,13 @@ class CloneWindow:
         oldest = observed & full & (self.buffer.first_frame(buffered) <= self.state.clone_frames[0])
         room = max(0, self.config.max_slam_landmarks - len(self.state.active_ids))
         long_ids = buffered[oldest]
-        rows = [self._enter_from_track(lm) for lm in long_ids[:room]]
-        rows.append(self._track_rows(np.concatenate([buffered[~observed], long_ids[room:]])))
+        tracks = self._tracks_of(np.concatenate([long_ids[:room], buffered[~observed], long_ids[room:]]))
+        if tracks is None:
+            return 0.0, 0
+        entering = np.isin(tracks[0], long_ids[:room])
+        rows = [self._enter_from_track(*_select(tracks, [b])) for b in np.nonzero(entering)[0]]
+        if not np.all(entering):
+            rows.append(self._track_rows(*_select(tracks, np.nonzero(~entering)[0])))
         rows = [r for r in rows if r is not None]
         if not rows:
             return 0.0, 0
@@ -115,12 +120,8 @@ class CloneWindow:
         keep, remap = ok[owner], np.cumsum(ok) - 1
         return lms[ok], clone_index[keep], z[keep], remap[owner[keep]], p_world[ok]
 
-    def _track_rows(self, lms):
-        """Null-space rows ``(H (m, 6 + 6 n_clones), r (m,))`` of the tracks of ``lms`` that pass the gate."""
-        tracks = self._tracks_of(lms)
-        if tracks is None:
-            return None
-        lms, clone_index, z, owner, p_world = tracks
+    def _track_rows(self, lms, clone_index, z, owner, p_world):
+        """Null-space rows ``(H (m, 6 + 6 n_clones), r (m,))`` of the tracks (:meth:`_tracks_of`) that pass the gate."""
         r, H_clone, H_point = _tracks.track_systems(self.camera, self.form, self.clone_T[clone_index], z, owner,
                                                     p_world)
         counts = np.bincount(owner)
@@ -162,12 +163,9 @@ class CloneWindow:
         self.track_counts["observations_used"] += n * used
         self.track_counts["observations_gated"] += n * gated
 
-    def _enter_from_track(self, lm):
-        """Delayed entry of landmark ``lm`` from its track; returns its null-space rows, or None (refused)."""
-        tracks = self._tracks_of(np.array([lm]))
-        if tracks is None:
-            return None
-        _, clone_index, z, owner, p_world = tracks
+    def _enter_from_track(self, lms, clone_index, z, owner, p_world):
+        """Delayed entry of the one landmark of ``lms`` from its track; its null-space rows, or None (refused)."""
+        lm = int(lms[0])
         r, H_clone, H_point = _tracks.track_systems(self.camera, self.form, self.clone_T[clone_index], z, owner,
                                                     p_world)
         n = len(z)
@@ -209,3 +207,13 @@ class CloneWindow:
             raise self._diverged(err, f" (track update, {len(r)} rows)") from err
         self._retract(delta)
         return nis, len(r)
+
+
+def _select(tracks, picked):
+    """The tracks ``picked`` (indices) of a :meth:`CloneWindow._tracks_of` tuple, renumbered."""
+    lms, clone_index, z, owner, p_world = tracks
+    picked = np.asarray(picked, dtype=np.int64)
+    keep = np.isin(owner, picked)
+    renumber = np.full(len(lms), -1)
+    renumber[picked] = np.arange(len(picked))
+    return lms[picked], clone_index[keep], z[keep], renumber[owner[keep]], p_world[picked]

@@ -36,7 +36,7 @@ __all__ = ["TrackBuffer", "triangulate_tracks", "track_systems", "project_out_po
 #: give ``4 * 3 - 3 = 9`` rows about the clones).
 MIN_TRACK_OBSERVATIONS = 3
 #: Gauss-Newton iterations of the triangulation.
-TRIANGULATION_ITERATIONS = 8
+TRIANGULATION_ITERATIONS = 5
 #: Residuals beyond this many pixel sigmas get Huber's weight ``c / |r|`` in the triangulation.
 HUBER_SIGMAS = 3.0
 #: Smallest inverse depth (1/m) of a triangulated point: 10 km.
