@@ -416,7 +416,8 @@ def _print_evaluation(evaluations, ground_truth, mode, start_mode=""):
           "drift over 100-800 m segments:")
     rows = {f"{mode} estimate": evaluations["estimate"]}
     if "start" in evaluations:
-        rows[f"{start_mode} it started from"] = evaluations["start"]
+        start = {"slam": "slam (EKF)", "vio": "vio", "deadreckon": "dead reckoning"}.get(start_mode, start_mode or "start")
+        rows[f"{start} it started from"] = evaluations["start"]
     rows["dead reckoning"] = evaluations["dead_reckoning"]
     width = max(map(len, rows)) + 2
     for label, evaluation in rows.items():

@@ -68,7 +68,7 @@ class CloneWindow:
         buffered = self.buffer.landmarks()
         if len(buffered) == 0:
             return 0.0, 0
-        observed = np.isin(buffered, seen)
+        observed = np.isin(buffered, seen) & (self.t < self.dataset.num_frames - 1)  # the last frame ends them all
         full = len(self.state.clone_frames) > self.window
         oldest = observed & full & (self.buffer.first_frame(buffered) <= self.state.clone_frames[0])
         room = max(0, self.config.max_slam_landmarks - len(self.state.active_ids))
@@ -99,26 +99,30 @@ class CloneWindow:
             ``(lms, clone_index, z, owner, p_world)`` of the tracks with at least
             :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations and a point in
             front of every camera, observations sorted by track; None when there are none.
+            Shorter tracks only get a place on the map.
         """
         if len(lms) == 0:
             return None
         frames, z, owner = self.buffer.pop(lms)
-        counts = np.bincount(owner, minlength=len(lms))
-        enough = counts >= _tracks.MIN_TRACK_OBSERVATIONS
-        self.track_counts["tracks_short"] += int(np.sum(~enough))
-        keep = enough[owner]
-        if not np.any(keep):
-            return None
-        lms, remap = lms[enough], np.cumsum(enough) - 1
-        frames, z, owner = frames[keep], z[keep], remap[owner[keep]]
         clone_index = np.searchsorted(self.state.clone_frames, frames)
         p_world, ok = _tracks.triangulate_tracks(self.camera, self.clone_T[clone_index], z, owner, len(lms),
                                                  np.sqrt(self.noise_var))
-        self.track_counts["tracks_failed"] += int(np.sum(~ok))
-        if not np.any(ok):
+        enough = np.bincount(owner, minlength=len(lms)) >= _tracks.MIN_TRACK_OBSERVATIONS
+        short = ~enough & ok  # too short to update anything, but placed on the map
+        if np.any(short):
+            keep, remap = short[owner], np.cumsum(short) - 1
+            _, _, H_point = _tracks.track_systems(self.camera, self.form, self.clone_T[clone_index[keep]], z[keep],
+                                                  remap[owner[keep]], p_world[short])
+            information = _tracks.segment_sum(np.swapaxes(H_point, 1, 2) @ H_point, remap[owner[keep]], int(short.sum()))
+            self.landmarks[lms[short]] = p_world[short]
+            self.landmark_cov[lms[short]] = self.noise_var * np.linalg.pinv(information, hermitian=True)
+        self.track_counts["tracks_short"] += int(np.sum(~enough))
+        self.track_counts["tracks_failed"] += int(np.sum(enough & ~ok))
+        use = enough & ok
+        if not np.any(use):
             return None
-        keep, remap = ok[owner], np.cumsum(ok) - 1
-        return lms[ok], clone_index[keep], z[keep], remap[owner[keep]], p_world[ok]
+        keep, remap = use[owner], np.cumsum(use) - 1
+        return lms[use], clone_index[keep], z[keep], remap[owner[keep]], p_world[use]
 
     def _track_rows(self, lms, clone_index, z, owner, p_world):
         """Null-space rows ``(H (m, 6 + 6 n_clones), r (m,))`` of the tracks (:meth:`_tracks_of`) that pass the gate."""
@@ -194,10 +198,18 @@ class CloneWindow:
         return H_o, r_o
 
     def _update_rows(self, H, r):
-        """One EKF update with the stacked track rows (over :meth:`_update_columns`); ``(nis, dof)``."""
-        if len(r) > H.shape[1]:  # more rows than columns: an orthonormal compression, the same update
+        """One EKF update with the stacked track rows (over :meth:`_update_columns`); ``(nis, dof)``.
+
+        More rows than columns are compressed orthonormally (``H = Q R``, the same update); the
+        part of ``r`` outside ``Q``'s columns, where ``S`` is ``noise_var I``, is added to the NIS,
+        so ``nis`` and ``dof`` are those of all the rows.
+        """
+        rows, outside = len(r), 0.0
+        if len(r) > H.shape[1]:
             Q, H = np.linalg.qr(H)
-            r = Q.T @ r
+            compressed = Q.T @ r
+            outside = max(0.0, float(r @ r - compressed @ compressed)) / self.noise_var
+            r = compressed
         U = self._update_columns()
         Sigma_Ht = self.state.Sigma[:, U] @ H.T
         S = H @ Sigma_Ht[U] + self.noise_var * np.eye(len(r))
@@ -206,7 +218,7 @@ class CloneWindow:
         except np.linalg.LinAlgError as err:
             raise self._diverged(err, f" (track update, {len(r)} rows)") from err
         self._retract(delta)
-        return nis, len(r)
+        return nis + outside, rows
 
 
 def _select(tracks, picked):

@@ -198,8 +198,6 @@ class FilterConfig:
 
     sigma_pixel: float = setting(1.5, float, 1e-3, 100.0, unit="px",
                                  why="no tracker locates a feature to a thousandth of a pixel; 100 px is no location")
-    pixel_noise_inflation: object = setting(AUTO, float, 1.0, MAX_INFLATION, words=(AUTO,),
-                                            why="a factor of at least 1 on sigma_pixel")
     sigma_linear_velocity: object = setting(AUTO, float, 0.0, 50.0, words=(AUTO,), per_axis=True, unit="m/s",
                                             why="0 trusts the velocities; 50 m/s (180 km/h) of noise is no measurement")
     sigma_angular_velocity: object = setting(AUTO, float, 0.0, 5.0, words=(AUTO,), per_axis=True, unit="rad/s",
@@ -226,6 +224,8 @@ class FilterConfig:
     slam_error: str = setting("invariant", str, words=("invariant", "right"),
                               why="the invariant EKF, or the right perturbation notebooks 05-06 derive")
     reinit_gated_landmarks: bool = setting(True, bool)
+    pixel_noise_inflation: object = setting(AUTO, float, 1.0, MAX_INFLATION, words=(AUTO,),
+                                            why="a factor of at least 1 on sigma_pixel")
     msckf_window: int = setting(20, int, 0, 200, why="0 is the classic joint EKF; a clone is a 6x6 block per frame")
     track_gate_probability: float = setting(0.95, float, 0.0, 1.0, low_open=True,
                                             why="a probability; 1 disables the whole-track gate")

@@ -30,7 +30,7 @@ from visla_edu.camera import stereo_projection
 from visla_edu.metrics import chi2_quantile
 
 __all__ = ["TrackBuffer", "triangulate_tracks", "track_systems", "project_out_point", "gate_tracks", "delayed_entry",
-           "MIN_TRACK_OBSERVATIONS", "TRIANGULATION_ITERATIONS", "HUBER_SIGMAS"]
+           "segment_sum", "MIN_TRACK_OBSERVATIONS", "TRIANGULATION_ITERATIONS", "HUBER_SIGMAS"]
 
 #: A track with fewer observations than this in the clone window is not used (3 observations
 #: give ``4 * 3 - 3 = 9`` rows about the clones).
@@ -104,7 +104,7 @@ def _project(camera, world_T_imu, p_world):
     return stereo_projection(camera.Ks, camera.cam_T_imu, world_T_imu, p_world)
 
 
-def _segment_sum(values, owner, count):
+def segment_sum(values, owner, count):
     """Sum of ``values`` (N, ...) over the observations of each track (``owner`` sorted), (count, ...)."""
     starts = np.searchsorted(owner, np.arange(count))
     return np.add.reduceat(values, starts, axis=0)
@@ -161,14 +161,14 @@ def triangulate_tracks(camera, world_T_imu, z, owner, count, sigma_pixel):
         weight = np.minimum(1.0, c / np.maximum(np.abs(r), 1e-12))
         H = J_z_landmark @ dp_dpsi[owner]  # (N, 4, 3)
         WH = H * weight[:, :, None]
-        normal = _segment_sum(np.swapaxes(WH, 1, 2) @ H, owner, count) + 1e-9 * np.eye(3)
-        gradient = _segment_sum(np.einsum("nij,ni->nj", WH, r), owner, count)
+        normal = segment_sum(np.swapaxes(WH, 1, 2) @ H, owner, count) + 1e-9 * np.eye(3)
+        gradient = segment_sum(np.einsum("nij,ni->nj", WH, r), owner, count)
         psi = psi + np.linalg.solve(normal, gradient[..., None])[..., 0]
         psi[:, 2] = np.maximum(psi[:, 2], MIN_INVERSE_DEPTH)
     p_world, _ = _from_inverse_depth(world_T_cam, psi)
     _, depth, _, _ = _project(camera, world_T_imu, p_world[owner])
     ok = np.isfinite(p_world).all(axis=1)
-    ok &= _segment_sum((depth >= MIN_POINT_DEPTH).astype(np.int64), owner, count) == np.bincount(owner, minlength=count)
+    ok &= segment_sum((depth >= MIN_POINT_DEPTH).astype(np.int64), owner, count) == np.bincount(owner, minlength=count)
     return p_world, ok
 
 

@@ -19,13 +19,14 @@ LOSSES = ("cauchy", "huber", "none")
 #: What the sliding window does with the states that leave it.
 WINDOW_MODES = ("fix", "marginalize")
 #: The settings :meth:`SmootherConfig.from_filter_config` takes from the filter's (the shared
-#: model): smoother setting -> :class:`~visla_edu.filters.FilterConfig` setting.
+#: model): smoother setting -> :class:`~visla_edu.filters.FilterConfig` setting; ``sigma_pixel``
+#: is multiplied by the filter's ``pixel_noise_inflation``.
 FROM_FILTER = {"sigma_pixel": "sigma_pixel", "sigma_linear_velocity": "sigma_linear_velocity",
                "sigma_angular_velocity": "sigma_angular_velocity", "imu_lag": "imu_lag",
                "min_disparity": "min_init_disparity", "skip_repeated_frames": "skip_repeated_frames"}
 #: The filter settings the smoothers read; the sliding window uses no other filter setting but
 #: ``extrinsic_correction``.
-FILTER_SETTINGS = tuple(FROM_FILTER.values())
+FILTER_SETTINGS = tuple(FROM_FILTER.values()) + ("pixel_noise_inflation",)
 #: Own settings only the batch smoother reads, and only the sliding window (the other ignores them).
 BATCH_ONLY = ("max_iterations", "rejection_rounds", "landmark_covariance", "start")
 #: Starts of the batch smoother (``visla-edu run --mode smooth``, :func:`visla_edu.run.run_smoother`).
@@ -170,6 +171,7 @@ class SmootherConfig:
             raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
                              "(visla_edu.run.resolve_config(dataset, config))")
         model = {name: getattr(filter_config, source) for name, source in FROM_FILTER.items()}
+        model["sigma_pixel"] *= filter_config.pixel_noise_inflation  # the filters' camera noise (resolved)
         return cls(**{**model, **overrides})
 
     def to_dict(self):
