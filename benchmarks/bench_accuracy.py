@@ -163,7 +163,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data-dir", default=None)
     parser.add_argument("--quick", action="store_true", help="one simulated seed, no dataset-10-like drive")
-    parser.add_argument("--seeds", type=int, default=3, help="noisy twins of each drive (default 3)")
+    parser.add_argument("--seeds", type=int, default=6, help="noisy twins of each drive (default 6)")
     parser.add_argument("--no-candidates", action="store_true", help="part 1 only")
     args = parser.parse_args(argv)
     if "VISLA_EDU_CACHE" in os.environ:

@@ -93,6 +93,15 @@ class FilterConfig:
     * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
       far landmark triangulated from a smaller disparity is a poor Gaussian in x, y, z that
       makes joint SLAM overconfident and less accurate.
+    * ``pixel_noise_inflation`` (``"auto"``): :func:`pixel_noise_inflation`, 1 where one
+      observation resolves angles better than a gyro step (noisy velocities: the camera carries
+      the estimate), ``r^2`` where the gyro is ``r`` times better (GPS-aided velocities: a camera
+      whose track errors persist from frame to frame would pull a good dead reckoning off). The
+      exponent was chosen on the cross-drive benchmark (``benchmarks/bench_accuracy.py``).
+    * ``msckf_window`` 20: the joint filter keeps the last 20 poses as clones; short tracks update
+      it when they end (null space, gated whole) and long ones enter as landmarks from all their
+      observations. On the cross-drive benchmark this beats the filter without clones where the
+      landmarks are few and far (a highway) and matches it elsewhere; 10 and 30 were worse.
     * ``slam_error="invariant"``: the joint filter's error in the world frame, whose
       unobservable directions do not depend on the estimate, so it stays consistent where the
       right perturbation (notebooks 05-06) becomes overconfident (notebook 07).
