@@ -21,7 +21,7 @@ STEPS = capstone.Steps(predict, add_landmarks, slam_update)
 @pytest.fixture(scope="module")
 def tiny():
     ds = data.load("sim-tiny")
-    return ds, run.resolve_config(ds, FilterConfig(slam_error="right"))
+    return ds, run.resolve_config(ds, FilterConfig(slam_error="right", msckf_window=0))
 
 
 def test_the_library_parts_jacobians_match_finite_differences():

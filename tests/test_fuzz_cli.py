@@ -237,7 +237,7 @@ FAILURE_CASES = {
         lambda mp: mp.setattr(_state.ActiveSet, "dense", _raise(MemoryError)), ["--mode", "slam", "--dense"], 1,
         r"out of memory .*--landmark-stride"),
     "singular innovation covariance in SLAM": (
-        lambda mp: mp.setattr(ekf, "_gain_update", _raise(np.linalg.LinAlgError)), ["--mode", "slam"], 1,
+        lambda mp: mp.setattr(ekf, "gain_update", _raise(np.linalg.LinAlgError)), ["--mode", "slam"], 1,
         r"the filter diverged: .*innovation covariance not positive definite at frame \d+"),
     "Ctrl-C during the run": (
         lambda mp: mp.setattr(motion, "imu_step", _fail_at_call(9, KeyboardInterrupt())), [], 130,

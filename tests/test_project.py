@@ -195,13 +195,15 @@ def test_a_filter_written_outside_the_library_is_graded_with_its_own_ate(graded)
     assert float(row["nees_per_dof"]) == pytest.approx(np.nanmean(nees) / 6, rel=1e-12)
     measures = project.measure(estimate, covariance, np.zeros(60), np.zeros(60), prepared.truth, 0.0)
     points = _rubric.measured_points(measures, prepared.reference_measures, True, True)
-    assert [int(row[f"points_{k}"]) for k in points] == list(points.values())
-    assert int(row["points_measured"]) == sum(points.values()) and points["completes"] == 10
+    assert [row[f"points_{k}"] for k in points] == ["" if v is None else str(v) for v in points.values()]
+    assert int(row["points_measured"]) == sum(v or 0 for v in points.values()) and points["completes"] == 10
 
 
 def test_the_starter_of_project_md_earns_the_dead_reckoning_band_and_steps_in_the_stepper(graded):
     row = graded["rows"]["starter"]
-    assert (row["points_completes"], row["points_accuracy"], row["points_consistency"]) == ("10", "10", "0")
+    scored = not _rubric.accuracy_unscored(project.prepare_drive("sim-tiny").reference_measures)
+    assert (row["points_completes"], row["points_accuracy"], row["points_consistency"]) == ("10", "10" if scored else "",
+                                                                                        "0")
     assert row["nees_per_dof"] == ""  # its covariance is zero: no NEES
     blocks = re.findall(r"```python\n(.*?)```", project.assignment_text(), flags=re.S)
     namespace = {}
@@ -369,9 +371,9 @@ def test_measured_points_follow_the_bands():
 
 @pytest.mark.data
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["0020", "0042"])
+@pytest.mark.parametrize("name", ["0020"])
 def test_accuracy_is_not_scored_where_dead_reckoning_is_as_good_as_slam(require_data, name):
-    """PROJECT.md says so of the two KITTI drives of the 2019 release (nearly noise-free velocities)."""
+    """PROJECT.md says so of 0020, a KITTI drive of the 2019 release (nearly noise-free velocities)."""
     require_data(name)
     prepared = project.prepare_drive(name)
     assert prepared.truth is not None and not prepared.simulated

@@ -8,7 +8,8 @@ from visla_edu.codes import OBS_USED, SMOOTHER_MODES
 from visla_edu.filters import FilterConfig
 
 #: The tiny simulated drive has no lag or extrinsic error; fixed noise skips the calibration.
-CFG = FilterConfig(extrinsic_correction="none", sigma_linear_velocity=0.2, sigma_angular_velocity=0.02, imu_lag=0)
+CFG = FilterConfig(extrinsic_correction="none", sigma_linear_velocity=0.2, sigma_angular_velocity=0.02, imu_lag=0,
+                   pixel_noise_inflation=1.0)
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +143,8 @@ def test_filter_settings_lists_exactly_what_the_smoother_model_reads(tiny):
                "min_init_disparity": 5.0, "skip_repeated_frames": False, "landmark_prior_inflation": 3.0,
                "landmark_prior_sigma": 9.0, "initial_pose_sigma": 0.5, "gate_probability": 0.9,
                "landmark_cross_covariance": False, "mapping_motion_noise": False, "vio_refine_landmarks": True,
-               "slam_error": "right", "reinit_gated_landmarks": False}
+               "slam_error": "right", "reinit_gated_landmarks": False, "pixel_noise_inflation": 2.0,
+               "msckf_window": 5, "track_gate_probability": 0.5, "max_slam_landmarks": 7}
     fields = {f.name for f in dataclasses.fields(FilterConfig)}
     assert set(changed) | {"extrinsic_correction", "landmark_stride"} == fields  # a new setting is listed here
     model = smoother.SmootherConfig.from_filter_config(base)
@@ -160,7 +162,7 @@ def test_an_ekf_setting_with_mode_window_is_refused_not_ignored(capsys):
 @pytest.mark.parametrize("mode, ignored", [("smooth", {"window_size": 3, "window_iterations": 3,
                                                         "window_mode": "marginalize"}),
                                            ("window", {"max_iterations": 1, "rejection_rounds": 0,
-                                                       "landmark_covariance": False})])
+                                                       "landmark_covariance": False, "start": "best"})])
 def test_batch_only_and_window_only_settings_are_what_the_other_mode_ignores(tiny, mode, ignored):
     """smoother.WINDOW_ONLY leave the batch unchanged and BATCH_ONLY the window (so refusing
     them for the other mode refuses only what would be ignored); run_smoother refuses them."""

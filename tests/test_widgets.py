@@ -174,7 +174,8 @@ def test_figure_shows_the_current_frame():
     assert len(fig.active_points.get_offsets()) == len(rec.active_ids)
     assert len(fig.active_ellipses.get_segments()) == len(rec.active_ids)
     shown = sum(len(fig._image[fig.ax_left][code].get_offsets()) for code in
-                (filters.OBS_USED, filters.OBS_NEW, filters.OBS_GATED, filters.OBS_NO_DEPTH, filters.OBS_FAR))
+                (filters.OBS_USED, filters.OBS_NEW, filters.OBS_GATED, filters.OBS_NO_DEPTH, filters.OBS_FAR,
+                 filters.OBS_DELAYED))
     assert shown == len(rec.ids)
     assert fig.captions["frame"].startswith("frame 25: ")
     assert "frame 25: " not in w.status.value and "25</b>" in w.status.value

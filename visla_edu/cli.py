@@ -272,7 +272,8 @@ def _cmd_run(args):
         raise
     print(result.summary())
     if dataset.ground_truth is not None:
-        _print_evaluation(run.evaluate_result(result, dataset.ground_truth), dataset.ground_truth, args.mode)
+        _print_evaluation(run.evaluate_result(result, dataset.ground_truth), dataset.ground_truth, args.mode,
+                          result.start_mode)
     if args.out:
         print(f"saved {run.save_result(result, outputs['--out'])}")
     if args.trajectory_out:
@@ -407,7 +408,7 @@ def _load_with_ground_truth(args):
     return _select_frames(dataset, args.frames, args.ground_truth)
 
 
-def _print_evaluation(evaluations, ground_truth, mode):
+def _print_evaluation(evaluations, ground_truth, mode, start_mode=""):
     """The lines ``visla-edu run`` prints about the ground truth, estimate and dead reckoning."""
     source = Path(ground_truth.source).name if ground_truth.source else "the simulation"
     rows = f", {ground_truth.rows_text}" if ground_truth.rows_text else ""
@@ -415,7 +416,8 @@ def _print_evaluation(evaluations, ground_truth, mode):
           "drift over 100-800 m segments:")
     rows = {f"{mode} estimate": evaluations["estimate"]}
     if "start" in evaluations:
-        rows["slam (EKF) it started from"] = evaluations["start"]
+        start = {"slam": "slam (EKF)", "vio": "vio", "deadreckon": "dead reckoning"}.get(start_mode, start_mode or "start")
+        rows[f"{start} it started from"] = evaluations["start"]
     rows["dead reckoning"] = evaluations["dead_reckoning"]
     width = max(map(len, rows)) + 2
     for label, evaluation in rows.items():

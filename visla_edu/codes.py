@@ -11,6 +11,9 @@ Observation status (one code per observation in :class:`visla_edu.filters.StepRe
     OBS_NO_DEPTH  non-positive disparity: a broken stereo match, never used
     OBS_FAR       disparity too small to initialise the landmark (not yet in the state)
     OBS_IGNORED   not used by this mode (dead reckoning, landmark stride, repeated frame)
+    OBS_DELAYED   held for its track's multi-frame update (joint SLAM with clones: a landmark
+                  outside the state; the track's outcome, used or gated, is counted when the
+                  track is used, :attr:`visla_edu.filters.JointSlam.track_counts`)
 
 ``STATUS_NAMES[code]`` is the code's name in summaries and per-status counts.
 """
@@ -22,6 +25,7 @@ __all__ = [
     "OBS_NO_DEPTH",
     "OBS_FAR",
     "OBS_IGNORED",
+    "OBS_DELAYED",
     "STATUS_NAMES",
     "DEADRECKON",
     "MAPPING",
@@ -41,7 +45,8 @@ OBS_NEW = 2  #: first observation: the landmark entered the state here
 OBS_NO_DEPTH = 3  #: non-positive disparity: a broken stereo match, never used
 OBS_FAR = 4  #: disparity too small to initialise the landmark (not yet in the state)
 OBS_IGNORED = 5  #: not used by this mode (dead reckoning, landmark stride, repeated frame)
-STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored")
+OBS_DELAYED = 6  #: held for its track's multi-frame update (joint SLAM with clones)
+STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored", "delayed")
 
 DEADRECKON = "deadreckon"  #: IMU prediction only
 MAPPING = "mapping"  #: poses from dead reckoning, one 3x3 EKF per landmark

@@ -22,6 +22,7 @@ __all__ = [
     "POSE_DIM",
     "slot_columns",
     "cholesky_update",
+    "gain_update",
     "innovation_covariances",
     "mahalanobis_squared",
     "initialize_landmarks",
@@ -81,14 +82,36 @@ def cholesky_update(Sigma, H, cols, innovation, R):
         If the innovation covariance is not positive definite.
     """
     Sigma_Ht = Sigma[:, cols] @ H.T  # (D, m)
-    return _gain_update(Sigma, Sigma_Ht, H @ Sigma_Ht[cols] + R, innovation)
+    return gain_update(Sigma, Sigma_Ht, H @ Sigma_Ht[cols] + R, innovation)
 
 
-def _gain_update(Sigma, Sigma_Ht, S, innovation):
-    """``Sigma -= A^T A`` and ``delta = A^T L^{-1} r`` with ``S = L L^T``, ``A = L^{-1} H Sigma``.
+def gain_update(Sigma, Sigma_Ht, S, innovation):
+    """The EKF gain step in place: ``Sigma -= A^T A``, ``delta = A^T L^{-1} r`` with ``S = L L^T``, ``A = L^{-1} H Sigma``.
 
     ``A.T @ A`` is computed as a symmetric rank-m product, so a symmetric ``Sigma`` stays
     exactly symmetric.
+
+    Parameters
+    ----------
+    Sigma : ndarray, shape (D, D)
+        The state covariance, overwritten with the posterior.
+    Sigma_Ht : ndarray, shape (D, m)
+        ``Sigma H^T``.
+    S : ndarray, shape (m, m)
+        The innovation covariance ``H Sigma H^T + R``.
+    innovation : ndarray, shape (m,)
+
+    Returns
+    -------
+    delta : ndarray, shape (D,)
+        ``K r``.
+    nis : float
+        ``r^T S^-1 r``.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``S`` is not positive definite.
     """
     L = linalg.cholesky(S, lower=True, check_finite=False)
     A = linalg.solve_triangular(L, Sigma_Ht.T, lower=True, check_finite=False)  # (m, D)
@@ -360,7 +383,7 @@ def joint_correction(Sigma, obs_slots, z, noise_var, prediction, rows=STEREO_ROW
     S = J_pose3 @ Sigma_Ht[:6] + (J_lm3 @ Sigma_Ht[lm_cols].reshape(k, 3, 3 * k)).reshape(3 * k, 3 * k)
     S[np.diag_indices(3 * k)] += noise_var
     r3 = r4 @ rows.T
-    delta, nis = _gain_update(Sigma, Sigma_Ht, S, r3.ravel())
+    delta, nis = gain_update(Sigma, Sigma_Ht, S, r3.ravel())
     if rows is STEREO_ROWS:  # the dropped row is (vL - vR) / sqrt(2)
         nis += float(np.sum((r4[:, 1] - r4[:, 3]) ** 2)) / (2 * noise_var)
     else:

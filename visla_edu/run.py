@@ -19,16 +19,16 @@ True
 
 import contextlib
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
 from visla_edu import data, diagnostics, filters, metrics, motion
 from visla_edu._blas import check_blas_threads as _check_blas_threads
 from visla_edu._blas import limit_blas_threads
-from visla_edu._files import atomic_write, expand_user, format_bytes
+from visla_edu._results import RunArrays, RunResult, load_result, save_result
 from visla_edu.codes import (DEADRECKON, MAPPING, MODES, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED, SLAM, SMOOTH,
-                             SMOOTHER_MODES, STATUS_NAMES, VIO, WINDOW)
+                             SMOOTHER_MODES, STATUS_NAMES, VIO)
 from visla_edu.filters import FilterConfig
 
 __all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "resolve_config", "iterate_filter",
@@ -122,7 +122,10 @@ def resolve_config(dataset, config):
     """
     if config.resolved:
         return config
-    return config.resolve(diagnostics.calibrate(dataset))
+    calibration = diagnostics.calibrate(dataset) if any(getattr(config, n) == filters.AUTO for n in filters.AUTO_FIELDS) \
+        else None
+    return config.resolve(calibration, focal_length=float(dataset.K[0, 0]),
+                          time_step=float(np.median(dataset.time_steps)) if dataset.num_frames > 1 else 0.1)
 
 
 def _imu_T_cam(dataset, config, verbose):
@@ -161,83 +164,6 @@ def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1)
     with limit_blas_threads(blas_threads):
         while not flt.done:
             yield flt.step()
-
-
-@dataclass
-class RunResult:
-    """Everything a whole run produced.
-
-    Attributes
-    ----------
-    name, mode : str
-    dense : bool
-    time_stamps : ndarray, shape (T,)
-    world_T_imu : ndarray, shape (T, 4, 4)
-        ``world`` is the IMU frame at the first time stamp.
-    pose_cov : ndarray, shape (T, 6, 6)
-    landmarks : ndarray, shape (M, 3)
-        NaN for landmarks never initialised.
-    landmark_cov : ndarray, shape (M, 3, 3)
-    dead_reckoning : ndarray, shape (T, 4, 4)
-        The IMU-only trajectory, for comparison.
-    nis, nis_dof : ndarray, shape (T,)
-    status_counts : ndarray of int, shape (T, 6)
-        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
-    step_seconds : ndarray, shape (T,)
-    config : dict
-    imu_T_cam : ndarray, shape (4, 4)
-        The calibration used (after any correction).
-    evaluation : dict
-        Figures against ground truth, filled by :func:`evaluate_result` (empty without):
-        ``estimate_<name>``, ``dead_reckoning_<name>`` (and for the batch smoother
-        ``start_<name>``, the EKF it started from) for every field of
-        :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
-    start_world_T_imu : ndarray, shape (T, 4, 4), or None
-        Batch smoother: the joint EKF's trajectory it started from (None otherwise).
-    notes : str
-        Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
-    """
-
-    name: str
-    mode: str
-    dense: bool
-    time_stamps: np.ndarray
-    world_T_imu: np.ndarray
-    pose_cov: np.ndarray
-    landmarks: np.ndarray
-    landmark_cov: np.ndarray
-    dead_reckoning: np.ndarray
-    nis: np.ndarray
-    nis_dof: np.ndarray
-    status_counts: np.ndarray
-    step_seconds: np.ndarray
-    config: dict = field(default_factory=dict)
-    imu_T_cam: np.ndarray = None
-    evaluation: dict = field(default_factory=dict)
-    start_world_T_imu: np.ndarray = None
-    notes: str = ""
-
-    def status_totals(self):
-        """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``."""
-        return dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
-
-    def summary(self):
-        """A few lines a student can read: mode, counts, timing."""
-        totals = self.status_totals()
-        seen = sum(v for k, v in totals.items() if k != "ignored")
-        lines = [
-            f"{self.name}: mode {self.mode}{' (dense)' if self.dense else ''}, {len(self.time_stamps)} frames, "
-            f"{int(np.isfinite(self.landmarks[:, 0]).sum())} of {len(self.landmarks)} landmarks mapped",
-            "observations: " + ", ".join(f"{k} {v}" for k, v in totals.items() if v),
-        ]
-        if seen:
-            lines.append(f"gated as outliers: {100 * totals['gated'] / seen:.2f}% of observations")
-        if self.notes:
-            lines.append(self.notes)
-        else:
-            lines.append(f"time: {self.step_seconds.sum():.2f} s, median step "
-                         f"{1e3 * np.median(self.step_seconds):.2f} ms")
-        return "\n".join(lines)
 
 
 def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verbose=False, blas_threads=1):
@@ -296,6 +222,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
         landmarks=landmarks, landmark_cov=landmark_cov,
         dead_reckoning=motion.dead_reckon(dataset.time_stamps, dataset.twists, lag=config.imu_lag),
         config=config.to_dict(), imu_T_cam=flt.camera.imu_T_cam.copy(), **arrays.as_dict(),
+        track_counts={k: int(v) for k, v in getattr(flt, "track_counts", {}).items()} if getattr(flt, "window", 0) else {},
     )
 
 
@@ -344,13 +271,35 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
         raise ValueError("run_smoother: give smoother_config or smoother_settings, not both")
     config = resolve_config(dataset, config or FilterConfig())
     settings = smoother_config or _smoother_settings(config, mode, smoother_settings)  # before the EKF: fail fast
-    start = None
+    start, start_note = None, ""
     if mode == SMOOTH:
-        start = run_filter(dataset, SLAM, config, progress=progress, verbose=verbose, blas_threads=blas_threads)
+        start, start_note = _best_start(dataset, config, settings, progress, verbose, blas_threads)
         solved = smoother.smooth(dataset, start.world_T_imu, start.landmarks, start.imu_T_cam, settings, blas_threads)
     else:
         solved = smoother.smooth_window(dataset, None, _imu_T_cam(dataset, config, verbose), settings, blas_threads)
-    return _smoother_run_result(dataset, config, solved, start)
+    result = _smoother_run_result(dataset, config, solved, start)
+    result.notes = "\n".join(line for line in (start_note, result.notes) if line)
+    result.start_mode = "" if start is None else start.mode
+    return result
+
+
+def _best_start(dataset, config, settings, progress, verbose, blas_threads):
+    """The batch smoother's start: the joint EKF, or (``start="best"``) the lowest objective of dead reckoning, VIO and it.
+
+    Each candidate is a :class:`RunResult` (dead reckoning with no map: the smoother
+    triangulates it); :func:`visla_edu.smoother.start_cost` prices them on the same
+    observations. Returns the chosen result (its ``mode`` names it) and a line of the costs.
+    """
+    from visla_edu import smoother
+
+    candidates = [run_filter(dataset, mode, config, progress=progress and mode == SLAM, verbose=verbose and mode == SLAM,
+                             blas_threads=blas_threads) for mode in (DEADRECKON, VIO, SLAM)]
+    costs = [smoother.start_cost(dataset, c.world_T_imu, None if c.mode == DEADRECKON else c.landmarks, c.imu_T_cam,
+                                 settings) for c in candidates]
+    best = int(np.argmin(costs)) if settings.start == "best" else 2
+    text = ", ".join(f"{c.mode} {cost:.4g}" for c, cost in zip(candidates, costs))
+    why = "the lowest objective" if settings.start == "best" else "start=slam; the objectives"
+    return candidates[best], f"start: {candidates[best].mode} ({why} of {text})"
 
 
 def _smoother_settings(config, mode, own=None):
@@ -440,57 +389,6 @@ def evaluate_result(result, ground_truth):
     return evaluations
 
 
-class RunArrays:
-    """Per-frame arrays of a run, filled one :class:`~visla_edu.filters.StepRecord` at a time.
-
-    The whole-run driver (:func:`run_filter`) and the stepper (:class:`visla_edu.stepper.Stepper`)
-    both keep their per-frame figures here.
-
-    Parameters
-    ----------
-    num_frames : int
-        ``T``.
-
-    Attributes
-    ----------
-    world_T_imu : ndarray, shape (T, 4, 4)
-    pose_cov : ndarray, shape (T, 6, 6)
-    nis : ndarray, shape (T,)
-        NaN where there was no update.
-    nis_dof : ndarray of int, shape (T,)
-    status_counts : ndarray of int, shape (T, 6)
-        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
-    step_seconds : ndarray, shape (T,)
-        Wall time of each filter step.
-    """
-
-    #: The arrays, in the order :class:`RunResult` lists them.
-    FIELDS = ("world_T_imu", "pose_cov", "nis", "nis_dof", "status_counts", "step_seconds")
-
-    def __init__(self, num_frames):
-        T = num_frames
-        self.world_T_imu = np.empty((T, 4, 4))
-        self.pose_cov = np.empty((T, 6, 6))
-        self.nis = np.full(T, np.nan)
-        self.nis_dof = np.zeros(T, dtype=np.int64)
-        self.status_counts = np.zeros((T, len(STATUS_NAMES)), dtype=np.int64)
-        self.step_seconds = np.zeros(T)
-
-    def store(self, rec, seconds=0.0):
-        """Write frame ``rec.t``'s figures (``seconds``: wall time of its step)."""
-        t = rec.t
-        self.world_T_imu[t] = rec.world_T_imu
-        self.pose_cov[t] = rec.pose_cov
-        self.nis[t] = rec.nis
-        self.nis_dof[t] = rec.nis_dof
-        self.status_counts[t] = np.bincount(rec.status, minlength=len(STATUS_NAMES))
-        self.step_seconds[t] = seconds
-
-    def as_dict(self):
-        """``{name: array}`` of :attr:`FIELDS` (the arrays themselves, not copies)."""
-        return {name: getattr(self, name) for name in self.FIELDS}
-
-
 class _NoBar:
     def update(self, n):
         pass
@@ -506,74 +404,3 @@ def _progress_bar(total, show, desc):
     with tqdm(total=total, desc=desc, unit="frame") as bar:
         yield bar
 
-
-def save_result(result, path):
-    """Save a :class:`RunResult` to ``path`` (npz), atomically; return the path written.
-
-    Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
-    initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
-    ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
-    ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
-    so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
-    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`),
-    ``notes`` (the smoothers' summary; empty for the filters) and, from the batch smoother,
-    ``start_world_T_imu``.
-
-    Parameters
-    ----------
-    result : RunResult
-    path : str or os.PathLike
-        ``.npz`` is appended if missing (as ``numpy.savez`` does). The file is written to a
-        temporary file first and then renamed (:func:`visla_edu._files.atomic_write`), so an
-        interrupted save leaves a previous result there intact.
-
-    Returns
-    -------
-    pathlib.Path
-        The absolute path written.
-    """
-    path = expand_user(path)
-    if path.suffix.lower() != ".npz":
-        path = path.with_name(path.name + ".npz")
-    arrays = {k: v for k, v in vars(result).items() if k not in ("config", "evaluation") and v is not None}
-    arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
-    arrays.update({f"eval_{k}": v for k, v in result.evaluation.items()})
-    with atomic_write(path, "wb") as f:
-        np.savez_compressed(f, **arrays)
-    return path.resolve()
-
-
-def _setting(array):
-    """A saved setting back: None (empty), a number or string, or a per-axis tuple."""
-    if array.size == 0:
-        return None
-    return array.item() if array.size == 1 else tuple(array.tolist())
-
-
-def load_result(path):
-    """Load a :class:`RunResult` written by :func:`save_result`.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The ``.npz`` that :func:`save_result` (or ``visla-edu run --out``) wrote.
-
-    Returns
-    -------
-    RunResult
-
-    Raises
-    ------
-    FileNotFoundError, ValueError, KeyError
-        As :func:`numpy.load` for a missing or broken file, or a file without the keys a
-        result has.
-    """
-    with np.load(path, allow_pickle=False) as f:
-        config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
-        evaluation = {k[len("eval_"):]: f[k].item() for k in f.files if k.startswith("eval_")}
-        fields = {k: f[k] for k in f.files if not k.startswith(("config_", "eval_"))}
-    for key in ("name", "mode", "notes"):
-        if key in fields:
-            fields[key] = str(fields[key])
-    fields["dense"] = bool(fields["dense"])
-    return RunResult(config=config, evaluation=evaluation, **fields)

@@ -170,7 +170,7 @@ def divergence_hint(dataset, config, frame=None):
         return "likely cause: " + problems[0]
     calibration = dataset.extra.get("calibration")  # what the run resolved "auto" with, if it got that far
     if calibration is not None and not config.resolved:
-        config = config.resolve(calibration)
+        config = config.resolve(calibration, focal_length=float(dataset.K[0, 0]), time_step=0.1)
     where = ""
     if frame is not None and 0 < frame < dataset.num_frames:
         lag = config.imu_lag if isinstance(config.imu_lag, int) else 0

@@ -117,7 +117,7 @@ def _drive(hidden):
     from visla_edu import data, simulate
 
     visible = data.load("sim-tiny")
-    config = run.resolve_config(visible, FilterConfig(slam_error="right"))
+    config = run.resolve_config(visible, FilterConfig(slam_error="right", msckf_window=0))
     return (simulate.simulate_drive("tiny", seed=_hidden_seed() % 1000 + 1) if hidden else visible), config
 
 

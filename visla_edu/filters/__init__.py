@@ -14,10 +14,12 @@ builds a mode by name.
 
 Where each piece lives: ``_config`` the settings, ``_base`` the step loop and its declared
 hooks, the record and the divergence error, ``_state`` the joint state's covariance
-bookkeeping, ``_maps`` dead reckoning, mapping and VIO, ``_slam`` joint SLAM.
+bookkeeping, ``_maps`` dead reckoning, mapping and VIO, ``_slam`` joint SLAM, ``_clones`` its
+clone window and ``_tracks`` the multi-frame track updates.
 """
 
 from visla_edu.codes import (
+    OBS_DELAYED,
     OBS_FAR,
     OBS_GATED,
     OBS_IGNORED,
@@ -45,6 +47,7 @@ __all__ = [
     "OBS_NO_DEPTH",
     "OBS_FAR",
     "OBS_IGNORED",
+    "OBS_DELAYED",
     "STATUS_NAMES",
     "DeadReckoning",
     "LandmarkMapping",

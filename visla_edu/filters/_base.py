@@ -59,7 +59,8 @@ class StepRecord:
     nis : float
         Normalised innovation squared of the update (NaN without an update).
     nis_dof : int
-        Its degrees of freedom (4 per used observation).
+        Its degrees of freedom: 4 per used observation, and ``4 n - 3`` per track of ``n``
+        observations used in a null-space update (joint SLAM with clones).
     active_ids : ndarray of int, shape (n,)
         Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO);
         empty when the filter's ``record_landmarks`` is off.
@@ -162,7 +163,7 @@ class _Filter(abc.ABC):
         nis : float
             NaN when nothing was used.
         dof : int
-            4 per used observation.
+            4 per used observation (``4 n - 3`` per track of a null-space update).
         """
 
     @abc.abstractmethod

@@ -8,7 +8,7 @@ from visla_edu.diagnostics import CORRECTIONS
 from visla_edu.metrics import chi2_quantile
 from visla_edu.settings import check_settings, setting
 
-__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS"]
+__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS", "INFLATION_POWER", "pixel_noise_inflation"]
 
 #: The value of a setting the driver measures from the data (:func:`visla_edu.diagnostics.calibrate`).
 AUTO = "auto"
@@ -16,6 +16,48 @@ AUTO = "auto"
 MAX_IMU_LAG = 2
 #: Settings that may be ``"auto"`` and their attribute on the calibration that resolves them.
 AUTO_FIELDS = ("sigma_linear_velocity", "sigma_angular_velocity", "imu_lag")
+#: Largest ``pixel_noise_inflation`` (the camera is then ignored in all but name).
+MAX_INFLATION = 1e4
+#: Exponent of :func:`pixel_noise_inflation`, chosen on the cross-drive benchmark
+#: (``benchmarks/bench_accuracy.py`` prints the candidates).
+INFLATION_POWER = 2
+
+
+def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, power=INFLATION_POWER):
+    """How much less than ``sigma_pixel`` promises the camera is to be trusted on a drive: ``max(1, r)^power``.
+
+    ``r = (sigma_pixel / focal_length) / (sigma_w tau)`` compares the angle one observation
+    resolves with the angle the gyro resolves in one step. Track errors are correlated from
+    frame to frame (tracker drift, a feature that slides along an edge: the course drives'
+    residuals barely change between consecutive frames), so many observations of a track are
+    worth about one. Where the gyro resolves angles better than one observation (``r > 1``, the
+    GPS-aided velocities of the 2019 release), a camera treated as independent pixels would
+    pull a good dead reckoning off by the sum of its correlated errors: its noise is inflated,
+    and the more so the better the gyro. Where one observation beats a gyro step (``r <= 1``,
+    the 2020 release's noisy velocities), the camera carries the estimate and is not inflated.
+
+    Parameters
+    ----------
+    sigma_pixel : float
+        The pixel noise the camera is said to have (px).
+    focal_length : float
+        ``fsu`` (px).
+    sigma_angular : float or array_like, shape (3,)
+        The angular-velocity noise (rad/s); per-axis values are averaged.
+    time_step : float
+        A typical step ``tau`` (s).
+    power : float
+
+    Returns
+    -------
+    float
+        The factor on ``sigma_pixel``, at least 1.
+    """
+    gyro_angle = float(np.mean(sigma_angular)) * float(time_step)
+    if gyro_angle <= 0:
+        return MAX_INFLATION  # a noise-free gyro: the camera can add nothing
+    ratio = (sigma_pixel / focal_length) / gyro_angle
+    return float(min(MAX_INFLATION, max(1.0, ratio) ** power))
 
 
 @dataclass
@@ -51,6 +93,15 @@ class FilterConfig:
     * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
       far landmark triangulated from a smaller disparity is a poor Gaussian in x, y, z that
       makes joint SLAM overconfident and less accurate.
+    * ``pixel_noise_inflation`` (``"auto"``): :func:`pixel_noise_inflation`, 1 where one
+      observation resolves angles better than a gyro step (noisy velocities: the camera carries
+      the estimate), ``r^2`` where the gyro is ``r`` times better (GPS-aided velocities: a camera
+      whose track errors persist from frame to frame would pull a good dead reckoning off). The
+      exponent was chosen on the cross-drive benchmark (``benchmarks/bench_accuracy.py``).
+    * ``msckf_window`` 20: the joint filter keeps the last 20 poses as clones; short tracks update
+      it when they end (null space, gated whole) and long ones enter as landmarks from all their
+      observations. On the cross-drive benchmark this beats the filter without clones where the
+      landmarks are few and far (a highway) and matches it elsewhere; 10 and 30 were worse.
     * ``slam_error="invariant"``: the joint filter's error in the world frame, whose
       unobservable directions do not depend on the estimate, so it stays consistent where the
       right perturbation (notebooks 05-06) becomes overconfident (notebook 07).
@@ -70,7 +121,11 @@ class FilterConfig:
     ----------
     sigma_pixel : float
         Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate (px);
-        ``R = sigma_pixel^2 I4``.
+        ``R = (pixel_noise_inflation sigma_pixel)^2 I4``.
+    pixel_noise_inflation : float or "auto"
+        Modes: mapping, vio, slam. A factor on ``sigma_pixel`` for the filters. ``"auto"``:
+        :func:`pixel_noise_inflation` of the drive (1 where the gyro is noisier than one
+        observation, larger the better the gyro).
     sigma_linear_velocity : float, (float, float, float) or "auto"
         Modes: all. Noise on each linear-velocity sample (m/s), one value for every axis or one
         per body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
@@ -131,10 +186,23 @@ class FilterConfig:
         perturbation ``T = mu exp(hat(delta))``); the last point above says why the default is
         the invariant form.
     reinit_gated_landmarks : bool
-        Mode: slam. A landmark no update has used yet (only its first observation placed it) is
-        placed again from its next observation when that one falls outside the gate: the first
-        observation was the outlier. False keeps the first placement, so a landmark born from
-        a bad observation gates its whole track.
+        Mode: slam (``msckf_window=0``). A landmark no update has used yet (only its first
+        observation placed it) is placed again from its next observation when that one falls
+        outside the gate: the first observation was the outlier. False keeps the first
+        placement, so a landmark born from a bad observation gates its whole track.
+    msckf_window : int
+        Mode: slam (not dense). Frames of past poses kept in the joint state as clones for the
+        multi-frame track updates (:mod:`visla_edu.filters._tracks`): a landmark's observations
+        wait until its track ends and are then used together in a null-space (MSCKF) update
+        that never puts the landmark in the state; a track still seen after this many frames
+        enters the state as a landmark (delayed entry, from all its observations). 0: every
+        landmark enters the state at its first observation, the joint EKF of notebook 06.
+    track_gate_probability : float
+        Mode: slam with clones. A track whose null-space residual exceeds the chi-square
+        quantile of its ``4 n - 3`` degrees of freedom at this probability is refused whole.
+    max_slam_landmarks : int
+        Mode: slam with clones. At most this many landmarks in the state; a long track beyond
+        them is used in window-long pieces instead.
     """
 
     sigma_pixel: float = setting(1.5, float, 1e-3, 100.0, unit="px",
@@ -165,14 +233,21 @@ class FilterConfig:
     slam_error: str = setting("invariant", str, words=("invariant", "right"),
                               why="the invariant EKF, or the right perturbation notebooks 05-06 derive")
     reinit_gated_landmarks: bool = setting(True, bool)
+    pixel_noise_inflation: object = setting(AUTO, float, 1.0, MAX_INFLATION, words=(AUTO,),
+                                            why="a factor of at least 1 on sigma_pixel")
+    msckf_window: int = setting(20, int, 0, 200, why="0 is the classic joint EKF; a clone is a 6x6 block per frame")
+    track_gate_probability: float = setting(0.95, float, 0.0, 1.0, low_open=True,
+                                            why="a probability; 1 disables the whole-track gate")
+    max_slam_landmarks: int = setting(40, int, 0, 100_000, why="0 keeps every track in the window")
 
     def __post_init__(self):
         check_settings(self)
 
     @property
     def pixel_variance(self):
-        """``sigma_pixel^2``."""
-        return self.sigma_pixel**2
+        """``(pixel_noise_inflation sigma_pixel)^2``, the filters' pixel noise variance (resolved configs only)."""
+        inflation = 1.0 if self.pixel_noise_inflation == AUTO else self.pixel_noise_inflation
+        return (inflation * self.sigma_pixel) ** 2
 
     @property
     def gate_threshold(self):
@@ -183,10 +258,10 @@ class FilterConfig:
 
     @property
     def resolved(self):
-        """True when no setting of :data:`AUTO_FIELDS` is ``"auto"`` (a filter can run with it)."""
-        return not any(isinstance(getattr(self, name), str) for name in AUTO_FIELDS)
+        """True when no setting of :data:`AUTO_FIELDS` nor ``pixel_noise_inflation`` is ``"auto"``."""
+        return not any(isinstance(getattr(self, name), str) for name in AUTO_FIELDS + ("pixel_noise_inflation",))
 
-    def resolve(self, calibration):
+    def resolve(self, calibration, focal_length=None, time_step=None):
         """A copy with every ``"auto"`` of :data:`AUTO_FIELDS` replaced by the calibration's value.
 
         Parameters
@@ -195,6 +270,9 @@ class FilterConfig:
             Has the attributes of :data:`AUTO_FIELDS` (e.g. a
             :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag.
             Only the attributes of the settings that are ``"auto"`` are read.
+        focal_length, time_step : float, optional
+            The drive's ``fsu`` (px) and typical time step (s), for ``pixel_noise_inflation="auto"``
+            (:func:`pixel_noise_inflation`, with the resolved angular-velocity noise).
 
         Returns
         -------
@@ -209,9 +287,18 @@ class FilterConfig:
             A calibration value outside the setting's declared range.
         AttributeError
             ``calibration`` lacks an attribute that is needed.
+        TypeError
+            ``pixel_noise_inflation`` is ``"auto"`` and ``focal_length`` or ``time_step`` is missing.
         """
         values = {name: getattr(calibration, name) for name in AUTO_FIELDS if getattr(self, name) == AUTO}
-        return replace(self, **values)
+        config = replace(self, **values)
+        if config.pixel_noise_inflation == AUTO:
+            if focal_length is None or time_step is None:
+                raise TypeError("FilterConfig.resolve: pixel_noise_inflation='auto' needs the drive's focal_length "
+                                "and time_step (visla_edu.run.resolve_config passes them)")
+            inflation = pixel_noise_inflation(config.sigma_pixel, focal_length, config.sigma_angular_velocity, time_step)
+            config = replace(config, pixel_noise_inflation=inflation)
+        return config
 
     def to_dict(self):
         """Plain dict of the settings (for saving with results)."""

@@ -103,6 +103,50 @@ class RightForm:
         return world_T_imu @ lie.se3_exp(delta[:6]), p_active + delta[6:].reshape(-1, 3)
 
     @staticmethod
+    def clone_jacobian(J_landmark, J_pose, p_world):
+        """Jacobian of an observation made from a cloned pose with respect to that clone's error, (N, 4, 6).
+
+        A clone's error means what the pose's does (here the right perturbation), so it is the
+        camera's ``J_pose``.
+
+        Parameters
+        ----------
+        J_landmark : ndarray, shape (N, 4, 3)
+            Unused here.
+        J_pose : ndarray, shape (N, 4, 6)
+            The right-perturbation pose Jacobian at the clone's mean.
+        p_world : ndarray, shape (N, 3)
+            Unused here.
+
+        Returns
+        -------
+        ndarray, shape (N, 4, 6)
+        """
+        return J_pose
+
+    @staticmethod
+    def delayed_pose_jacobian(J_landmark, p_world):
+        """Jacobian of a past observation of a landmark entering now with respect to the current pose, (N, 4, 6).
+
+        The right form's landmark error ``m - mu_m`` does not involve the pose: zero.
+
+        Parameters
+        ----------
+        J_landmark : ndarray, shape (N, 4, 3)
+        p_world : ndarray, shape (N, 3)
+
+        Returns
+        -------
+        ndarray, shape (N, 4, 6)
+        """
+        return np.zeros(J_landmark.shape[:-1] + (6,))
+
+    @staticmethod
+    def retract_clone(clone_T, delta):
+        """``clone_T exp(hat(delta))`` for each clone: clone_T (n, 4, 4), delta (n, 6)."""
+        return clone_T @ lie.se3_exp(delta)
+
+    @staticmethod
     def landmark_sensitivity(G_pose):
         """``G_pose`` of :func:`visla_edu.ekf.initialize_landmarks` (the body-frame error), (k, 3, 6).
 
@@ -186,8 +230,12 @@ class InvariantForm:
             Ignored.
         W : ndarray, shape (6, 6)
             The step's motion noise.
+
+        Clones (columns after the landmarks) get no noise: a clone's world-frame error does not
+        change when the current pose moves.
         """
-        motion.predict_invariant_covariance(Sigma, world_T_imu, p_active, W)
+        end = 6 + 3 * len(p_active)
+        motion.predict_invariant_covariance(Sigma[:end, :end], world_T_imu, p_active, W)
 
     @staticmethod
     def pose_jacobian(J_landmark, J_pose):
@@ -225,6 +273,54 @@ class InvariantForm:
         p_active : ndarray, shape (n, 3)
         """
         return ekf.invariant_retract(world_T_imu, p_active, delta)
+
+    @staticmethod
+    def clone_jacobian(J_landmark, J_pose, p_world):
+        """Jacobian of an observation made from a clone with respect to the clone's error, (N, 4, 6).
+
+        With ``T = exp(hat(xi)) mu`` and a point ``m`` not in the state, the camera sees
+        ``inv(T) m ~ inv(mu) (m - p - theta x m)``: ``[-J_landmark, J_landmark hat(m)]``.
+
+        Parameters
+        ----------
+        J_landmark : ndarray, shape (N, 4, 3)
+            ``dz/dm`` at the clone's mean.
+        J_pose : ndarray, shape (N, 4, 6)
+            Unused here.
+        p_world : ndarray, shape (N, 3)
+            ``m``.
+
+        Returns
+        -------
+        ndarray, shape (N, 4, 6)
+        """
+        return np.concatenate([-J_landmark, J_landmark @ lie.hat(p_world)], axis=-1)
+
+    @staticmethod
+    def delayed_pose_jacobian(J_landmark, p_world):
+        """Jacobian of a past observation of a landmark entering now with respect to the current pose, (N, 4, 6).
+
+        The landmark's invariant error is taken relative to the current pose's rotation error,
+        ``m = exp(hat(theta)) mu_m + e``, so every observation of it depends on ``theta`` through
+        ``-J_landmark hat(mu_m)`` (and on ``e`` through ``J_landmark``).
+
+        Parameters
+        ----------
+        J_landmark : ndarray, shape (N, 4, 3)
+        p_world : ndarray, shape (N, 3)
+            ``mu_m``.
+
+        Returns
+        -------
+        ndarray, shape (N, 4, 6)
+            Columns 0-2 zero, 3-5 ``-J_landmark hat(mu_m)``.
+        """
+        return np.concatenate([np.zeros_like(J_landmark), -J_landmark @ lie.hat(p_world)], axis=-1)
+
+    @staticmethod
+    def retract_clone(clone_T, delta):
+        """``exp(hat(delta)) clone_T`` for each clone: clone_T (n, 4, 4), delta (n, 6)."""
+        return lie.se3_exp(delta) @ clone_T
 
     @staticmethod
     def landmark_sensitivity(G_pose):

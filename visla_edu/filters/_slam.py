@@ -21,13 +21,24 @@ A landmark whose only information is its first observation (no update has used i
 placed again from its next observation when that one falls outside the gate
 (``FilterConfig.reinit_gated_landmarks``): its first observation was the outlier, or the
 landmark moved. Without this, a landmark born from a bad observation gates all of its track.
+
+**With clones** (``FilterConfig.msckf_window > 0``, the default; not dense) the state also holds
+copies of the last poses, and a landmark enters it only when its track outlives the window
+(delayed entry, from all its observations); shorter tracks update the state in one null-space
+(MSCKF) update when they end, without ever entering it (:mod:`visla_edu.filters._tracks`). A
+far landmark (a disparity of a pixel or less, which a single stereo pair cannot place) is then
+triangulated from its whole track, a track wrong as a whole is gated as a whole, and only the
+long tracks cost state. ``msckf_window=0`` is the joint EKF above, every landmark entering at its
+first observation (notebook 06).
 """
 
 import numpy as np
 
 from visla_edu import ekf
 from visla_edu.codes import OBS_GATED, OBS_USED
+from visla_edu.filters import _tracks
 from visla_edu.filters._base import _Filter
+from visla_edu.filters._clones import CloneWindow
 from visla_edu.filters._forms import ERROR_FORMS
 from visla_edu.filters._state import ActiveSet
 
@@ -41,7 +52,7 @@ DENSE_PLACEHOLDER_VARIANCE = 1e6
 MAX_DENSE_BYTES = 4 * 2**30
 
 
-class JointSlam(_Filter):
+class JointSlam(CloneWindow, _Filter):
     """Joint EKF over ``[pose; landmarks]``, active set by default, textbook form if ``dense``.
 
     Parameters
@@ -61,11 +72,26 @@ class JointSlam(_Filter):
         The error form (``config.slam_error``).
     updates : ndarray of int, shape (M,)
         Observations of each landmark used by an update since it entered the state.
+    window : int
+        Clones kept (``config.msckf_window``; 0 when dense): 0 is the joint EKF without clones.
+    clone_T : ndarray, shape (n_clones, 4, 4)
+        The clones' means, oldest first (their frames: ``state.clone_frames``).
+    track_counts : dict of str -> int
+        Multi-frame track updates so far: ``tracks_used``, ``tracks_gated`` (refused by the
+        whole-track gate), ``tracks_short`` (fewer than
+        :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations in the window),
+        ``tracks_failed`` (no point in front of every camera), ``entered`` (tracks that entered
+        the state), and ``observations_used``, ``observations_gated`` (their observations).
     """
 
     def __init__(self, dataset, camera, config, dense=False):
         super().__init__(dataset, camera, config)
         self.dense = dense
+        self.window = 0 if dense else config.msckf_window
+        self.buffer = _tracks.TrackBuffer()
+        self.clone_T = np.zeros((0, 4, 4))
+        self.track_counts = dict.fromkeys(("tracks_used", "tracks_gated", "tracks_short", "tracks_failed", "entered",
+                                           "observations_used", "observations_gated"), 0)
         self.form = ERROR_FORMS[config.slam_error]
         self.updates = np.zeros(dataset.num_landmarks, dtype=np.int64)
         pose_cov = config.initial_pose_sigma**2 * np.eye(6)
@@ -90,6 +116,8 @@ class JointSlam(_Filter):
         self.form.predict(self.state.Sigma, self.world_T_imu, self.landmarks[self.state.active_ids], F, W)
 
     def _update(self, ids, z, status, z_pred):
+        if self.window:
+            return self._update_with_clones(ids, z, status, z_pred)
         if not self.dense:
             self._retire_finished()
         usable = self._usable(ids, z, status)
@@ -159,14 +187,22 @@ class JointSlam(_Filter):
 
     def _joint_update(self, lm, z, prediction):
         """The joint EKF update with the observations of landmarks ``lm``; returns the NIS."""
-        active = self.state.active_ids
         try:
             delta, nis = ekf.joint_correction(self.state.Sigma, self.state.slot_of[lm], z, self.noise_var, prediction,
                                               self.camera.stereo_rows)
         except np.linalg.LinAlgError as err:
             raise self._diverged(err, f" ({len(lm)} observations)") from err
-        self.world_T_imu, self.landmarks[active] = self.form.retract(self.world_T_imu, self.landmarks[active], delta)
+        self._retract(delta)
         return nis
+
+    def _retract(self, delta):
+        """Apply a correction of the whole state: pose, landmarks (in slot order) and clones."""
+        active = self.state.active_ids
+        end = self.state.landmark_end
+        self.world_T_imu, self.landmarks[active] = self.form.retract(self.world_T_imu, self.landmarks[active],
+                                                                     delta[:end])
+        if len(self.clone_T):
+            self.clone_T = self.form.retract_clone(self.clone_T, delta[end:].reshape(-1, 6))
 
     def _enter(self, new_ids, G_pose, C_new):
         """New landmarks into the state (slots appended unless dense), correlated unless the shortcut is on."""

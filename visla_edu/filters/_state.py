@@ -6,8 +6,11 @@ rows, deleting a landmark's rows (marginalising it) and reading marginals. The f
 (:class:`visla_edu.filters.JointSlam`) only decides *when* to do each; the update itself is
 :func:`visla_edu.ekf.joint_update`, which works on the same layout.
 
-The state is ``[pose perturbation (6); slot 0 (3); slot 1 (3); ...]``; slot ``s`` occupies the
-columns :func:`visla_edu.ekf.slot_columns` gives (``6 + 3 s .. 6 + 3 s + 2``).
+The state is ``[pose perturbation (6); slot 0 (3); slot 1 (3); ...; clone 0 (6); clone 1 (6);
+...]``: slot ``s`` occupies the columns :func:`visla_edu.ekf.slot_columns` gives (``6 + 3 s ..
+6 + 3 s + 2``), and after the ``n`` landmark slots come the *clones*, copies of past poses that
+the multi-frame track updates need (:mod:`visla_edu.filters._tracks`), oldest first: clone ``k``
+occupies ``6 + 3 n + 6 k .. 6 + 3 n + 6 k + 5`` (:meth:`ActiveSet.clone_columns`).
 """
 
 import numpy as np
@@ -35,6 +38,8 @@ class ActiveSet:
         Landmark id in each slot, in slot order.
     slot_of : ndarray of int, shape (M,)
         Slot of each landmark id, -1 when it is not in the state.
+    clone_frames : list of int
+        The frame of each clone, oldest first (empty unless the filter clones poses).
     """
 
     def __init__(self, num_landmarks, pose_cov):
@@ -43,6 +48,7 @@ class ActiveSet:
             raise ValueError(f"ActiveSet: pose_cov must have shape (6, 6), got {self.Sigma.shape}")
         self.active_ids = np.zeros(0, dtype=np.int64)
         self.slot_of = np.full(num_landmarks, -1)
+        self.clone_frames = []
 
     @classmethod
     def dense(cls, num_landmarks, ids, pose_cov, placeholder_variance):
@@ -68,6 +74,15 @@ class ActiveSet:
         """The pose block of the joint covariance, (6, 6) (a view)."""
         return self.Sigma[:POSE_DIM, :POSE_DIM]
 
+    @property
+    def landmark_end(self):
+        """``6 + 3 n``: the first column after the landmark slots (where the clones start)."""
+        return POSE_DIM + 3 * len(self.active_ids)
+
+    def clone_columns(self, k):
+        """State columns of clone ``k`` (0 = the oldest), shape (6,) (or (len(k), 6) for an array)."""
+        return self.landmark_end + 6 * np.asarray(k, dtype=np.int64)[..., None] + np.arange(6)
+
     def columns(self, ids):
         """State columns of landmarks ``ids`` (all in the state), shape (k, 3)."""
         return slot_columns(self.slot_of[ids])
@@ -82,12 +97,12 @@ class ActiveSet:
         return np.swapaxes(self.Sigma[:POSE_DIM][:, self.columns(ids)], 0, 1)
 
     def enter(self, ids):
-        """Append one slot per landmark of ``ids`` (zero rows and columns, filled by :meth:`augment`)."""
+        """Append one slot per landmark of ``ids`` (zero rows and columns, filled by :meth:`augment`).
+
+        The new slots follow the last landmark slot, before the clones.
+        """
         ids = np.asarray(ids, dtype=np.int64)
-        D_old = self.dim
-        Sigma = np.zeros((D_old + 3 * len(ids),) * 2)
-        Sigma[:D_old, :D_old] = self.Sigma
-        self.Sigma = Sigma
+        self.Sigma = _insert_zeros(self.Sigma, self.landmark_end, 3 * len(ids))
         self.slot_of[ids] = len(self.active_ids) + np.arange(len(ids))
         self.active_ids = np.concatenate([self.active_ids, ids])
 
@@ -118,6 +133,35 @@ class ActiveSet:
         block.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += C_new
         self.Sigma[np.ix_(cols, cols)] = block
 
+    def augment_delayed(self, ids, cross, block):
+        """Fill the rows of new landmarks whose covariance is already known (delayed initialisation).
+
+        Parameters
+        ----------
+        ids : ndarray of int, shape (k,)
+            Landmarks already in the state (:meth:`enter`), never updated since.
+        cross : ndarray, shape (3k, D)
+            ``Sigma_new,x`` for every state entry ``x`` (the new rows' own columns are ignored).
+        block : ndarray, shape (3k, 3k)
+            ``Sigma_new,new``.
+        """
+        cols = self.columns(ids).ravel()
+        self.Sigma[cols] = cross
+        self.Sigma[:, cols] = cross.T
+        self.Sigma[np.ix_(cols, cols)] = 0.5 * (block + block.T)
+
+    def clone_pose(self, frame):
+        """Append a clone of the current pose (rows and columns copying the pose's), for ``frame``."""
+        D = self.dim
+        rows = np.concatenate([np.arange(D), np.arange(POSE_DIM)])
+        self.Sigma = self.Sigma[np.ix_(rows, rows)]
+        self.clone_frames.append(int(frame))
+
+    def drop_clone(self, k=0):
+        """Marginalise clone ``k`` (delete its rows and columns)."""
+        self.Sigma = _delete(self.Sigma, self.clone_columns(k))
+        del self.clone_frames[k]
+
     def retire(self, ids):
         """Marginalise landmarks ``ids`` out of the state (delete their rows and columns).
 
@@ -138,9 +182,26 @@ class ActiveSet:
         leaving = np.zeros(len(self.active_ids), dtype=bool)
         leaving[self.slot_of[ids]] = True
         keep_slots = np.nonzero(~leaving)[0]
-        keep = np.concatenate([np.arange(POSE_DIM), slot_columns(keep_slots).ravel()])
-        self.Sigma = self.Sigma.take(keep, axis=0).take(keep, axis=1)
+        self.Sigma = _delete(self.Sigma, slot_columns(np.nonzero(leaving)[0]).ravel())
         self.slot_of[ids] = -1
         self.active_ids = self.active_ids[keep_slots]
         self.slot_of[self.active_ids] = np.arange(len(self.active_ids))
         return covs
+
+
+def _insert_zeros(Sigma, at, count):
+    """``Sigma`` with ``count`` zero rows and columns inserted before index ``at``."""
+    D = Sigma.shape[0]
+    out = np.zeros((D + count, D + count))
+    if at == D:  # appending (no clones after the landmarks): one block copy
+        out[:D, :D] = Sigma
+        return out
+    old = np.concatenate([np.arange(at), np.arange(at + count, D + count)])
+    out[np.ix_(old, old)] = Sigma
+    return out
+
+
+def _delete(Sigma, cols):
+    """``Sigma`` without the rows and columns ``cols``."""
+    keep = np.setdiff1d(np.arange(Sigma.shape[0]), np.asarray(cols).ravel())
+    return Sigma.take(keep, axis=0).take(keep, axis=1)

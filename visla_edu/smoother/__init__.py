@@ -42,7 +42,7 @@ selected inverse), ``_normal`` (linearisation, the Schur step, marginals), ``_re
 right Jacobians lie's (re-exported for notebook 08).
 """
 
-from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth
+from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth, start_cost
 from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, FROM_FILTER, LOSSES, OWN_SETTINGS, WINDOW_MODES,
                                         WINDOW_ONLY, SmootherConfig, check_own_settings)
 from visla_edu.camera import stereo_projection as reprojection
@@ -67,6 +67,7 @@ __all__ = [
     "HISTORY_FIELDS",
     "STOP_REASONS",
     "smooth",
+    "start_cost",
     "smooth_window",
     "NormalEquations",
     "normal_equations",

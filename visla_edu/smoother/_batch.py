@@ -27,14 +27,14 @@ from visla_edu.smoother import _normal
 from visla_edu._blas import limit_blas_threads
 from visla_edu.metrics import chi2_quantile
 from visla_edu.smoother._config import as_smoother_config
-from visla_edu.smoother._factors import motion_steps
+from visla_edu.smoother._factors import motion_steps, robust_loss
 from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
                                          far_landmarks, observation_status, rig_camera, triangulate_landmarks)
 from visla_edu.smoother._result import (CONVERGED, ITERATION_CAP, NO_DESCENT, SmootherResult,
                                         check_landmarks, check_trajectory, empty_history, finish_history)
 
 __all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information",
-           "NormalEquations", "normal_equations"]
+           "NormalEquations", "normal_equations", "start_cost"]
 
 #: Damping beyond which a round gives up (no step lowers the cost).
 MAX_DAMPING = 1e12
@@ -398,6 +398,38 @@ def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, confi
     H, g = _normal.normal_equations(problem, lin)
     return NormalEquations(H, g, problem.num_vars, problem.landmark_ids.copy(), problem.landmark_active.copy(),
                            lin.cost)
+
+
+def start_cost(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
+    """The batch objective at a candidate start, with what the start cannot explain counted as outliers.
+
+    The problem is the one :func:`smooth` would build from this start (its landmarks, missing
+    ones triangulated, and its drops: landmarks behind a camera or too far). Starts drop
+    different landmarks, so each observation a start leaves out is charged what an outlier at
+    the rejection threshold costs, ``rho(chi2_4(rejection_probability))``: the costs of
+    different starts compare the same observations.
+
+    Parameters
+    ----------
+    dataset, world_T_imu, landmarks, imu_T_cam, config
+        As in :func:`smooth`.
+
+    Returns
+    -------
+    float
+        The robust cost plus the charge for the observations left out; ``inf`` when the start
+        puts an observation behind a camera.
+    """
+    config = as_smoother_config(config, "start_cost")
+    world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)
+    landmarks = check_landmarks(landmarks, dataset.num_landmarks, dataset.name)
+    problem, m, status, _ = _setup(dataset, world_T_imu, landmarks, rig_camera(dataset, imu_T_cam), config)
+    drop_landmarks(problem, world_T_imu, m, config.min_observations)
+    cost = _normal.evaluate(problem, world_T_imu, m)
+    usable = int(np.sum(status == USED)) + int(np.sum(status == DROPPED))
+    outlier = robust_loss(np.array([chi2_quantile(config.rejection_probability, 4)]), config.loss,
+                          config.loss_scale)[0][0]
+    return float(cost + (usable - int(problem.active.sum())) * outlier)
 
 
 def _drop_counts(too_few, behind, too_far):

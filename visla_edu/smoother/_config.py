@@ -11,7 +11,7 @@ import numpy as np
 from visla_edu.filters import MAX_IMU_LAG
 from visla_edu.settings import check_settings, setting
 
-__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "FROM_FILTER", "OWN_SETTINGS", "FILTER_SETTINGS", "BATCH_ONLY",
+__all__ = ["SmootherConfig", "LOSSES", "WINDOW_MODES", "STARTS", "FROM_FILTER", "OWN_SETTINGS", "FILTER_SETTINGS", "BATCH_ONLY",
            "WINDOW_ONLY", "check_own_settings", "as_smoother_config"]
 
 #: Robust losses on the whitened reprojection error (``"none"``: plain least squares).
@@ -19,15 +19,18 @@ LOSSES = ("cauchy", "huber", "none")
 #: What the sliding window does with the states that leave it.
 WINDOW_MODES = ("fix", "marginalize")
 #: The settings :meth:`SmootherConfig.from_filter_config` takes from the filter's (the shared
-#: model): smoother setting -> :class:`~visla_edu.filters.FilterConfig` setting.
+#: model): smoother setting -> :class:`~visla_edu.filters.FilterConfig` setting; ``sigma_pixel``
+#: is multiplied by the filter's ``pixel_noise_inflation``.
 FROM_FILTER = {"sigma_pixel": "sigma_pixel", "sigma_linear_velocity": "sigma_linear_velocity",
                "sigma_angular_velocity": "sigma_angular_velocity", "imu_lag": "imu_lag",
                "min_disparity": "min_init_disparity", "skip_repeated_frames": "skip_repeated_frames"}
 #: The filter settings the smoothers read; the sliding window uses no other filter setting but
 #: ``extrinsic_correction``.
-FILTER_SETTINGS = tuple(FROM_FILTER.values())
+FILTER_SETTINGS = tuple(FROM_FILTER.values()) + ("pixel_noise_inflation",)
 #: Own settings only the batch smoother reads, and only the sliding window (the other ignores them).
-BATCH_ONLY = ("max_iterations", "rejection_rounds", "landmark_covariance")
+BATCH_ONLY = ("max_iterations", "rejection_rounds", "landmark_covariance", "start")
+#: Starts of the batch smoother (``visla-edu run --mode smooth``, :func:`visla_edu.run.run_smoother`).
+STARTS = ("slam", "best")
 WINDOW_ONLY = ("window_size", "window_iterations", "window_mode")
 
 
@@ -102,6 +105,10 @@ class SmootherConfig:
         Gauss-Newton iterations per new frame in the sliding window.
     window_mode : {"fix", "marginalize"}
         What happens to a pose leaving the window, see :func:`smooth_window`.
+    start : {"slam", "best"}
+        Where the batch smoother starts (:func:`visla_edu.run.run_smoother`): the joint EKF's
+        estimate, or the lowest objective of dead reckoning, VIO and the joint EKF
+        (:func:`start_cost`). Either way the costs of all three are reported.
     """
 
     sigma_pixel: float = setting(1.5, float, 0.0, low_open=True, unit="px",
@@ -129,6 +136,7 @@ class SmootherConfig:
     window_size: int = setting(20, int, 2, why="two frames hold one motion step")
     window_iterations: int = setting(1, int, 1)
     window_mode: str = setting("fix", str, words=WINDOW_MODES)
+    start: str = setting("slam", str, words=STARTS)
 
     def __post_init__(self):
         check_settings(self)
@@ -163,6 +171,7 @@ class SmootherConfig:
             raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
                              "(visla_edu.run.resolve_config(dataset, config))")
         model = {name: getattr(filter_config, source) for name, source in FROM_FILTER.items()}
+        model["sigma_pixel"] *= filter_config.pixel_noise_inflation  # the filters' camera noise (resolved)
         return cls(**{**model, **overrides})
 
     def to_dict(self):

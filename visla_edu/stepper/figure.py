@@ -12,6 +12,7 @@ import numpy as np
 from visla_edu.codes import (
     DEADRECKON,
     OBS_FAR,
+    OBS_DELAYED,
     OBS_GATED,
     OBS_IGNORED,
     OBS_NEW,
@@ -30,6 +31,7 @@ _STATUS_STYLE = {  # status -> (marker, colour, label)
     OBS_GATED: ("x", PALETTE["vermillion"], "gated (outlier)"),
     OBS_NO_DEPTH: ("v", PALETTE["reddish_purple"], "no depth"),
     OBS_FAR: (".", PALETTE["grey"], "too far / unused"),
+    OBS_DELAYED: ("d", PALETTE["sky_blue"], "held for its track's update"),
 }
 
 

@@ -1,0 +1,239 @@
+"""A whole run's result, its per-frame arrays, and its file: :class:`RunResult`, :class:`RunArrays`.
+
+:func:`save_result` writes a result atomically (:func:`visla_edu._files.atomic_write`) and
+:func:`load_result` reads it back; :mod:`visla_edu.run` produces them and re-exports all four.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from visla_edu._files import atomic_write, expand_user
+from visla_edu.codes import STATUS_NAMES
+
+__all__ = ["RunResult", "RunArrays", "save_result", "load_result"]
+
+
+@dataclass
+class RunResult:
+    """Everything a whole run produced.
+
+    Attributes
+    ----------
+    name, mode : str
+    dense : bool
+    time_stamps : ndarray, shape (T,)
+    world_T_imu : ndarray, shape (T, 4, 4)
+        ``world`` is the IMU frame at the first time stamp.
+    pose_cov : ndarray, shape (T, 6, 6)
+    landmarks : ndarray, shape (M, 3)
+        NaN for landmarks never initialised.
+    landmark_cov : ndarray, shape (M, 3, 3)
+    dead_reckoning : ndarray, shape (T, 4, 4)
+        The IMU-only trajectory, for comparison.
+    nis, nis_dof : ndarray, shape (T,)
+    status_counts : ndarray of int, shape (T, 6)
+        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
+    step_seconds : ndarray, shape (T,)
+    config : dict
+    imu_T_cam : ndarray, shape (4, 4)
+        The calibration used (after any correction).
+    evaluation : dict
+        Figures against ground truth, filled by :func:`evaluate_result` (empty without):
+        ``estimate_<name>``, ``dead_reckoning_<name>`` (and for the batch smoother
+        ``start_<name>``, the start it took, :attr:`start_mode`) for every field of
+        :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
+    start_world_T_imu : ndarray, shape (T, 4, 4), or None
+        Batch smoother: the trajectory it started from (None otherwise).
+    track_counts : dict of str -> int
+        Joint SLAM with clones: :attr:`visla_edu.filters.JointSlam.track_counts` (empty otherwise).
+    start_mode : str
+        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``, the
+        lowest objective of the three), else ``""``.
+    notes : str
+        Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
+    """
+
+    name: str
+    mode: str
+    dense: bool
+    time_stamps: np.ndarray
+    world_T_imu: np.ndarray
+    pose_cov: np.ndarray
+    landmarks: np.ndarray
+    landmark_cov: np.ndarray
+    dead_reckoning: np.ndarray
+    nis: np.ndarray
+    nis_dof: np.ndarray
+    status_counts: np.ndarray
+    step_seconds: np.ndarray
+    config: dict = field(default_factory=dict)
+    imu_T_cam: np.ndarray = None
+    evaluation: dict = field(default_factory=dict)
+    start_world_T_imu: np.ndarray = None
+    start_mode: str = ""
+    track_counts: dict = field(default_factory=dict)
+    notes: str = ""
+
+    def status_totals(self):
+        """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``.
+
+        With clones, the ``delayed`` observations of the tracks that were used or gated later
+        count as ``used`` or ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (tracks
+        too short, without a point in front of their cameras, or still open at the end).
+        """
+        totals = dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
+        used, gated = (int(self.track_counts.get(k, 0)) for k in ("observations_used", "observations_gated"))
+        totals["used"] += used
+        totals["gated"] += gated
+        totals["delayed"] -= used + gated
+        return totals
+
+    def summary(self):
+        """A few lines a student can read: mode, counts, timing."""
+        totals = self.status_totals()
+        seen = sum(v for k, v in totals.items() if k != "ignored")
+        lines = [
+            f"{self.name}: mode {self.mode}{' (dense)' if self.dense else ''}, {len(self.time_stamps)} frames, "
+            f"{int(np.isfinite(self.landmarks[:, 0]).sum())} of {len(self.landmarks)} landmarks mapped",
+            "observations: " + ", ".join(f"{k} {v}" for k, v in totals.items() if v),
+        ]
+        if seen:
+            lines.append(f"gated as outliers: {100 * totals['gated'] / seen:.2f}% of observations")
+        if self.track_counts:
+            c = self.track_counts
+            lines.append(f"tracks: {c['tracks_used']} used in multi-frame updates, {c['tracks_gated']} gated whole, "
+                         f"{c['entered']} entered the state, {c['tracks_short']} too short")
+        if self.notes:
+            lines.append(self.notes)
+        else:
+            lines.append(f"time: {self.step_seconds.sum():.2f} s, median step "
+                         f"{1e3 * np.median(self.step_seconds):.2f} ms")
+        return "\n".join(lines)
+
+
+class RunArrays:
+    """Per-frame arrays of a run, filled one :class:`~visla_edu.filters.StepRecord` at a time.
+
+    The whole-run driver (:func:`run_filter`) and the stepper (:class:`visla_edu.stepper.Stepper`)
+    both keep their per-frame figures here.
+
+    Parameters
+    ----------
+    num_frames : int
+        ``T``.
+
+    Attributes
+    ----------
+    world_T_imu : ndarray, shape (T, 4, 4)
+    pose_cov : ndarray, shape (T, 6, 6)
+    nis : ndarray, shape (T,)
+        NaN where there was no update.
+    nis_dof : ndarray of int, shape (T,)
+    status_counts : ndarray of int, shape (T, 6)
+        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
+    step_seconds : ndarray, shape (T,)
+        Wall time of each filter step.
+    """
+
+    #: The arrays, in the order :class:`RunResult` lists them.
+    FIELDS = ("world_T_imu", "pose_cov", "nis", "nis_dof", "status_counts", "step_seconds")
+
+    def __init__(self, num_frames):
+        T = num_frames
+        self.world_T_imu = np.empty((T, 4, 4))
+        self.pose_cov = np.empty((T, 6, 6))
+        self.nis = np.full(T, np.nan)
+        self.nis_dof = np.zeros(T, dtype=np.int64)
+        self.status_counts = np.zeros((T, len(STATUS_NAMES)), dtype=np.int64)
+        self.step_seconds = np.zeros(T)
+
+    def store(self, rec, seconds=0.0):
+        """Write frame ``rec.t``'s figures (``seconds``: wall time of its step)."""
+        t = rec.t
+        self.world_T_imu[t] = rec.world_T_imu
+        self.pose_cov[t] = rec.pose_cov
+        self.nis[t] = rec.nis
+        self.nis_dof[t] = rec.nis_dof
+        self.status_counts[t] = np.bincount(rec.status, minlength=len(STATUS_NAMES))
+        self.step_seconds[t] = seconds
+
+    def as_dict(self):
+        """``{name: array}`` of :attr:`FIELDS` (the arrays themselves, not copies)."""
+        return {name: getattr(self, name) for name in self.FIELDS}
+
+
+def save_result(result, path):
+    """Save a :class:`RunResult` to ``path`` (npz), atomically; return the path written.
+
+    Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
+    initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
+    ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
+    ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
+    so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
+    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`),
+    ``notes`` (the smoothers' summary; empty for the filters) and, from the batch smoother,
+    ``start_world_T_imu``.
+
+    Parameters
+    ----------
+    result : RunResult
+    path : str or os.PathLike
+        ``.npz`` is appended if missing (as ``numpy.savez`` does). The file is written to a
+        temporary file first and then renamed (:func:`visla_edu._files.atomic_write`), so an
+        interrupted save leaves a previous result there intact.
+
+    Returns
+    -------
+    pathlib.Path
+        The absolute path written.
+    """
+    path = expand_user(path)
+    if path.suffix.lower() != ".npz":
+        path = path.with_name(path.name + ".npz")
+    skip = ("config", "evaluation", "track_counts")
+    arrays = {k: v for k, v in vars(result).items() if k not in skip and v is not None}
+    arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
+    arrays.update({f"track_{k}": v for k, v in result.track_counts.items()})
+    arrays.update({f"eval_{k}": v for k, v in result.evaluation.items()})
+    with atomic_write(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
+    return path.resolve()
+
+
+def _setting(array):
+    """A saved setting back: None (empty), a number or string, or a per-axis tuple."""
+    if array.size == 0:
+        return None
+    return array.item() if array.size == 1 else tuple(array.tolist())
+
+
+def load_result(path):
+    """Load a :class:`RunResult` written by :func:`save_result`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.npz`` that :func:`save_result` (or ``visla-edu run --out``) wrote.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    FileNotFoundError, ValueError, KeyError
+        As :func:`numpy.load` for a missing or broken file, or a file without the keys a
+        result has.
+    """
+    with np.load(path, allow_pickle=False) as f:
+        config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
+        evaluation = {k[len("eval_"):]: f[k].item() for k in f.files if k.startswith("eval_")}
+        track_counts = {k[len("track_"):]: int(f[k]) for k in f.files if k.startswith("track_")}
+        fields = {k: f[k] for k in f.files if not k.startswith(("config_", "eval_", "track_"))}
+    fields["track_counts"] = track_counts
+    for key in ("name", "mode", "notes", "start_mode"):
+        if key in fields:
+            fields[key] = str(fields[key])
+    fields["dense"] = bool(fields["dense"])
+    return RunResult(config=config, evaluation=evaluation, **fields)
