@@ -220,16 +220,19 @@ def test_kinematics_checks(capsys):
     _fails(checks.check_dead_reckon, lambda ts, u: np.moveaxis(A.dead_reckon(ts, u), 0, -1), "shape")
 
 
-def test_exponentials_need_the_small_angle_series(capsys):
-    """A closed form guarded only at exactly 0 loses digits near 1e-7..1e-5 rad and fails, named."""
-    message = _fails(checks.check_so3_exp, _rodrigues_zero_guard, "no small-angle series")
-    assert "1/2 - t^2/24" in message
-    _fails(checks.check_se3_exp, lambda u: _se3_naive(u, guard=True), "no small-angle series")
-    # an se3_exp that is exact in V but takes its rotation from a zero-guarded closed form
-    _fails(checks.check_se3_exp, lambda u: np.block([[_rodrigues_zero_guard(u[3:]), A.se3_exp(u)[:3, 3:]],
-                                                     [np.zeros((1, 3)), np.ones((1, 1))]]), "no small-angle series")
-    # accurate forms without a series pass: the half-angle form and scipy's quaternions
+def test_the_translation_needs_the_small_angle_series_and_rodrigues_does_not(capsys):
+    """Guarded only at exactly 0: R keeps full precision and passes, V v loses digits near 1e-7 rad and fails."""
+    _passes(checks.check_so3_exp, _rodrigues_zero_guard, capsys)
+    message = _fails(checks.check_se3_exp, lambda u: _se3_naive(u, guard=True), "no small-angle series")
+    assert "1/2 - t^2/24" in message and "of size t |v|" in message.replace("\n", " ")
+    # an se3_exp that is exact in V but takes its rotation from a zero-guarded closed form passes
+    _passes(checks.check_se3_exp, lambda u: np.block([[_rodrigues_zero_guard(u[3:]), A.se3_exp(u)[:3, 3:]],
+                                                      [np.zeros((1, 3)), np.ones((1, 1))]]), capsys)
+    # accurate forms without a series pass: scipy's quaternions
     _passes(checks.check_so3_exp, lambda w: Rotation.from_rotvec(w).as_matrix(), capsys)
+    # a first-order shortcut below a threshold is caught at the tiny angles
+    _fails(checks.check_so3_exp, lambda w: np.eye(3) + A.hat(w) if np.linalg.norm(w) < 1e-4 else A.so3_exp(w),
+           "wrong values")
 
 
 # --------------------------------------------------------------------------- 02 camera

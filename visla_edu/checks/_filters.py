@@ -310,7 +310,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
         got = as_array(call(J_pose, J_landmark, slots, n), name, ref.shape)
         compare(name, got, ref, f"for slots {slots.tolist()} of {n} landmarks", [
             ("the pose columns come first: the state is [pose (6); landmarks (3n)]\n"
-             "(the seed report orders it [landmarks; pose])",
+             "(Javadi's course report orders it [landmarks; pose])",
              lambda: _slam_jacobian_reference(J_pose, J_landmark, slots, n, pose_first=False)),
             ("landmark slot s occupies columns 6 + 3 s ... 6 + 3 s + 2\n(after the 6 pose columns)",
              lambda: _slam_jacobian_reference(J_pose, J_landmark, slots, n, offset=0)),
