@@ -149,6 +149,23 @@ def pose_transition(u, tau):
     return F
 
 
+def adjoint(T):
+    R, p = T[:3, :3], T[:3, 3]
+    out = np.zeros((6, 6))
+    out[:3, :3] = out[3:, 3:] = R
+    out[:3, 3:] = hat(p) @ R
+    return out
+
+
+def left_pose_prediction(mu, Sigma, u, tau, W, at="next", transition=False, rotate=True):
+    """The left perturbation's prediction; the keywords make the tests' wrong answers."""
+    mu_next = mu @ se3_exp(tau * np.asarray(u, dtype=float))
+    Ad = {"next": adjoint(mu_next), "before": adjoint(mu), "inverse": adjoint(se3_inv(mu_next)),
+          "transposed": adjoint(mu_next).T}[at]
+    F = pose_transition(u, tau) if transition else np.eye(6)
+    return mu_next, F @ Sigma @ F.T + (Ad @ W @ Ad.T if rotate else W)
+
+
 def pose_update(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, side="right", sign=1.0, inverse=se3_inv):
     H = np.concatenate([pose_jacobian(Ks, cam_T_imu, mu, m, inverse) for m in p_world])
     z_pred = project(Ks, cam_T_imu, mu, p_world, inverse)
@@ -163,6 +180,19 @@ def slam_jacobian(J_pose, J_landmark, slots, n):
         H[4 * i:4 * i + 4, :6] = J_pose[i]
         H[4 * i:4 * i + 4, 6 + 3 * s:9 + 3 * s] = J_landmark[i]
     return H
+
+
+def slam_null_space(world_T_imu, p_landmarks, pose_block="inverse", sign=-1.0, swap=False, landmarks=True):
+    """The world's rigid motions as joint-state directions; the keywords make the tests' wrong answers."""
+    blocks = [{"inverse": adjoint(se3_inv(world_T_imu)), "forward": adjoint(world_T_imu), "identity": np.eye(6)}[pose_block]]
+    for m in np.asarray(p_landmarks, dtype=float).reshape(-1, 3):
+        block = np.hstack([sign * hat(m), np.eye(3)] if swap else [np.eye(3), sign * hat(m)])
+        blocks.append(block if landmarks else np.zeros((3, 6)))
+    return np.vstack(blocks)
+
+
+def invariant_pose_jacobian(Ks, cam_T_imu, world_T_imu, m):
+    return np.hstack([-landmark_jacobian(Ks, cam_T_imu, world_T_imu, m), np.zeros((4, 3))])
 
 
 def dense_covariance_bytes(num_landmarks, stride=1):
@@ -233,6 +263,11 @@ def schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
         S -= H_pj @ np.linalg.solve(block, H_pj.T)
         b -= H_pj @ np.linalg.solve(block, g_m[3 * j:3 * j + 3])
     return S, b
+
+
+def pose_marginal_covariance(H_pp, H_pm, H_mm):
+    S, _ = schur_reduce(H_pp, H_pm, H_mm, np.zeros(len(H_pp)), np.zeros(H_pm.shape[1]))
+    return np.linalg.inv(S)
 
 
 def gauss_newton_step(world_T_body, p_body, q_world):

@@ -10,7 +10,7 @@ graded cells and the hidden cases are tested in tests/test_checks_guard.py.
 import numpy as np
 import pytest
 from scipy import stats
-from scipy.linalg import expm
+from scipy.linalg import block_diag, expm
 from scipy.spatial.transform import Rotation
 
 import answers as A  # tests/answers.py
@@ -416,6 +416,23 @@ def _pose_update_innovation_by_columns(mu, Sigma, z, p_world, Ks, cam_T_imu, noi
     return mu @ A.se3_exp(delta), (np.eye(6) - K @ H) @ Sigma
 
 
+def test_left_pose_prediction_check(capsys):
+    _passes(checks.check_left_pose_prediction, A.left_pose_prediction, capsys)
+    checks.check_left_pose_prediction(A.left_pose_prediction, hidden=True)
+    wrong = A.left_pose_prediction
+    _fails(checks.check_left_pose_prediction,
+           lambda mu, S, u, tau, W: (wrong(mu, S, u, tau, W)[0], A.pose_transition(u, tau) @ S
+                                     @ A.pose_transition(u, tau).T + W), "right perturbation's")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, transition=True), "do not apply F")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, rotate=False), "rotate it into the world")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, at="before"), "pose after the step")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, at="inverse"), "Ad(mu_next^-1)")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, at="transposed"), "transposed")
+    _fails(checks.check_left_pose_prediction,
+           lambda mu, S, u, tau, W: (A.se3_exp(tau * u) @ mu, wrong(mu, S, u, tau, W)[1]), "moves on the right")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a)[1], "return the pair")
+
+
 @pytest.mark.parametrize("noise", [lambda r: 4.0, lambda r: r ** 2, np.sqrt], ids=["fixed 4", "squared", "root"])
 @pytest.mark.parametrize("hidden", [False, True], ids=["visible", "hidden"])
 def test_pose_update_must_use_its_noise_variance(noise, hidden):
@@ -483,6 +500,52 @@ def test_slam_checks(capsys):
 
     _fails(checks.check_marginalize, _schur, "Schur complement")
     _fails(checks.check_marginalize, lambda S, keep: S[keep], "wrong shape")
+
+
+def test_slam_null_space_check(capsys):
+    _passes(checks.check_slam_null_space, A.slam_null_space, capsys)
+    checks.check_slam_null_space(A.slam_null_space, hidden=True)
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, pose_block="forward"), "not Ad(mu)")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, pose_block="identity"), "not the identity")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, sign=1.0), "wrong sign")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, swap=True), "twist order")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, landmarks=False), "move with the world")
+    _fails(checks.check_slam_null_space,
+           lambda T, p: A.slam_null_space(T, (np.c_[p, np.ones(len(p))] @ A.se3_inv(T).T)[:, :3]), "IMU frame")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p).T, "transposed")
+
+
+def test_null_space_is_the_kernel_of_the_joint_jacobian():
+    """H N = 0 at the estimate: moving the whole world leaves every pixel unchanged (the check's reference)."""
+    generator = np.random.default_rng(3)
+    camera = cam.StereoCamera(*__import__("visla_edu.simulate", fromlist=["default_rig"]).default_rig())
+    T = lie.se3_exp(np.r_[generator.normal(scale=5, size=3), generator.normal(size=3)])
+    world_T_cam = T @ camera.imu_T_cam
+    p_cam = np.c_[generator.uniform(-5, 5, 6), generator.uniform(-2, 2, 6), generator.uniform(5, 40, 6)]
+    p = p_cam @ world_T_cam[:3, :3].T + world_T_cam[:3, 3]
+    _, J_landmark, J_pose = camera.predict_with_jacobians(T, p)
+    H = A.slam_jacobian(J_pose, J_landmark, np.arange(6), 6)
+    N = checks.reference_slam_null_space(T, p)
+    assert np.abs(H @ N).max() < 1e-9 * np.abs(H).max() * np.abs(N).max()
+    assert np.linalg.matrix_rank(N) == 6
+
+
+def test_invariant_pose_jacobian_check(capsys):
+    _passes(checks.check_invariant_pose_jacobian, A.invariant_pose_jacobian, capsys)
+    checks.check_invariant_pose_jacobian(A.invariant_pose_jacobian, hidden=True)
+    _fails(checks.check_invariant_pose_jacobian, A.pose_jacobian, "right perturbation's pose Jacobian")
+    _fails(checks.check_invariant_pose_jacobian, lambda *a: -A.invariant_pose_jacobian(*a), "wrong sign")
+    _fails(checks.check_invariant_pose_jacobian, lambda *a: A.invariant_pose_jacobian(*a)[:, [3, 4, 5, 0, 1, 2]],
+           "swapped")
+    _fails(checks.check_invariant_pose_jacobian,
+           lambda Ks, C, T, m: np.hstack([-A.landmark_jacobian(Ks, C, T, m), A.landmark_jacobian(Ks, C, T, m) @ A.hat(m)]),
+           "shares the pose's rotation")
+    _fails(checks.check_invariant_pose_jacobian, lambda *a: A.landmark_jacobian(*a), "4x3")
+    with pytest.raises(AssertionError, match="notebook's rig"):
+        from visla_edu.checks import _inputs
+        notebook = _inputs.stereo_camera()
+        checks.check_invariant_pose_jacobian(
+            lambda Ks, C, T, m: A.invariant_pose_jacobian(notebook.Ks, notebook.cam_T_imu, T, m), hidden=True)
 
 
 # --------------------------------------------------------------------------- 07 consistency
@@ -644,6 +707,19 @@ def test_smoothing_checks(capsys):
     _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: A.schur_reduce(
         H_pp, H_pm, np.linalg.inv(H_mm), g_p, g_m), "inverse of H_mm")
     _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: (H_pp, g_p), "dropped, not eliminated")
+
+    _passes(checks.check_pose_marginal_covariance, A.pose_marginal_covariance, capsys)
+    checks.check_pose_marginal_covariance(A.pose_marginal_covariance, hidden=True)
+    _passes(checks.check_pose_marginal_covariance,  # the dense inverse of the whole system is right too
+            lambda H_pp, H_pm, H_mm: np.linalg.inv(np.block([[H_pp, H_pm], [H_pm.T, block_diag(*H_mm)]]))[
+                :len(H_pp), :len(H_pp)], capsys)
+    pm = checks.check_pose_marginal_covariance
+    _fails(pm, lambda H_pp, H_pm, H_mm: np.linalg.inv(H_pp), "conditions on the landmarks")
+    _fails(pm, lambda H_pp, H_pm, H_mm: A.schur_reduce(H_pp, H_pm, H_mm, np.zeros(len(H_pp)),
+                                                       np.zeros(H_pm.shape[1]))[0], "not S itself")
+    _fails(pm, lambda H_pp, H_pm, H_mm: A.pose_marginal_covariance(H_pp, H_pm, np.linalg.inv(H_mm)), "inverse of H_mm")
+    _fails(pm, lambda H_pp, H_pm, H_mm: np.linalg.inv(2 * H_pp - np.linalg.inv(
+        A.pose_marginal_covariance(H_pp, H_pm, H_mm))), "added the correction")
 
     def step_plus(T, p_body, q_world):  # the step of -r: twice the distance the other way
         return A.gauss_newton_step(T, p_body, 2 * (p_body @ T[:3, :3].T + T[:3, 3]) - q_world)

@@ -37,8 +37,8 @@ import importlib as _importlib
 import sys as _sys
 
 #: Submodules in dependency order; a reload of this package reloads them all.
-_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_primer", "_kinematics", "_camera", "_jacobians", "_filters",
-               "_consistency", "_smoothing", "_capstone")
+_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_primer", "_kinematics", "_uncertainty", "_camera", "_jacobians", "_filters",
+               "_observability", "_consistency", "_smoothing", "_capstone")
 
 
 def _load_submodules():
@@ -67,18 +67,26 @@ from visla_edu.checks._hiding import LibraryFunctionHidden  # noqa: E402
 from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
                                          check_pose_jacobian, check_projection_jacobian,
                                          reference_numerical_jacobian)
-from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat,  # noqa: E402
-                                          check_pose_transition, check_se3_exp, check_so3_exp)
+from visla_edu.checks._kinematics import check_dead_reckon, check_hat, check_se3_exp, check_so3_exp  # noqa: E402
+from visla_edu.checks._observability import (check_invariant_pose_jacobian, check_slam_null_space,  # noqa: E402
+                                             reference_slam_null_space)
 from visla_edu.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
+from visla_edu.checks._uncertainty import (check_curly_hat, check_left_pose_prediction,  # noqa: E402
+                                           check_pose_transition, reference_left_pose_prediction)
 from visla_edu.checks._smoothing import (check_gauss_newton_step, check_motion_residual,  # noqa: E402
-                                         check_schur_reduce, reference_gauss_newton_step, reference_schur_reduce)
+                                         check_pose_marginal_covariance, check_schur_reduce,
+                                         reference_gauss_newton_step, reference_pose_marginal_covariance,
+                                         reference_schur_reduce)
 
 __all__ = [
     "student_or_reference",
     "reference_numerical_jacobian",
     "reference_dense_covariance_bytes",
     "reference_schur_reduce",
+    "reference_pose_marginal_covariance",
     "reference_gauss_newton_step",
+    "reference_left_pose_prediction",
+    "reference_slam_null_space",
     "LibraryFunctionHidden",
     # 00 know your data
     "check_observations_at",
@@ -107,18 +115,22 @@ __all__ = [
     # 05 pose uncertainty
     "check_curly_hat",
     "check_pose_transition",
+    "check_left_pose_prediction",
     "check_pose_update",
     # 06 joint SLAM
     "check_slam_jacobian",
+    "check_slam_null_space",
     "check_dense_covariance_bytes",
     "check_marginalize",
     # 07 tuning and consistency
     "check_motion_noise",
     "check_nees",
     "check_average_nees_bounds",
+    "check_invariant_pose_jacobian",
     # 08 from filtering to smoothing
     "check_motion_residual",
     "check_schur_reduce",
+    "check_pose_marginal_covariance",
     "check_gauss_newton_step",
     # 09 capstone
     "check_capstone_predict",

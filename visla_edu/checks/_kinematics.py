@@ -1,4 +1,4 @@
-"""Checks of notebooks 01 and 05 (SE(3) kinematics): hat, exponentials, dead reckoning, curly-hat, F."""
+"""Checks of notebook 01 (SE(3) kinematics): hat, the exponentials, the logarithm, dead reckoning."""
 
 import numpy as np
 import scipy.linalg
@@ -13,8 +13,6 @@ __all__ = [
     "check_so3_exp",
     "check_se3_exp",
     "check_dead_reckon",
-    "check_curly_hat",
-    "check_pose_transition",
 ]
 
 _EPS = np.finfo(float).eps
@@ -359,110 +357,3 @@ def check_dead_reckon(dead_reckon, hidden=False):
         ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
     ], atol=1e-8)
     ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon", hidden)
-
-
-@exercise_check
-def check_curly_hat(curly_hat, hidden=False):
-    """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
-
-    On ``[1, 2, 3, 4, 5, 6]`` and 4 random twists (hidden: the zero twist, a tiny rotation
-    ``[0, 0, 0, 1e-9, 0, 0]`` and 4 random ones); compares with :func:`visla_edu.lie.curly_hat`
-    (default tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the twist
-    order, ``hat(v)`` in the lower-left block, ``curly_hat(-u)`` and the transpose. Hides
-    ``lie.curly_hat``.
-
-    Parameters
-    ----------
-    curly_hat : callable
-        The student's function: a twist ``u = [v; w]`` (6,) to its adjoint matrix (6, 6).
-    hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
-    """
-    name = "curly_hat"
-    generator = rng(hidden)
-    fixed = [np.zeros(6), np.array([0.0, 0, 0, 1e-9, 0, 0])] if hidden else [np.array([1.0, 2, 3, 4, 5, 6])]
-    call = student(curly_hat, name, hide=[lie.curly_hat])
-    cases = fixed + [generator.normal(size=6) for _ in range(4)]
-    for u in cases:
-        got = as_array(call(u), name, (6, 6))
-        ref = lie.curly_hat(u)
-        v, w = lie.hat(u[:3]), lie.hat(u[3:])
-        Z = np.zeros((3, 3))
-        compare(name, got, ref, f"for u = {fmt(u)}", [
-            ("wrong twist order: u = [v; w]\nthe diagonal blocks are hat(w) = hat(u[3:]) and the "
-             "off-diagonal one hat(v) = hat(u[:3])", lambda: lie.curly_hat(swap_twist(u))),
-            ("hat(v) belongs in the upper-right block\n[[hat(w), hat(v)], [0, hat(w)]] for [v; w]",
-             lambda: np.block([[w, Z], [v, w]])),
-            ("the signs are flipped (you built curly_hat(-u))", lambda: -ref),
-            ("curly_hat is transposed", lambda: ref.T),
-        ])
-    ok(f"{name}: [[hat(w), hat(v)], [0, hat(w)]] agrees with the library on {len(cases)} twists [v; w]", hidden)
-
-
-@exercise_check
-def check_pose_transition(pose_transition, hidden=False):
-    """Exercise 05: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
-
-    On every other twist of :func:`~visla_edu.checks._inputs.twists` (10 visible, 8 hidden),
-    each with a step ``tau`` uniform in 0.05 to 0.2 s; a 4x4 result fails at once. Compares
-    with :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Recognises a
-    missing minus sign, the transpose, the twist order and the first-order ``I - tau
-    curly_hat(u)``.
-
-    Hides ``motion.pose_transition``, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp``
-    stays.
-
-    Parameters
-    ----------
-    pose_transition : callable
-        The student's function: a body twist ``u = [v; w]`` (6,) and the step ``tau`` (s) to the
-        perturbation transition ``F`` (6, 6).
-    hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
-    """
-    name = "pose_transition"
-    generator = rng(hidden)
-    call = student(pose_transition, name, hide=[motion.pose_transition, motion.imu_step, lie.adjoint])
-    for u in twists(generator, hidden)[1 if hidden else 0::2]:
-        tau = float(generator.uniform(0.05, 0.2))
-        out = call(u, tau)
-        if np.shape(out) == (4, 4):
-            raise fail(name, "got a 4x4 matrix; F is 6x6, it acts on perturbations",
-                       "use the adjoint of exp(-tau u^), a 6x6 matrix")
-        got = as_array(out, name, (6, 6))
-        ref = motion.pose_transition(u, tau)
-        compare(name, got, ref, f"for u = {fmt(u)}, tau = {tau:.3f}", [
-            ("missing minus sign: F = exp(-tau curly_hat(u)) = Ad(exp(-tau u^))\nthe perturbation is "
-             "carried backwards through the motion step", lambda: motion.pose_transition(u, -tau)),
-            ("F is transposed", lambda: ref.T),
-            ("wrong twist order: u = [v; w]", lambda: motion.pose_transition(swap_twist(u), tau)),
-            ("you used I - tau curly_hat(u), the first-order approximation\nuse the exact closed form "
-             "Ad(exp(-tau u^))", lambda: np.eye(6) - tau * lie.curly_hat(u)),
-        ], rtol=1e-7, atol=1e-9, nan_hint=NEAR_ZERO_HINT)
-    ok(f"{name}: closed form agrees with expm(-tau curly_hat(u)), including at rest", hidden)
