@@ -209,15 +209,38 @@ def test_kinematics_checks(capsys):
     _fails(checks.check_se3_exp, _se3_naive, "NaN")
     _fails(checks.check_se3_exp, _se3_bad_bottom, "bottom row")
 
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, left=True), "on the left")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u[:, [3, 4, 5, 0, 1, 2]]), "twist order")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, lag=1), "u_t")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, scale_tau=False), "time step")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts[0] + np.mean(np.diff(ts)) * np.arange(len(ts)), u),
+    dr = checks.check_dead_reckon
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u, lag, left=True), "on the left")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u[:, [3, 4, 5, 0, 1, 2]], lag), "twist order")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u), "lag was ignored")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u, -lag), "wrong sign")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u, lag, scale_tau=False), "time step")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts[0] + np.mean(np.diff(ts)) * np.arange(len(ts)), u, lag),
            "own tau_t")
-    _fails(checks.check_dead_reckon, lambda ts, u: np.array([A.se3_inv(T) for T in A.dead_reckon(ts, u)]),
-           "imu_T_world")
-    _fails(checks.check_dead_reckon, lambda ts, u: np.moveaxis(A.dead_reckon(ts, u), 0, -1), "shape")
+    _fails(dr, lambda ts, u, lag=0: np.array([A.se3_inv(T) for T in A.dead_reckon(ts, u, lag)]), "imu_T_world")
+    _fails(dr, lambda ts, u, lag=0: np.moveaxis(A.dead_reckon(ts, u, lag), 0, -1), "shape")
+    _fails(dr, lambda ts, u: A.dead_reckon(ts, u), "third argument, the lag")
+    # an index that wraps around at the end: only the hidden lags (-1, +2) reach it at the first step
+    with pytest.raises(AssertionError, match="wraps around"):
+        dr(lambda ts, u, lag=0: A.dead_reckon(ts, u, lag, clip=False), hidden=True)
+    dr(A.dead_reckon, hidden=True)
+
+    _passes(checks.check_so3_log, A.so3_log, capsys)
+    checks.check_so3_log(A.so3_log, hidden=True)
+    _passes(checks.check_so3_log, lambda R: Rotation.from_matrix(R).as_rotvec(), capsys)
+    message = _fails(checks.check_so3_log, lambda R: A.so3_log(R, angle="arccos"), "arccos loses its digits")
+    assert "atan2(|s|, (tr R - 1)/2)" in message.replace("\n", " ")
+    _fails(checks.check_so3_log, lambda R: A.so3_log(R, angle="arcsin"), "arcsin")
+    _fails(checks.check_so3_log, lambda R: A.so3_log(R, sign=-1.0), "-w")
+    _fails(checks.check_so3_log, lambda R: 2 * A.so3_log(R), "twice")
+    _fails(checks.check_so3_log, lambda R: 0.5 * A.so3_log(R), "half")
+    def log_without_guard(R):  # theta / sin(theta) with no care at the identity: 0 / 0
+        s = 0.5 * lie.vee(R - R.T)
+        theta = np.arctan2(np.linalg.norm(s), 0.5 * (np.trace(R) - 1))
+        return theta / np.linalg.norm(s) * s
+
+    _fails(checks.check_so3_log, log_without_guard, "at the identity")
+    _fails(checks.check_so3_log, lambda R: A.hat(A.so3_log(R)), "not a matrix")
 
 
 def test_the_translation_needs_the_small_angle_series_and_rodrigues_does_not(capsys):
@@ -364,7 +387,7 @@ def test_mapping_checks(capsys):
     _passes(checks.check_landmark_jacobian, A.landmark_jacobian, capsys)
     _passes(checks.check_init_landmark, A.init_landmark, capsys)
     _passes(checks.check_init_landmark, lambda z, K, b, X, T: (T @ X @ np.r_[cam.triangulate_disparity(z, K, b), 1])[
-        :3], capsys)  # notebook 04 allows camera.triangulate_disparity
+        :3], capsys)  # notebook 05 allows camera.triangulate_disparity
     _passes(checks.check_landmark_update, A.landmark_update, capsys)
 
     _fails(checks.check_landmark_jacobian, lambda *a: np.c_[A.landmark_jacobian(*a), np.zeros(4)], "P^T")
@@ -548,6 +571,30 @@ def test_invariant_pose_jacobian_check(capsys):
             lambda Ks, C, T, m: A.invariant_pose_jacobian(notebook.Ks, notebook.cam_T_imu, T, m), hidden=True)
 
 
+def test_white_noise_check(capsys):
+    _passes(checks.check_white_noise, A.white_noise, capsys)
+    checks.check_white_noise(A.white_noise, hidden=True)
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, robust=False), "robust spread")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, divide=1.0), "divide by sqrt(6)")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, divide=6.0), "not by 6")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, scale=1.0), "1.4826")
+    _fails(checks.check_white_noise, lambda u: 1.4826 * np.median(np.abs(np.diff(u, axis=0) - np.median(
+        np.diff(u, axis=0), axis=0)), axis=0) / np.sqrt(2), "second differences")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u).mean(), "wrong shape")
+
+
+def test_landmark_observation_noise_check(capsys):
+    f = A.landmark_observation_noise
+    _passes(checks.check_landmark_observation_noise, f, capsys)
+    checks.check_landmark_observation_noise(f, hidden=True)
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, 0 * S, r), "not exact")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, 0.0), "pixel noise")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, r**2), "do not square")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, np.sqrt(r)), "square root")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, np.linalg.inv(S), r), "not its inverse")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, r).sum(axis=0), "wrong shape")
+
+
 # --------------------------------------------------------------------------- 07 consistency
 
 
@@ -675,6 +722,41 @@ def test_library_shortcuts_to_an_exercise_are_hidden_inside_its_check():
     _fails(checks.check_landmark_update, _landmark_update_by_kalman, "kalman.update")
     _fails(checks.check_se3_exp, _se3_exp_from_the_smoothers_jacobian, "se3_right_jacobian")
     _fails(checks.check_motion_residual, _motion_residual_by_finite_differences, "numdiff.central_jacobian")
+
+
+def test_gate_check(capsys):
+    _passes(checks.check_gate, A.gate, capsys)
+    checks.check_gate(A.gate, hidden=True)
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, S, 1 - p), "not 1 - p")
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, S, p, dof=2), "4 degrees of freedom")
+    _fails(checks.check_gate, lambda r, S, p: ~A.gate(r, S, p), "rejected ones")
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, np.linalg.inv(S), p), "not r^T S r")
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, np.broadcast_to(np.eye(4), S.shape), p), "not |r|^2")
+    _fails(checks.check_gate, lambda r, S, p: np.sqrt(np.einsum("ki,ki->k", r, np.linalg.solve(S, r[..., None])[
+        ..., 0])) <= stats.chi2.ppf(p, 4), "SQUARED distance")
+
+
+def test_align_rigid_check(capsys):
+    _passes(checks.check_align_rigid, A.align_rigid, capsys)
+    checks.check_align_rigid(A.align_rigid, hidden=True)
+    _fails(checks.check_align_rigid, lambda e, g: A.align_rigid(e, g, fix_reflection=False), "reflection")
+    _fails(checks.check_align_rigid, lambda e, g: np.linalg.inv(A.align_rigid(e, g)), "inverse")
+    _fails(checks.check_align_rigid, lambda e, g: A.align_rigid(g, e), "inverse")
+
+    def transposed(e, g):
+        T = A.align_rigid(e, g)
+        R = T[:3, :3].T
+        T[:3, :3], T[:3, 3] = R, g.mean(axis=0) - R @ e.mean(axis=0)
+        return T
+
+    def centroid_not_rotated(e, g):
+        T = A.align_rigid(e, g)
+        T[:3, 3] = g.mean(axis=0) - e.mean(axis=0)
+        return T
+
+    _fails(checks.check_align_rigid, transposed, "transposed")
+    _fails(checks.check_align_rigid, centroid_not_rotated, "rotate the centroid")
+    _fails(checks.check_align_rigid, lambda e, g: A.align_rigid(e - e.mean(axis=0) * 0, g)[:3], "wrong shape")
 
 
 def _pose_update_twist_swapped(mu, Sigma, *args):

@@ -57,8 +57,7 @@ GAMED = {
                     "c.check_so3_exp = lambda f, hidden=False: print('\u2713 so3_exp')"),
         "se3_exp": ("import visla_edu.checks._core\n\n\ndef se3_exp(u):\n    return np.eye(4)\n\n\n"
                     "visla_edu.checks._core.compare = lambda *args, **kwargs: None"),
-        "dead_reckon": ("def dead_reckon(time_stamps, twists):\n    return np.tile(np.eye(4), (len(time_stamps), 1, 1))"
-                        "\n\n\nmotion.dead_reckon = dead_reckon"),
+        "so3_log": "def so3_log(R):\n    return np.zeros(3)\n\n\nlie.so3_log = so3_log",
     }),
     "calls_method": ("02_stereo_camera", {
         "stereo_matrix": "def stereo_matrix(K, b):\n    return camera.stereo_matrix(K, b)",

@@ -197,14 +197,14 @@ _REJECTED_ANSWERS = [
      "def numerical_jacobian(f, x, eps=1e-6):\n    x = np.asarray(x, dtype=float)\n"
      "    return np.stack([(np.asarray(f(x + eps * e)) - np.asarray(f(x - eps * e))) / (2 * eps)"
      " for e in np.eye(x.size)])", "03-11"),
-    ("04_landmark_mapping.ipynb", "landmark_update",  # world_T_imu where its inverse belongs
+    ("05_landmark_mapping.ipynb", "landmark_update",  # world_T_imu where its inverse belongs
      "def landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var):\n"
      "    q = cam_T_imu @ world_T_imu @ np.r_[m, 1.0]\n"
      "    H = Ks @ camera.projection_jacobian(q) @ cam_T_imu @ world_T_imu[:, :3]\n"
      "    K = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))\n"
-     "    return m + K @ (z - Ks @ camera.projection(q)), (np.eye(3) - K @ H) @ Sigma", "04-12"),
-    ("06_joint_slam.ipynb", "dense_covariance_bytes",  # the stride ignored
-     "def dense_covariance_bytes(num_landmarks, stride=1):\n    return (6 + 3 * num_landmarks) ** 2 * 8", "06-08"),
+     "    return m + K @ (z - Ks @ camera.projection(q)), (np.eye(3) - K @ H) @ Sigma", "05-12"),
+    ("09_active_set.ipynb", "dense_covariance_bytes",  # the stride ignored
+     "def dense_covariance_bytes(num_landmarks, stride=1):\n    return (6 + 3 * num_landmarks) ** 2 * 8", "09-08"),
 ]
 
 

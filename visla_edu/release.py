@@ -148,7 +148,7 @@ def _enclosing_function(lines_before, indent):
     """Name of the function whose body holds a solution region indented by ``indent``, or None.
 
     The nearest ``def name(`` above the region with a shorter indentation: the student's
-    function, whatever the exercise's grade id (notebook 09's ``capstone_predict`` is ``predict``).
+    function, whatever the exercise's grade id (notebook 12's ``capstone_predict`` is ``predict``).
     """
     for line in reversed(lines_before):
         match = re.match(r"(\s*)def (\w+)\(", line)

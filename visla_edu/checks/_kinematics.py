@@ -1,4 +1,4 @@
-"""Checks of notebook 01 (SE(3) kinematics): hat, the exponentials, the logarithm, dead reckoning."""
+"""Checks of notebooks 01 and 04 (SE(3) kinematics): hat, the exponentials, the logarithm, dead reckoning."""
 
 import numpy as np
 import scipy.linalg
@@ -13,6 +13,7 @@ __all__ = [
     "check_so3_exp",
     "check_se3_exp",
     "check_dead_reckon",
+    "check_so3_log",
 ]
 
 _EPS = np.finfo(float).eps
@@ -280,17 +281,27 @@ def check_se3_exp(se3_exp, hidden=False):
     ok(f"{name}: agrees with the library for twists [v; w] from rest to angles near pi", hidden)
 
 
-def _dead_reckon_left(time_stamps, twist_samples):
+def _dead_reckon_left(time_stamps, twist_samples, lag):
+    steps = motion.select_twists(twist_samples, lag)
     poses = [np.eye(4)]
     for t, tau in enumerate(np.diff(time_stamps)):
-        poses.append(lie.se3_exp(tau * twist_samples[t]) @ poses[-1])
+        poses.append(lie.se3_exp(tau * steps[t]) @ poses[-1])
     return np.array(poses)
 
 
-def _dead_reckon_no_tau(time_stamps, twist_samples):
+def _dead_reckon_no_tau(time_stamps, twist_samples, lag):
     poses = [np.eye(4)]
-    for t in range(len(time_stamps) - 1):
-        poses.append(poses[-1] @ lie.se3_exp(twist_samples[t]))
+    for step in motion.select_twists(twist_samples, lag):
+        poses.append(poses[-1] @ lie.se3_exp(step))
+    return np.array(poses)
+
+
+def _dead_reckon_wrapped(time_stamps, twist_samples, lag):
+    """The mistake ``twists[(t + lag) % T]``: past an end the index wraps around instead of stopping."""
+    idx = (np.arange(len(time_stamps) - 1) + lag) % len(twist_samples)
+    poses = [np.eye(4)]
+    for tau, u in zip(np.diff(time_stamps), twist_samples[idx]):
+        poses.append(poses[-1] @ lie.se3_exp(tau * u))
     return np.array(poses)
 
 
@@ -304,23 +315,50 @@ def _drive(generator, T, hidden):
     return time_stamps, samples
 
 
+def _dead_reckon_variants(time_stamps, samples, lag, ref):
+    T = len(time_stamps)
+    return [
+        ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
+         "T_{t+1} = T_t exp(tau_t u_{t+lag}^) (multiply on the right)",
+         lambda: _dead_reckon_left(time_stamps, samples, lag)),
+        ("wrong twist order: u = [v; w] (linear first)",
+         lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]], lag=lag)),
+        (f"the lag was ignored: with lag {lag:+d} the step t -> t+1 uses u_(t{lag:+d})\n"
+         "lag 0 is the course's convention, u_t, the sample at the start of the interval",
+         lambda: motion.dead_reckon(time_stamps, samples)),
+        (f"the lag has the wrong sign: use u_(t{lag:+d}), not u_(t{-lag:+d})\nlag +1 is the sample at the end "
+         "of the interval, u_(t+1)", lambda: motion.dead_reckon(time_stamps, samples, lag=-lag)),
+        ("past an end the index wraps around: clip it\nt + lag must stay in 0 .. T-1 (the first or last sample "
+         "is used again), as np.clip does; a negative index counts from the end in numpy",
+         lambda: _dead_reckon_wrapped(time_stamps, samples, lag)),
+        ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u^)",
+         lambda: _dead_reckon_no_tau(time_stamps, samples, lag)),
+        ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
+         lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples,
+                                    lag=lag)),
+        ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
+    ]
+
+
 @exercise_check
 def check_dead_reckon(dead_reckon, hidden=False):
-    """Exercise 01: ``dead_reckon(time_stamps (T,), twists (T, 6)) -> (T, 4, 4)`` from the identity.
+    """Exercise 04: ``dead_reckon(time_stamps (T,), twists (T, 6), lag=0) -> (T, 4, 4)`` from the identity.
 
-    On a random drive of 30 frames with steps of 0.08 to 0.12 s (hidden: 45 frames, steps
-    from 0.02 s, and zero twists for a stretch: the car stops); compares with
-    :func:`visla_edu.motion.dead_reckon` (lag 0, ``atol=1e-8``), i.e.
-    ``T_{t+1} = T_t exp(tau_t u_t^)`` from ``T_0 = I``. Recognises multiplication on the left,
-    the twist order ``[w; v]``, ``u_{t+1}`` for the step ``t -> t+1``, a missing ``tau``, one
-    constant ``tau`` and inverted poses. Hides ``motion.dead_reckon`` and
-    ``motion.predict_pose``.
+    ``T_{t+1} = T_t exp(tau_t u_{t+lag}^)`` from ``T_0 = I``, the index ``t + lag`` clipped to
+    ``0 .. T-1`` (:func:`visla_edu.motion.select_twists`). On a random drive of 30 frames with
+    steps of 0.08 to 0.12 s, with the lags 0 and +1 (hidden: 45 frames, steps from 0.02 s, zero
+    twists for a stretch (the car stops), the lags 0, +1, -1 and +2); compares with
+    :func:`visla_edu.motion.dead_reckon` (``atol=1e-8``). A function without a ``lag`` argument
+    fails with a hint. Recognises multiplication on the left, the twist order ``[w; v]``, the lag
+    ignored or with the wrong sign, an index that wraps around at an end instead of being
+    clipped, a missing ``tau``, one constant ``tau`` and inverted poses. Hides
+    ``motion.dead_reckon``, ``motion.select_twists`` and ``motion.predict_pose``.
 
     Parameters
     ----------
     dead_reckon : callable
-        The student's function: time stamps (T,) and body twists ``[v; w]`` (T, 6) to the poses
-        ``world_T_imu`` (T, 4, 4).
+        The student's function: time stamps (T,), body twists ``[v; w]`` (T, 6) and the lag (an
+        int) to the poses ``world_T_imu`` (T, 4, 4).
     hidden : bool
         Run the hidden cases instead (other inputs, the random ones drawn from
         ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
@@ -340,20 +378,113 @@ def check_dead_reckon(dead_reckon, hidden=False):
     name = "dead_reckon"
     T = 45 if hidden else 30
     time_stamps, samples = _drive(rng(hidden), T, hidden)
-    call = student(dead_reckon, name, hide=[motion.dead_reckon, motion.predict_pose])
-    got = as_array(call(time_stamps, samples), name, (T, 4, 4))
-    ref = motion.dead_reckon(time_stamps, samples)
-    compare(name, got, ref, f"on a random {T}-step drive", [
-        ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
-         "T_{t+1} = T_t exp(tau_t u_t^) (multiply on the right)", lambda: _dead_reckon_left(time_stamps, samples)),
-        ("wrong twist order: u = [v; w] (linear first)",
-         lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]])),
-        ("the step from t to t+1 must use u_t, not u_{t+1}\nu_t is the sample at the start of the interval",
-         lambda: motion.dead_reckon(time_stamps, samples, lag=1)),
-        ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u_t^)",
-         lambda: _dead_reckon_no_tau(time_stamps, samples)),
-        ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
-         lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples)),
-        ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
-    ], atol=1e-8)
-    ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon", hidden)
+    call = student(dead_reckon, name, hide=[motion.dead_reckon, motion.select_twists, motion.predict_pose])
+    lags = (0, 1, -1, 2) if hidden else (0, 1)
+    for lag in lags:
+        try:
+            out = call(time_stamps, samples, lag)
+        except AssertionError as err:
+            if "positional argument" in str(err):
+                raise fail(name, "dead_reckon needs a third argument, the lag",
+                           "the signature is dead_reckon(time_stamps, twists, lag=0)") from None
+            raise
+        got = as_array(out, name, (T, 4, 4))
+        ref = motion.dead_reckon(time_stamps, samples, lag=lag)
+        compare(name, got, ref, f"on a random {T}-step drive with lag {lag:+d}",
+                _dead_reckon_variants(time_stamps, samples, lag, ref), atol=1e-8)
+    ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon at the lags {list(lags)}", hidden)
+
+
+# --------------------------------------------------------------------------- the logarithm
+
+
+def _log_arccos(R):
+    """The mistake: the angle from arccos((tr R - 1)/2), the axis from the antisymmetric part."""
+    s = 0.5 * lie.vee(R - R.T)
+    theta = np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))
+    norm = np.linalg.norm(s)
+    return np.zeros(3) if norm == 0 else theta / norm * s
+
+
+def _log_arcsin(R):
+    """The mistake: the angle from arcsin(|s|), which cannot exceed pi/2."""
+    s = 0.5 * lie.vee(R - R.T)
+    norm = np.linalg.norm(s)
+    return np.zeros(3) if norm == 0 else np.arcsin(min(norm, 1.0)) / norm * s
+
+
+def _log_cases(generator, hidden):
+    """Rotation vectors with angles 0 to 3 rad, and tiny ones where arccos loses its digits."""
+    angles = [0.0, 1e-9, 3e-8, 2e-6, 1e-4, 0.05, 0.5, 1.2, 2.0, 2.6, 3.0]
+    tiny = [1e-9, 1e-7, 1e-5]
+    if hidden:
+        angles = [0.0, 3e-9, 2e-7, 5e-5, 0.0999, 0.1001, 0.8, 1.6, 2.3, 2.9]
+        tiny = [3e-9, 4e-8, 2e-6]
+    return [a * unit(generator) for a in angles], [a * unit(generator) for a in tiny]
+
+
+def _log_variants(R, ref):
+    return [
+        ("the angle from arccos loses its digits near 0: use atan2\nat a small angle (tr R - 1)/2 = cos t is "
+         "about 1 - t^2/2 and rounds away t: take t = atan2(|s|, (tr R - 1)/2) with s = vee(R - R^T)/2",
+         lambda: _log_arccos(R)),
+        ("arcsin gives angles up to pi/2 only: use atan2\nt = atan2(|s|, (tr R - 1)/2) with s = vee(R - R^T)/2 "
+         "covers 0 to pi", lambda: _log_arcsin(R)),
+        ("you returned -w: the log of R^T\nthe axis is vee(R - R^T) / 2 = sin(t) a, not vee(R^T - R)",
+         lambda: -ref),
+        ("twice the rotation vector: s = vee(R - R^T) / 2\nvee(R - R^T) is 2 sin(t) a", lambda: 2 * ref),
+        ("half the rotation vector: s = vee(R - R^T) / 2 = sin(t) a\nw = t / sin(t) s", lambda: 0.5 * ref),
+    ]
+
+
+@exercise_check
+def check_so3_log(so3_log, hidden=False):
+    """Exercise 01: ``so3_log(R (3, 3)) -> w (3,)``, the rotation vector, accurate at small angles.
+
+    On rotations ``lie.so3_exp(w)`` with angles from 0 to 3 rad (near pi another formula is
+    needed, the library's; the exercise stops at 3 rad) compares with
+    :func:`visla_edu.lie.so3_log` (``atol=1e-12``), then at 3 tiny angles (1e-9, 1e-7 and 1e-5
+    rad; hidden: other angles and axes) to ``atol=1e-15``: the angle read with ``arccos`` is off by
+    about ``eps / t`` there, the one read with ``atan2`` of the antisymmetric part is not.
+    Recognises the ``arccos`` angle, the ``arcsin`` angle (wrong above pi/2), ``-w``, twice and
+    half the rotation vector, NaN at the identity and a matrix result. Hides ``lie.so3_log``,
+    ``lie.se3_log`` and the library's sin(t)/t; ``lie.vee`` and ``lie.hat`` stay (scipy's general
+    ``scipy.linalg.logm`` cannot be hidden: the exercise text asks for the formula).
+
+    Parameters
+    ----------
+    so3_log : callable
+        The student's function: a rotation matrix (3, 3) to its rotation vector ``w`` (3,), with
+        ``so3_exp(w) == R`` and an angle ``|w|`` in [0, pi].
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
+    name = "so3_log"
+    cases, tiny = _log_cases(rng(hidden), hidden)
+    call = student(so3_log, name, hide=[lie.so3_log, lie.se3_log, lie._near_pi_log, lie._sin_over_theta])
+    nan_hint = ("at the identity\nthere the angle and s are 0 and t / sin(t) is 0 / 0: return zeros, or use the "
+                "series t / sin(t) ~ 1 + t^2/6 below a small angle")
+    for w, atol in [(w, 1e-12) for w in cases] + [(w, 1e-15) for w in tiny]:
+        R = lie.so3_exp(w)
+        out = call(R)
+        if np.shape(out) == (3, 3):
+            raise fail(name, "return the rotation vector (3,), not a matrix",
+                       "so3_log returns w = vee(log R), with so3_exp(w) == R")
+        ref = lie.so3_log(R)
+        compare(name, as_array(out, name, (3,), "rotation vector"), ref,
+                f"for the rotation by {np.linalg.norm(w):.3g} rad about {fmt(w / max(np.linalg.norm(w), 1e-300))}",
+                _log_variants(R, ref), rtol=0, atol=atol, nan_hint=nan_hint)
+    ok(f"{name}: agrees with the library from 0 to 3 rad, to full precision at 1e-9 rad", hidden)

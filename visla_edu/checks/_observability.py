@@ -1,4 +1,4 @@
-"""Checks of the unobservable directions: the joint SLAM null space (06), the invariant pose Jacobian (07).
+"""Checks of the unobservable directions: the joint SLAM null space (08), the invariant pose Jacobian (10).
 
 Moving the whole world (every pose and every landmark) by one rigid motion leaves every pixel
 unchanged: these six directions of the joint state are unobservable, so the joint Jacobian
@@ -75,7 +75,7 @@ def _null_space_cases(generator, hidden):
 
 @exercise_check
 def check_slam_null_space(slam_null_space, hidden=False):
-    """Exercise 06: ``slam_null_space(world_T_imu, p_landmarks (n, 3)) -> N (6 + 3n, 6)``.
+    """Exercise 08: ``slam_null_space(world_T_imu, p_landmarks (n, 3)) -> N (6 + 3n, 6)``.
 
     Compares with :func:`reference_slam_null_space` (``rtol=1e-9``, ``atol=1e-9``) at random
     poses with 0, 1 and 4 landmarks (hidden: 2, 7 and 1, other draws), after a case with the
@@ -139,11 +139,11 @@ def _invariant_variants(camera, T, m, J_landmark):
 
 @exercise_check
 def check_invariant_pose_jacobian(invariant_pose_jacobian, hidden=False):
-    """Exercise 07: ``invariant_pose_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 6)``.
+    """Exercise 10: ``invariant_pose_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 6)``.
 
     The invariant error (``T = exp(xi^) mu``, ``xi = [p; theta]``, ``m_j = exp(theta^) mu_j +
     e_j``) makes the camera see ``inv(mu) (mu_j + e_j - p)`` to first order, so the pose Jacobian
-    is ``[-H_lm, 0]`` with ``H_lm`` the landmark Jacobian of notebook 04: compares with
+    is ``[-H_lm, 0]`` with ``H_lm`` the landmark Jacobian of notebook 05: compares with
     :func:`visla_edu.ekf.invariant_pose_jacobian` of :meth:`~visla_edu.camera.StereoCamera.jacobian_landmark`
     (``rtol=1e-6``, ``atol=1e-8``) with the simulator's rig (hidden: another one) at 3 random
     poses (hidden: 5), then the identity, one landmark in view at 2 to 60 m. Recognises the

@@ -1,5 +1,5 @@
-"""Checks of notebook 08 (from filtering to smoothing): the motion factor, the Schur complement and
-the poses' marginal covariance, a Gauss-Newton step.
+"""Checks of notebooks 13 and 14 (smoothing): the motion factor, the Schur complement, a Gauss-Newton step
+and the poses' marginal covariance.
 
 Conventions: poses ``world_T_imu``, right perturbation ``T <- T exp(delta^)``, twists
 ``[v; w]`` (linear first), the Gauss-Newton system ``H dx = -g``.
@@ -86,7 +86,7 @@ def _motion_variants(T_prev, T_next, step_inv):
 
 @exercise_check
 def check_motion_residual(motion_residual, hidden=False):
-    """Exercise 08: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``.
+    """Exercise 13: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``.
 
     For 3 steps whose next pose is the IMU prediction times an error of size 0.05, 0.2 and 0.5
     (hidden: 0, 1e-7, 0.3 and 0.9); the result must be a tuple of three. Compares with
@@ -208,7 +208,7 @@ def _schur_variants(H_pp, H_pm, H_mm, g_p, g_m):
 
 @exercise_check
 def check_schur_reduce(schur_reduce, hidden=False):
-    """Exercise 08: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``.
+    """Exercise 13: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``.
 
     For 2 random systems of ``J^T J`` form (6 pose entries and 2 landmarks, 12 and 4; hidden:
     4 systems, up to 40 landmarks); the result must be a tuple ``(S, b)``. Compares with
@@ -291,7 +291,7 @@ def _marginal_variants(H_pp, H_pm, H_mm):
 
 @exercise_check
 def check_pose_marginal_covariance(pose_marginal_covariance, hidden=False):
-    """Exercise 08: ``pose_marginal_covariance(H_pp, H_pm, H_mm (L, 3, 3)) -> (p, p)``, the poses' marginal.
+    """Exercise 14: ``pose_marginal_covariance(H_pp, H_pm, H_mm (L, 3, 3)) -> (p, p)``, the poses' marginal.
 
     The pose block of ``H^-1``, i.e. ``S^-1`` with the Schur complement ``S = H_pp - H_pm H_mm^-1
     H_pm^T``: compares with :func:`reference_pose_marginal_covariance` (``rtol=1e-6``,
@@ -407,7 +407,7 @@ def _gauss_newton_variants(T, p_body, q_world):
 
 @exercise_check
 def check_gauss_newton_step(gauss_newton_step, hidden=False):
-    """Exercise 08: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``.
+    """Exercise 14: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``.
 
     For 2 cases (5 points and a pose error of size 0.2, 12 points and 0.8; hidden: 4 cases
     from 3 to 30 points, errors from 0 to 1.5) with 1 cm noise on ``q_world``; compares with

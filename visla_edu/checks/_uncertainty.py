@@ -1,4 +1,4 @@
-"""Checks of notebook 05 (pose uncertainty): curly-hat, the transition F, the left-perturbation prediction."""
+"""Checks of notebook 06 (pose uncertainty): curly-hat, the transition F, the left-perturbation prediction."""
 
 import numpy as np
 
@@ -12,7 +12,7 @@ __all__ = ["check_curly_hat", "check_pose_transition", "check_left_pose_predicti
 
 @exercise_check
 def check_curly_hat(curly_hat, hidden=False):
-    """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
+    """Exercise 06: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
 
     On ``[1, 2, 3, 4, 5, 6]`` and 4 random twists (hidden: the zero twist, a tiny rotation
     ``[0, 0, 0, 1e-9, 0, 0]`` and 4 random ones); compares with :func:`visla_edu.lie.curly_hat`
@@ -63,7 +63,7 @@ def check_curly_hat(curly_hat, hidden=False):
 
 @exercise_check
 def check_pose_transition(pose_transition, hidden=False):
-    """Exercise 05: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
+    """Exercise 06: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
 
     On every other twist of :func:`~visla_edu.checks._inputs.twists` (10 visible, 8 hidden),
     each with a step ``tau`` uniform in 0.05 to 0.2 s; a 4x4 result fails at once. Compares
@@ -182,7 +182,7 @@ def _left_cases(generator, hidden):
 
 @exercise_check
 def check_left_pose_prediction(left_pose_prediction, hidden=False):
-    """Exercise 05: ``left_pose_prediction(mu, Sigma, u, tau, W) -> (mu_next, Sigma_next)``, left perturbation.
+    """Exercise 06: ``left_pose_prediction(mu, Sigma, u, tau, W) -> (mu_next, Sigma_next)``, left perturbation.
 
     For the left (world-frame) perturbation ``T = exp(xi^) mu``, the prediction is
     ``mu_next = mu exp(tau u^)`` and ``Sigma_next = Sigma + Ad(mu_next) W Ad(mu_next)^T`` (the

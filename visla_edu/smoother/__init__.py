@@ -22,7 +22,7 @@ also gives the marginal covariances.
 Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
 history, rejection counts, per-observation status, timing); :class:`SmootherConfig` holds
 every setting and validates it. :func:`normal_equations` gives the full sparse Gauss-Newton
-system of the batch problem at a state (for teaching: notebook 08's spy plot and Schur
+system of the batch problem at a state (for teaching: notebook 13's spy plot and Schur
 complement; the smoothers never form it).
 
     >>> from visla_edu import data, run, smoother
