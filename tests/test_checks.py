@@ -112,14 +112,14 @@ def test_primer_checks(capsys):
     _fails(checks.check_kalman_update_1d,
            _update_1d_with_gain(lambda var, r: np.sqrt(var) / (np.sqrt(var) + np.sqrt(r))), "standard deviations")
     _fails(checks.check_kalman_update_1d, _update_1d_with_gain(right_gain, mean_sign=-1.0), "z - mean")
-    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(lambda var, r: var / r), "not variance / r")
+    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(lambda var, r: var / r), "not variance / V")
     _fails(checks.check_kalman_update_1d, _update_1d_with_gain(right_gain, variance_of=lambda var, k: var - k),
-           "not variance - K")
+           "not variance - L")
     _fails(checks.check_kalman_update_1d, lambda *a: A.kalman_update_1d(*a)[::-1], "in this order")
     _fails(checks.check_kalman_update_1d, lambda *a: A.kalman_update_1d(*a)[0], "return the pair")
     _fails(checks.check_kalman_update_1d, lambda m, var, z, r: (m + 0.5 * (z - m), var / 2), "no known mistake")
 
-    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F.T), "process noise Q")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F.T), "motion noise W")
     _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F.T @ P @ F + Q), "transposed")
     _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P + Q), "F.T on the right")
     _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F + Q), "second F")
@@ -202,10 +202,10 @@ def test_kinematics_checks(capsys):
     _fails(checks.check_se3_exp, lambda u: A.se3_exp(np.r_[u[3:], u[:3]]), "twist order")
     _fails(checks.check_se3_exp, lambda u: A.se3_exp(-u), "inverse pose")
     _fails(checks.check_se3_exp, lambda u: A.se3_inv(A.se3_exp(u)), "inverse pose")
-    _fails(checks.check_se3_exp, _se3_v_only, "V v")
+    _fails(checks.check_se3_exp, _se3_v_only, "J_l v")
     _fails(checks.check_se3_exp, _se3_v_only, "translation is v,")
     # first wrong at a tiny angle, where V^T v, v and V v nearly coincide: named as V^T, not as v
-    _fails(checks.check_se3_exp, _se3_v_transposed, "you used V^T")
+    _fails(checks.check_se3_exp, _se3_v_transposed, "you used J_l^T")
     _fails(checks.check_se3_exp, _se3_naive, "NaN")
     _fails(checks.check_se3_exp, _se3_bad_bottom, "bottom row")
 
@@ -477,7 +477,7 @@ def test_curly_hat_success_line_claims_only_the_comparison(capsys):
 def test_pose_update_success_line_names_what_it_compared_with(capsys):
     checks.check_pose_update(A.pose_update)
     out = capsys.readouterr().out
-    assert "the reference update mu exp(K r), (I - K H) Sigma" in out  # the check's own formula
+    assert "the reference update mu exp(L r), (I - L H) Sigma" in out  # the check's own formula
     assert "ekf.pose_update" not in out  # the check never calls it
 
 
@@ -640,7 +640,7 @@ def test_se3_exp_translation_mistakes_are_named():
     """R v instead of V v, V's coefficients exchanged, and V transposed (the right Jacobian, V^T)."""
     _fails(checks.check_se3_exp, lambda u: _se3_translation(u, A.so3_exp(u[3:])), "translation is R v")
     _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=True)), "coefficients are swapped")
-    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "you used V^T")
+    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "you used J_l^T")
 
 # --------------------------------------------------------------------------- 08 smoothing
 

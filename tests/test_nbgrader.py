@@ -40,7 +40,9 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"
 STUDENT = ROOT / "notebooks"
-NAMES = sorted(p.stem for p in SOLUTIONS.glob("*.ipynb"))
+#: The graded notebooks (the notation page, a reference page without exercises, is not part of the assignment).
+NAMES = sorted(p.stem for p in SOLUTIONS.glob("*.ipynb")
+               if not release.is_reference_page(nbformat.read(str(p), as_version=4)))
 ASSIGNMENT = "visla"
 
 #: Gamed submissions: student -> (notebook, {answer cell grade id: its source}).

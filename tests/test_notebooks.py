@@ -26,6 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"
 STUDENT = ROOT / "notebooks"
 NAMES = sorted(p.name for p in SOLUTIONS.glob("*.ipynb"))
+#: Reference pages (the notation page): no exercises, no code; exempt from the per-lesson checks.
+REFERENCE_PAGES = [n for n in NAMES if release.is_reference_page(nbformat.read(str(SOLUTIONS / n), as_version=4))]
+LESSONS = [n for n in NAMES if n not in REFERENCE_PAGES]
 MAX_BYTES = 1_000_000
 #: Seconds one notebook may take (the course budget is 5 minutes for all of them).
 CELL_TIMEOUT = 600
@@ -96,7 +99,15 @@ def test_stored_without_outputs_and_small(folder, name):
 # --------------------------------------------------------------------------- structure
 
 
-@pytest.mark.parametrize("name", NAMES)
+def test_the_notation_page_is_the_reference_page_and_has_no_code():
+    assert REFERENCE_PAGES == ["notation.ipynb"]
+    for folder in (SOLUTIONS, STUDENT):
+        nb = _read(folder / "notation.ipynb")
+        assert all(c.cell_type == "markdown" for c in nb.cells), folder
+        assert not any(_nbgrader(c) for c in nb.cells), folder
+
+
+@pytest.mark.parametrize("name", LESSONS)
 def test_solution_notebook_structure(name):
     nb = _read(SOLUTIONS / name)
     ids = [_nbgrader(c)["grade_id"] for c in nb.cells if _nbgrader(c)]
@@ -138,7 +149,7 @@ def _check_graded_cell(source, where):
         assert fn in checks.__all__, f"{where}: checks.{fn} does not exist"
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", LESSONS)
 def test_student_notebook_has_stubs_and_no_solutions(name):
     nb = _read(STUDENT / name)
     text = "\n".join(c.source for c in nb.cells)

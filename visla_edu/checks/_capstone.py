@@ -376,8 +376,8 @@ def check_capstone_slam(slam_update, hidden=False):
     With the simulator's rig (hidden: another one), for states of 4 landmarks with 2 observed
     and 6 with all 6 observed (hidden: 2 of 5, 1 of 1 and 5 of 8), ``noise_var = 4``. The result
     must be a tuple of three; compared with the joint EKF update through ``parts`` (``H`` from
-    ``parts.slam_jacobian``, ``K = Sigma H^T S^-1``, the pose corrected on the right by
-    ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - K H) Sigma``
+    ``parts.slam_jacobian``, ``L = Sigma H^T S^-1``, the pose corrected on the right by
+    ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - L H) Sigma``
     symmetrised): pose ``rtol=1e-7``, ``atol=1e-8``; covariance ``rtol=1e-6``, ``atol=1e-10``;
     landmarks ``rtol=1e-7``, ``atol=1e-8``. Recognises the correction on the left, its sign, a
     covariance that does not change, and the landmarks left in place. The function must call
@@ -431,7 +431,7 @@ def check_capstone_slam(slam_update, hidden=False):
         ], rtol=1e-7, atol=1e-8)
         D = 6 + 3 * n
         compare(name, as_array(out[1], name, (D, D), "covariance"), ref[1], f"(covariance) {where}", [
-            ("the covariance did not change: Sigma <- (I - K H) Sigma", lambda: Sigma),
+            ("the covariance did not change: Sigma <- (I - L H) Sigma", lambda: Sigma),
         ], rtol=1e-6, atol=1e-10)
         compare(name, as_array(out[2], name, (n, 3), "landmark means"), ref[2], f"(landmark means) {where}", [
             ("every landmark in the state moves: p_active + dx[6:].reshape(-1, 3)\n(the unobserved ones too, "

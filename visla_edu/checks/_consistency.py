@@ -269,11 +269,11 @@ def _align_variants(p_est, p_gt, ref):
     R = ref[:3, :3]
     U0, _, Vt0 = np.linalg.svd(p_est.T @ p_gt)
     return [
-        ("the rotation block is transposed: R = V D U^T\nwith U S V^T = svd(sum (p_est - c_est)(p_gt - c_gt)^T)",
+        ("the rotation block is transposed: R = Q D U^T\nwith U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt - c_gt)^T)",
          lambda: _rigid(R.T, mu_g - R.T @ mu_e)),
-        ("the result is a reflection (det -1): fix the sign\nR = V diag(1, 1, det(V U^T)) U^T is the best "
+        ("the result is a reflection (det -1): fix the sign\nR = Q diag(1, 1, det(Q U^T)) U^T is the best "
          "rotation; without the fix the SVD may give a mirror image", lambda: _rigid(Vt.T @ U.T, mu_g - Vt.T @ U.T @ mu_e)),
-        ("rotate the centroid: t = c_gt - R c_est, not c_gt - c_est",
+        ("rotate the centroid: p = c_gt - R c_est, not c_gt - c_est",
          lambda: _rigid(R, mu_g - mu_e)),
         ("remove the centroids before the SVD\nthe cross-covariance is sum (p_est - c_est)(p_gt - c_gt)^T",
          lambda: _rigid(Vt0.T @ U0.T, mu_g - Vt0.T @ U0.T @ mu_e)),
@@ -300,9 +300,9 @@ def _align_cases(generator, hidden):
 def check_align_rigid(align_rigid, hidden=False):
     """Exercise 11: ``align_rigid(p_est (N, 3), p_gt (N, 3)) -> gt_T_est (4, 4)``, the best rigid alignment.
 
-    The rotation ``R`` and translation ``t`` minimising ``sum |p_gt - (R p_est + t)|^2`` (Kabsch,
-    no scale): ``R = V diag(1, 1, det(V U^T)) U^T`` from ``U S V^T = svd(sum (p_est - c_est)(p_gt -
-    c_gt)^T)`` and ``t = c_gt - R c_est``. On 2 noisy drives moved by a random rigid motion (200 and
+    The rotation ``R`` and translation ``p`` minimising ``sum |p_gt - (R p_est + p)|^2`` (Kabsch,
+    no scale): ``R = Q diag(1, 1, det(Q U^T)) U^T`` from ``U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt -
+    c_gt)^T)`` and ``p = c_gt - R c_est``. On 2 noisy drives moved by a random rigid motion (200 and
     12 positions; hidden: 300, 40 and 8) and on a flat set of points compared with its mirror image
     (the SVD then gives a reflection); compares with :func:`visla_edu.metrics.align_se3`
     (``rtol=1e-7``, ``atol=1e-8``). Recognises the transposed rotation, the reflection not fixed,
@@ -338,4 +338,4 @@ def check_align_rigid(align_rigid, hidden=False):
         flat = not np.any(p_est[:, 2])
         compare(name, got, ref, f"for {len(p_est)} {'flat, mirrored ' if flat else ''}positions",
                 _align_variants(p_est, p_gt, ref), rtol=1e-7, atol=1e-8)
-    ok(f"{name}: R = V diag(1, 1, det(V U^T)) U^T, t = c_gt - R c_est", hidden)
+    ok(f"{name}: R = Q diag(1, 1, det(Q U^T)) U^T, p = c_gt - R c_est", hidden)

@@ -62,8 +62,8 @@ def _landmark_covariance_variants(m, Sigma, T, camera, noise_var):
     H = camera.jacobian_landmark(T, m[None])[0]
     gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))
     return [
-        ("Sigma_new = (I - K H) Sigma, with a minus sign", lambda: (np.eye(3) + gain @ H) @ Sigma),
-        ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
+        ("Sigma_new = (I - L H) Sigma, with a minus sign", lambda: (np.eye(3) + gain @ H) @ Sigma),
+        ("the covariance did not change: Sigma_new = (I - L H) Sigma", lambda: Sigma),
         ("the observation noise is missing from S = H Sigma H^T + noise_var I",
          lambda: Sigma - Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T) @ H @ Sigma),
     ]
@@ -84,7 +84,7 @@ def check_landmark_update(landmark_update, hidden=False):
     and a random prior covariance; ``noise_var = 4`` (hidden: 1). Compares with
     :func:`visla_edu.ekf.landmark_update` (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``,
     ``atol=1e-8``). Recognises a flipped innovation, a mean or covariance that does not change,
-    ``(I + K H) Sigma``, the pixel noise missing from ``S`` or squared (``noise_var^2``) and
+    ``(I + L H) Sigma``, the pixel noise missing from ``S`` or squared (``noise_var^2``) and
     transposed rotations. Hides
     ``ekf.landmark_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
     ``kalman.update``.
@@ -167,7 +167,7 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
     transposed.append(lambda: _pose_update_with(mu, Sigma, z, p_world, camera.Ks,
                                                 rotation_transposed(camera.cam_T_imu), noise_var)[0])
     return [
-        ("the correction is applied on the left; use mu_new = mu @ se3_exp(K r)\n"
+        ("the correction is applied on the left; use mu_new = mu @ se3_exp(L r)\n"
          "with the right perturbation T = mu exp(delta^) the correction K (z - z_pred) multiplies mu "
          "on the right",
          lambda: _pose_update_with(*args, side="left")[0]),
@@ -175,7 +175,7 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
          "(-Ks dpi/dq o_T_i (mu^-1 m)^odot) and the innovation z - z_pred",
          lambda: _pose_update_with(*args, sign=-1.0)[0]),
         ("the pose did not move", lambda: mu),
-        ("wrong twist order: the correction K r is [v; w] (linear first), as se3_exp expects",
+        ("wrong twist order: the correction L r is [v; w] (linear first), as se3_exp expects",
          lambda: _pose_update_with(*args, swap=True)[0]),
         ("the innovation is not stacked like H: use (z - z_pred).ravel()\n"
          "H stacks the observations one after the other (4 rows each: uL, vL, uR, vR of observation "
@@ -194,8 +194,8 @@ def check_pose_update(pose_update, hidden=False):
     observation): 8 landmarks in view at 4 to 40 m observed with 1 px noise, a random pose
     covariance and a mean drawn from it around the true pose; ``noise_var`` 4, 1 and 9 (hidden:
     then 2.25 and 0.25), so a function that ignores it fails. Compares with the EKF update
-    written out in the checks (``H`` stacked over the observations, ``K = Sigma H^T (H Sigma H^T
-    + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``; mean ``rtol=1e-6``,
+    written out in the checks (``H`` stacked over the observations, ``L = Sigma H^T (H Sigma H^T
+    + noise_var I)^-1``, ``mu exp(L r)``, ``(I - L H) Sigma``; mean ``rtol=1e-6``,
     ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the correction applied
     on the left, its sign, a pose that does not move, the twist order, an innovation stacked
     column by column (unlike ``H``), transposed rotations, a
@@ -249,9 +249,9 @@ def check_pose_update(pose_update, hidden=False):
                     hidden, lambda c=stereo_camera(): _pose_update_with(*args[:4], c.Ks, c.cam_T_imu, noise_var)[0]),
                 rtol=1e-6, atol=1e-7, extra=not_se3)
         compare(name, as_array(out[1], name, (6, 6), "covariance"), S_ref, "(covariance)", [
-            ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
+            ("the covariance did not change: Sigma_new = (I - L H) Sigma", lambda: Sigma),
         ], rtol=1e-6, atol=1e-10)
-    ok(f"{name}: pose and covariance agree with the reference update mu exp(K r), (I - K H) Sigma", hidden)
+    ok(f"{name}: pose and covariance agree with the reference update mu exp(L r), (I - L H) Sigma", hidden)
 
 
 def _observation_noise_cases(generator, hidden):

@@ -111,7 +111,7 @@ def _tiny_angle_failure(name, t, error):
     return fail(name, f"no small-angle series: digits lost at {t:.0e} rad",
                 f"at the angle t = {t:.0e} rad your translation is off by {error:.1e} (relative to |v|); in "
                 f"float64 (1 - cos t)/t^2 keeps only about {digits:.0f} correct digit(s) there and (t - sin t)/t^3 "
-                "fewer, and in V v the first multiplies hat(w) v, of size t |v| only, so its error shows.",
+                "fewer, and in J_l v the first multiplies hat(w) v, of size t |v| only, so its error shows.",
                 "Below a small angle (visla-edu switches at 0.1 rad) use the Taylor series "
                 "(1 - cos t)/t^2 ~ 1/2 - t^2/24 + t^4/720, (t - sin t)/t^3 ~ 1/6 - t^2/120 + t^4/5040; "
                 "a guard at exactly t == 0 is not enough.")
@@ -185,7 +185,7 @@ def _se3_no_jacobian(u):
 
 
 def _se3_with_translation(u, translation):
-    """``se3_exp(u)`` with its translation replaced by ``translation`` (a mistake's V v)."""
+    """``se3_exp(u)`` with its translation replaced by ``translation`` (a mistake's J_l v)."""
     T = lie.se3_exp(u)
     T[:3, 3] = translation
     return T
@@ -200,14 +200,14 @@ def _swapped_v(w):
 
 
 def _se3_jacobian_transposed(u):
-    """The translation ``V^T v`` (the sign of V's hat(w) term flipped): ``V(w)^T = V(-w)``."""
+    """The translation ``J_l^T v`` (the sign of J_l's hat(w) term flipped): ``J_l(w)^T = J_l(-w)``."""
     T = lie.se3_exp(u)
     T[:3, 3] = lie.se3_exp(np.concatenate([u[:3], -u[3:]]))[:3, 3]
     return T
 
 
 def _check_tiny_twist(name, T, u):
-    """Fail if ``V v`` of ``T = se3_exp(u)`` lost digits at a tiny angle (``B hat(w) v`` is of size ``t |v|``)."""
+    """Fail if ``J_l v`` of ``T = se3_exp(u)`` lost digits at a tiny angle (``B hat(w) v`` is of size ``t |v|``)."""
     v, w = u[:3], u[3:]
     t = float(np.linalg.norm(w))
     wv = np.cross(w, v)
@@ -224,10 +224,10 @@ def check_se3_exp(se3_exp, hidden=False):
 
     Compares with :func:`visla_edu.lie.se3_exp` (``atol=1e-9``) on the twists of
     :func:`~visla_edu.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
-    at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``V v`` to relative
+    at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``J_l v`` to relative
     accuracy 1e-12 of ``|v|`` (a closed form guarded at exactly 0 is off by about ``eps / t``
     there: the small-angle series is needed) and the rotation to ``atol=1e-15``. Recognises the twist order ``[w; v]``,
-    the inverse pose, the translation ``v`` instead of ``V v`` or ``V^T v``, a transposed rotation
+    the inverse pose, the translation ``v`` instead of ``J_l v`` or ``J_l^T v``, a transposed rotation
     block, NaN near 0 and a result that is not a pose.
 
     Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the smoother's SE(3) right
@@ -264,13 +264,13 @@ def check_se3_exp(se3_exp, hidden=False):
             ("wrong twist order: u = [v; w] (linear first); you used [w; v]",
              lambda: lie.se3_exp(swap_twist(u))),
             ("you returned the inverse pose exp(-u^)\ncheck the signs", lambda: lie.se3_exp(-u)),
-            ("the translation is v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + "
+            ("the translation is v, but it must be J_l v\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
              "(t - sin t)/t^3 hat(w)^2 (the left Jacobian of SO(3))", lambda: _se3_no_jacobian(u)),
-            ("the translation is R v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
+            ("the translation is R v, but it must be J_l v\nJ_l = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, ref[:3, :3] @ u[:3])),
-            ("V's two coefficients are swapped\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
+            ("J_l's two coefficients are swapped\nJ_l = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, _swapped_v(u[3:]) @ u[:3])),
-            ("V's hat(w) term has the wrong sign (you used V^T)\nV = I + (1 - cos t)/t^2 hat(w) + "
+            ("J_l's hat(w) term has the wrong sign (you used J_l^T)\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
              "(t - sin t)/t^3 hat(w)^2, with a plus before the hat(w) term", lambda: _se3_jacobian_transposed(u)),
             ("the rotation block is transposed (R^T instead of R)",
              lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
