@@ -40,7 +40,7 @@ from visla_edu.filters._config import pixel_noise_inflation
 #: Candidate defaults of part 2: a label and the settings that differ from ``FilterConfig()``.
 CANDIDATES = {
     "default": {},
-    "no clones (the joint EKF of notebook 06)": {"msckf_window": 0},
+    "no clones (the joint EKF of notebook 08)": {"msckf_window": 0},
     "no inflation": {"pixel_noise_inflation": 1.0},
     "no clones, no inflation (the old default)": {"msckf_window": 0, "pixel_noise_inflation": 1.0},
     "inflation power 1": {"inflation_power": 1.0},

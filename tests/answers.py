@@ -51,13 +51,32 @@ def se3_inv(T):
     return out
 
 
-def dead_reckon(time_stamps, twists, lag=0, left=False, scale_tau=True):
+def dead_reckon(time_stamps, twists, lag=0, left=False, scale_tau=True, clip=True):
     time_stamps, twists = np.asarray(time_stamps, dtype=float), np.asarray(twists, dtype=float)
     poses = [np.eye(4)]
     for t, tau in enumerate(np.diff(time_stamps)):
-        step = se3_exp((tau if scale_tau else 1.0) * twists[min(t + lag, len(twists) - 1)])
+        index = min(max(t + lag, 0), len(twists) - 1) if clip else (t + lag) % len(twists)
+        step = se3_exp((tau if scale_tau else 1.0) * twists[index])
         poses.append(step @ poses[-1] if left else poses[-1] @ step)
     return np.array(poses)
+
+
+def so3_log(R, angle="atan2", sign=1.0):
+    """The rotation vector of R; ``angle="arccos"`` or ``"arcsin"`` make the tests' wrong answers."""
+    R = np.asarray(R, dtype=float)
+    s = sign * 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    c = 0.5 * (np.trace(R) - 1)
+    sin_t = np.linalg.norm(s)
+    theta = {"atan2": np.arctan2(sin_t, c), "arccos": np.arccos(np.clip(c, -1, 1)),
+             "arcsin": np.arcsin(min(sin_t, 1.0))}[angle]
+    factor = 1 + theta**2 / 6 if sin_t < 1e-6 else theta / sin_t
+    return factor * s
+
+
+def white_noise(twists, robust=True, scale=1.4826, divide=np.sqrt(6)):
+    second = np.diff(np.asarray(twists, dtype=float), n=2, axis=0)
+    spread = np.median(np.abs(second - np.median(second, axis=0)), axis=0) if robust else np.std(second, axis=0)
+    return (scale if robust else 1.0) * spread / divide
 
 
 def stereo_matrix(K, b):
@@ -149,6 +168,23 @@ def pose_transition(u, tau):
     return F
 
 
+def adjoint(T):
+    R, p = T[:3, :3], T[:3, 3]
+    out = np.zeros((6, 6))
+    out[:3, :3] = out[3:, 3:] = R
+    out[:3, 3:] = hat(p) @ R
+    return out
+
+
+def left_pose_prediction(mu, Sigma, u, tau, W, at="next", transition=False, rotate=True):
+    """The left perturbation's prediction; the keywords make the tests' wrong answers."""
+    mu_next = mu @ se3_exp(tau * np.asarray(u, dtype=float))
+    Ad = {"next": adjoint(mu_next), "before": adjoint(mu), "inverse": adjoint(se3_inv(mu_next)),
+          "transposed": adjoint(mu_next).T}[at]
+    F = pose_transition(u, tau) if transition else np.eye(6)
+    return mu_next, F @ Sigma @ F.T + (Ad @ W @ Ad.T if rotate else W)
+
+
 def pose_update(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, side="right", sign=1.0, inverse=se3_inv):
     H = np.concatenate([pose_jacobian(Ks, cam_T_imu, mu, m, inverse) for m in p_world])
     z_pred = project(Ks, cam_T_imu, mu, p_world, inverse)
@@ -157,12 +193,29 @@ def pose_update(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, side="right", s
     return (mu @ se3_exp(delta) if side == "right" else se3_exp(delta) @ mu), (np.eye(6) - K @ H) @ Sigma
 
 
+def landmark_observation_noise(J_landmark, Sigma_landmark, noise_var):
+    return np.array([noise_var * np.eye(4) + J @ S @ J.T for J, S in zip(J_landmark, Sigma_landmark)])
+
+
 def slam_jacobian(J_pose, J_landmark, slots, n):
     H = np.zeros((4 * len(slots), 6 + 3 * n))
     for i, s in enumerate(slots):
         H[4 * i:4 * i + 4, :6] = J_pose[i]
         H[4 * i:4 * i + 4, 6 + 3 * s:9 + 3 * s] = J_landmark[i]
     return H
+
+
+def slam_null_space(world_T_imu, p_landmarks, pose_block="inverse", sign=-1.0, swap=False, landmarks=True):
+    """The world's rigid motions as joint-state directions; the keywords make the tests' wrong answers."""
+    blocks = [{"inverse": adjoint(se3_inv(world_T_imu)), "forward": adjoint(world_T_imu), "identity": np.eye(6)}[pose_block]]
+    for m in np.asarray(p_landmarks, dtype=float).reshape(-1, 3):
+        block = np.hstack([sign * hat(m), np.eye(3)] if swap else [np.eye(3), sign * hat(m)])
+        blocks.append(block if landmarks else np.zeros((3, 6)))
+    return np.vstack(blocks)
+
+
+def invariant_pose_jacobian(Ks, cam_T_imu, world_T_imu, m):
+    return np.hstack([-landmark_jacobian(Ks, cam_T_imu, world_T_imu, m), np.zeros((4, 3))])
 
 
 def dense_covariance_bytes(num_landmarks, stride=1):
@@ -184,6 +237,21 @@ def nees(error, cov):
 def average_nees_bounds(dof, n, probability=0.95):
     tail = (1 - probability) / 2
     return tuple(stats.chi2.ppf([tail, 1 - tail], dof * n) / n)
+
+
+def gate(innovations, S, probability, dof=4):
+    d2 = np.array([r @ np.linalg.solve(S_i, r) for r, S_i in zip(innovations, S)])
+    return d2 <= stats.chi2.ppf(probability, dof)
+
+
+def align_rigid(p_est, p_gt, fix_reflection=True):
+    c_est, c_gt = p_est.mean(axis=0), p_gt.mean(axis=0)
+    U, _, Vt = np.linalg.svd((p_est - c_est).T @ (p_gt - c_gt))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) if fix_reflection else 1.0])
+    R = Vt.T @ D @ U.T
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, c_gt - R @ c_est
+    return T
 
 
 def observations_at(features, t):
@@ -233,6 +301,11 @@ def schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
         S -= H_pj @ np.linalg.solve(block, H_pj.T)
         b -= H_pj @ np.linalg.solve(block, g_m[3 * j:3 * j + 3])
     return S, b
+
+
+def pose_marginal_covariance(H_pp, H_pm, H_mm):
+    S, _ = schur_reduce(H_pp, H_pm, H_mm, np.zeros(len(H_pp)), np.zeros(H_pm.shape[1]))
+    return np.linalg.inv(S)
 
 
 def gauss_newton_step(world_T_body, p_body, q_world):

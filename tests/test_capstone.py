@@ -1,4 +1,4 @@
-"""The capstone's loop skeleton (visla_edu.capstone) and its checks (notebook 09)."""
+"""The capstone's loop skeleton (visla_edu.capstone) and its checks (notebook 12)."""
 
 from dataclasses import replace
 

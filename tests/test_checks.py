@@ -10,7 +10,7 @@ graded cells and the hidden cases are tested in tests/test_checks_guard.py.
 import numpy as np
 import pytest
 from scipy import stats
-from scipy.linalg import expm
+from scipy.linalg import block_diag, expm
 from scipy.spatial.transform import Rotation
 
 import answers as A  # tests/answers.py
@@ -112,14 +112,14 @@ def test_primer_checks(capsys):
     _fails(checks.check_kalman_update_1d,
            _update_1d_with_gain(lambda var, r: np.sqrt(var) / (np.sqrt(var) + np.sqrt(r))), "standard deviations")
     _fails(checks.check_kalman_update_1d, _update_1d_with_gain(right_gain, mean_sign=-1.0), "z - mean")
-    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(lambda var, r: var / r), "not variance / r")
+    _fails(checks.check_kalman_update_1d, _update_1d_with_gain(lambda var, r: var / r), "not variance / V")
     _fails(checks.check_kalman_update_1d, _update_1d_with_gain(right_gain, variance_of=lambda var, k: var - k),
-           "not variance - K")
+           "not variance - L")
     _fails(checks.check_kalman_update_1d, lambda *a: A.kalman_update_1d(*a)[::-1], "in this order")
     _fails(checks.check_kalman_update_1d, lambda *a: A.kalman_update_1d(*a)[0], "return the pair")
     _fails(checks.check_kalman_update_1d, lambda m, var, z, r: (m + 0.5 * (z - m), var / 2), "no known mistake")
 
-    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F.T), "process noise Q")
+    _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F.T), "motion noise W")
     _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F.T @ P @ F + Q), "transposed")
     _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P + Q), "F.T on the right")
     _fails(checks.check_kalman_predict, lambda x, P, F, Q: (F @ x, F @ P @ F + Q), "second F")
@@ -202,34 +202,60 @@ def test_kinematics_checks(capsys):
     _fails(checks.check_se3_exp, lambda u: A.se3_exp(np.r_[u[3:], u[:3]]), "twist order")
     _fails(checks.check_se3_exp, lambda u: A.se3_exp(-u), "inverse pose")
     _fails(checks.check_se3_exp, lambda u: A.se3_inv(A.se3_exp(u)), "inverse pose")
-    _fails(checks.check_se3_exp, _se3_v_only, "V v")
+    _fails(checks.check_se3_exp, _se3_v_only, "J_l v")
     _fails(checks.check_se3_exp, _se3_v_only, "translation is v,")
     # first wrong at a tiny angle, where V^T v, v and V v nearly coincide: named as V^T, not as v
-    _fails(checks.check_se3_exp, _se3_v_transposed, "you used V^T")
+    _fails(checks.check_se3_exp, _se3_v_transposed, "you used J_l^T")
     _fails(checks.check_se3_exp, _se3_naive, "NaN")
     _fails(checks.check_se3_exp, _se3_bad_bottom, "bottom row")
 
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, left=True), "on the left")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u[:, [3, 4, 5, 0, 1, 2]]), "twist order")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, lag=1), "u_t")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts, u, scale_tau=False), "time step")
-    _fails(checks.check_dead_reckon, lambda ts, u: A.dead_reckon(ts[0] + np.mean(np.diff(ts)) * np.arange(len(ts)), u),
+    dr = checks.check_dead_reckon
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u, lag, left=True), "on the left")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u[:, [3, 4, 5, 0, 1, 2]], lag), "twist order")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u), "lag was ignored")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u, -lag), "wrong sign")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts, u, lag, scale_tau=False), "time step")
+    _fails(dr, lambda ts, u, lag=0: A.dead_reckon(ts[0] + np.mean(np.diff(ts)) * np.arange(len(ts)), u, lag),
            "own tau_t")
-    _fails(checks.check_dead_reckon, lambda ts, u: np.array([A.se3_inv(T) for T in A.dead_reckon(ts, u)]),
-           "imu_T_world")
-    _fails(checks.check_dead_reckon, lambda ts, u: np.moveaxis(A.dead_reckon(ts, u), 0, -1), "shape")
+    _fails(dr, lambda ts, u, lag=0: np.array([A.se3_inv(T) for T in A.dead_reckon(ts, u, lag)]), "imu_T_world")
+    _fails(dr, lambda ts, u, lag=0: np.moveaxis(A.dead_reckon(ts, u, lag), 0, -1), "shape")
+    _fails(dr, lambda ts, u: A.dead_reckon(ts, u), "third argument, the lag")
+    # an index that wraps around at the end: only the hidden lags (-1, +2) reach it at the first step
+    with pytest.raises(AssertionError, match="wraps around"):
+        dr(lambda ts, u, lag=0: A.dead_reckon(ts, u, lag, clip=False), hidden=True)
+    dr(A.dead_reckon, hidden=True)
+
+    _passes(checks.check_so3_log, A.so3_log, capsys)
+    checks.check_so3_log(A.so3_log, hidden=True)
+    _passes(checks.check_so3_log, lambda R: Rotation.from_matrix(R).as_rotvec(), capsys)
+    message = _fails(checks.check_so3_log, lambda R: A.so3_log(R, angle="arccos"), "arccos loses its digits")
+    assert "atan2(|s|, (tr R - 1)/2)" in message.replace("\n", " ")
+    _fails(checks.check_so3_log, lambda R: A.so3_log(R, angle="arcsin"), "arcsin")
+    _fails(checks.check_so3_log, lambda R: A.so3_log(R, sign=-1.0), "-w")
+    _fails(checks.check_so3_log, lambda R: 2 * A.so3_log(R), "twice")
+    _fails(checks.check_so3_log, lambda R: 0.5 * A.so3_log(R), "half")
+    def log_without_guard(R):  # theta / sin(theta) with no care at the identity: 0 / 0
+        s = 0.5 * lie.vee(R - R.T)
+        theta = np.arctan2(np.linalg.norm(s), 0.5 * (np.trace(R) - 1))
+        return theta / np.linalg.norm(s) * s
+
+    _fails(checks.check_so3_log, log_without_guard, "at the identity")
+    _fails(checks.check_so3_log, lambda R: A.hat(A.so3_log(R)), "not a matrix")
 
 
-def test_exponentials_need_the_small_angle_series(capsys):
-    """A closed form guarded only at exactly 0 loses digits near 1e-7..1e-5 rad and fails, named."""
-    message = _fails(checks.check_so3_exp, _rodrigues_zero_guard, "no small-angle series")
-    assert "1/2 - t^2/24" in message
-    _fails(checks.check_se3_exp, lambda u: _se3_naive(u, guard=True), "no small-angle series")
-    # an se3_exp that is exact in V but takes its rotation from a zero-guarded closed form
-    _fails(checks.check_se3_exp, lambda u: np.block([[_rodrigues_zero_guard(u[3:]), A.se3_exp(u)[:3, 3:]],
-                                                     [np.zeros((1, 3)), np.ones((1, 1))]]), "no small-angle series")
-    # accurate forms without a series pass: the half-angle form and scipy's quaternions
+def test_the_translation_needs_the_small_angle_series_and_rodrigues_does_not(capsys):
+    """Guarded only at exactly 0: R keeps full precision and passes, V v loses digits near 1e-7 rad and fails."""
+    _passes(checks.check_so3_exp, _rodrigues_zero_guard, capsys)
+    message = _fails(checks.check_se3_exp, lambda u: _se3_naive(u, guard=True), "no small-angle series")
+    assert "1/2 - t^2/24" in message and "of size t |v|" in message.replace("\n", " ")
+    # an se3_exp that is exact in V but takes its rotation from a zero-guarded closed form passes
+    _passes(checks.check_se3_exp, lambda u: np.block([[_rodrigues_zero_guard(u[3:]), A.se3_exp(u)[:3, 3:]],
+                                                      [np.zeros((1, 3)), np.ones((1, 1))]]), capsys)
+    # accurate forms without a series pass: scipy's quaternions
     _passes(checks.check_so3_exp, lambda w: Rotation.from_rotvec(w).as_matrix(), capsys)
+    # a first-order shortcut below a threshold is caught at the tiny angles
+    _fails(checks.check_so3_exp, lambda w: np.eye(3) + A.hat(w) if np.linalg.norm(w) < 1e-4 else A.so3_exp(w),
+           "wrong values")
 
 
 # --------------------------------------------------------------------------- 02 camera
@@ -361,7 +387,7 @@ def test_mapping_checks(capsys):
     _passes(checks.check_landmark_jacobian, A.landmark_jacobian, capsys)
     _passes(checks.check_init_landmark, A.init_landmark, capsys)
     _passes(checks.check_init_landmark, lambda z, K, b, X, T: (T @ X @ np.r_[cam.triangulate_disparity(z, K, b), 1])[
-        :3], capsys)  # notebook 04 allows camera.triangulate_disparity
+        :3], capsys)  # notebook 05 allows camera.triangulate_disparity
     _passes(checks.check_landmark_update, A.landmark_update, capsys)
 
     _fails(checks.check_landmark_jacobian, lambda *a: np.c_[A.landmark_jacobian(*a), np.zeros(4)], "P^T")
@@ -413,6 +439,23 @@ def _pose_update_innovation_by_columns(mu, Sigma, z, p_world, Ks, cam_T_imu, noi
     return mu @ A.se3_exp(delta), (np.eye(6) - K @ H) @ Sigma
 
 
+def test_left_pose_prediction_check(capsys):
+    _passes(checks.check_left_pose_prediction, A.left_pose_prediction, capsys)
+    checks.check_left_pose_prediction(A.left_pose_prediction, hidden=True)
+    wrong = A.left_pose_prediction
+    _fails(checks.check_left_pose_prediction,
+           lambda mu, S, u, tau, W: (wrong(mu, S, u, tau, W)[0], A.pose_transition(u, tau) @ S
+                                     @ A.pose_transition(u, tau).T + W), "right perturbation's")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, transition=True), "do not apply F")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, rotate=False), "rotate it into the world")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, at="before"), "pose after the step")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, at="inverse"), "Ad(mu_next^-1)")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a, at="transposed"), "transposed")
+    _fails(checks.check_left_pose_prediction,
+           lambda mu, S, u, tau, W: (A.se3_exp(tau * u) @ mu, wrong(mu, S, u, tau, W)[1]), "moves on the right")
+    _fails(checks.check_left_pose_prediction, lambda *a: wrong(*a)[1], "return the pair")
+
+
 @pytest.mark.parametrize("noise", [lambda r: 4.0, lambda r: r ** 2, np.sqrt], ids=["fixed 4", "squared", "root"])
 @pytest.mark.parametrize("hidden", [False, True], ids=["visible", "hidden"])
 def test_pose_update_must_use_its_noise_variance(noise, hidden):
@@ -434,7 +477,7 @@ def test_curly_hat_success_line_claims_only_the_comparison(capsys):
 def test_pose_update_success_line_names_what_it_compared_with(capsys):
     checks.check_pose_update(A.pose_update)
     out = capsys.readouterr().out
-    assert "the reference update mu exp(K r), (I - K H) Sigma" in out  # the check's own formula
+    assert "the reference update mu exp(L r), (I - L H) Sigma" in out  # the check's own formula
     assert "ekf.pose_update" not in out  # the check never calls it
 
 
@@ -482,6 +525,76 @@ def test_slam_checks(capsys):
     _fails(checks.check_marginalize, lambda S, keep: S[keep], "wrong shape")
 
 
+def test_slam_null_space_check(capsys):
+    _passes(checks.check_slam_null_space, A.slam_null_space, capsys)
+    checks.check_slam_null_space(A.slam_null_space, hidden=True)
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, pose_block="forward"), "not Ad(mu)")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, pose_block="identity"), "not the identity")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, sign=1.0), "wrong sign")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, swap=True), "twist order")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p, landmarks=False), "move with the world")
+    _fails(checks.check_slam_null_space,
+           lambda T, p: A.slam_null_space(T, (np.c_[p, np.ones(len(p))] @ A.se3_inv(T).T)[:, :3]), "IMU frame")
+    _fails(checks.check_slam_null_space, lambda T, p: A.slam_null_space(T, p).T, "transposed")
+
+
+def test_null_space_is_the_kernel_of_the_joint_jacobian():
+    """H N = 0 at the estimate: moving the whole world leaves every pixel unchanged (the check's reference)."""
+    generator = np.random.default_rng(3)
+    camera = cam.StereoCamera(*__import__("visla_edu.simulate", fromlist=["default_rig"]).default_rig())
+    T = lie.se3_exp(np.r_[generator.normal(scale=5, size=3), generator.normal(size=3)])
+    world_T_cam = T @ camera.imu_T_cam
+    p_cam = np.c_[generator.uniform(-5, 5, 6), generator.uniform(-2, 2, 6), generator.uniform(5, 40, 6)]
+    p = p_cam @ world_T_cam[:3, :3].T + world_T_cam[:3, 3]
+    _, J_landmark, J_pose = camera.predict_with_jacobians(T, p)
+    H = A.slam_jacobian(J_pose, J_landmark, np.arange(6), 6)
+    N = checks.reference_slam_null_space(T, p)
+    assert np.abs(H @ N).max() < 1e-9 * np.abs(H).max() * np.abs(N).max()
+    assert np.linalg.matrix_rank(N) == 6
+
+
+def test_invariant_pose_jacobian_check(capsys):
+    _passes(checks.check_invariant_pose_jacobian, A.invariant_pose_jacobian, capsys)
+    checks.check_invariant_pose_jacobian(A.invariant_pose_jacobian, hidden=True)
+    _fails(checks.check_invariant_pose_jacobian, A.pose_jacobian, "right perturbation's pose Jacobian")
+    _fails(checks.check_invariant_pose_jacobian, lambda *a: -A.invariant_pose_jacobian(*a), "wrong sign")
+    _fails(checks.check_invariant_pose_jacobian, lambda *a: A.invariant_pose_jacobian(*a)[:, [3, 4, 5, 0, 1, 2]],
+           "swapped")
+    _fails(checks.check_invariant_pose_jacobian,
+           lambda Ks, C, T, m: np.hstack([-A.landmark_jacobian(Ks, C, T, m), A.landmark_jacobian(Ks, C, T, m) @ A.hat(m)]),
+           "shares the pose's rotation")
+    _fails(checks.check_invariant_pose_jacobian, lambda *a: A.landmark_jacobian(*a), "4x3")
+    with pytest.raises(AssertionError, match="notebook's rig"):
+        from visla_edu.checks import _inputs
+        notebook = _inputs.stereo_camera()
+        checks.check_invariant_pose_jacobian(
+            lambda Ks, C, T, m: A.invariant_pose_jacobian(notebook.Ks, notebook.cam_T_imu, T, m), hidden=True)
+
+
+def test_white_noise_check(capsys):
+    _passes(checks.check_white_noise, A.white_noise, capsys)
+    checks.check_white_noise(A.white_noise, hidden=True)
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, robust=False), "robust spread")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, divide=1.0), "divide by sqrt(6)")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, divide=6.0), "not by 6")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u, scale=1.0), "1.4826")
+    _fails(checks.check_white_noise, lambda u: 1.4826 * np.median(np.abs(np.diff(u, axis=0) - np.median(
+        np.diff(u, axis=0), axis=0)), axis=0) / np.sqrt(2), "second differences")
+    _fails(checks.check_white_noise, lambda u: A.white_noise(u).mean(), "wrong shape")
+
+
+def test_landmark_observation_noise_check(capsys):
+    f = A.landmark_observation_noise
+    _passes(checks.check_landmark_observation_noise, f, capsys)
+    checks.check_landmark_observation_noise(f, hidden=True)
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, 0 * S, r), "not exact")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, 0.0), "pixel noise")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, r**2), "do not square")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, np.sqrt(r)), "square root")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, np.linalg.inv(S), r), "not its inverse")
+    _fails(checks.check_landmark_observation_noise, lambda J, S, r: f(J, S, r).sum(axis=0), "wrong shape")
+
+
 # --------------------------------------------------------------------------- 07 consistency
 
 
@@ -527,7 +640,7 @@ def test_se3_exp_translation_mistakes_are_named():
     """R v instead of V v, V's coefficients exchanged, and V transposed (the right Jacobian, V^T)."""
     _fails(checks.check_se3_exp, lambda u: _se3_translation(u, A.so3_exp(u[3:])), "translation is R v")
     _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=True)), "coefficients are swapped")
-    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "you used V^T")
+    _fails(checks.check_se3_exp, lambda u: _se3_translation(u, _series_v(u[3:], swap=False).T), "you used J_l^T")
 
 # --------------------------------------------------------------------------- 08 smoothing
 
@@ -611,6 +724,41 @@ def test_library_shortcuts_to_an_exercise_are_hidden_inside_its_check():
     _fails(checks.check_motion_residual, _motion_residual_by_finite_differences, "numdiff.central_jacobian")
 
 
+def test_gate_check(capsys):
+    _passes(checks.check_gate, A.gate, capsys)
+    checks.check_gate(A.gate, hidden=True)
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, S, 1 - p), "not 1 - p")
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, S, p, dof=2), "4 degrees of freedom")
+    _fails(checks.check_gate, lambda r, S, p: ~A.gate(r, S, p), "rejected ones")
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, np.linalg.inv(S), p), "not r^T S r")
+    _fails(checks.check_gate, lambda r, S, p: A.gate(r, np.broadcast_to(np.eye(4), S.shape), p), "not |r|^2")
+    _fails(checks.check_gate, lambda r, S, p: np.sqrt(np.einsum("ki,ki->k", r, np.linalg.solve(S, r[..., None])[
+        ..., 0])) <= stats.chi2.ppf(p, 4), "SQUARED distance")
+
+
+def test_align_rigid_check(capsys):
+    _passes(checks.check_align_rigid, A.align_rigid, capsys)
+    checks.check_align_rigid(A.align_rigid, hidden=True)
+    _fails(checks.check_align_rigid, lambda e, g: A.align_rigid(e, g, fix_reflection=False), "reflection")
+    _fails(checks.check_align_rigid, lambda e, g: np.linalg.inv(A.align_rigid(e, g)), "inverse")
+    _fails(checks.check_align_rigid, lambda e, g: A.align_rigid(g, e), "inverse")
+
+    def transposed(e, g):
+        T = A.align_rigid(e, g)
+        R = T[:3, :3].T
+        T[:3, :3], T[:3, 3] = R, g.mean(axis=0) - R @ e.mean(axis=0)
+        return T
+
+    def centroid_not_rotated(e, g):
+        T = A.align_rigid(e, g)
+        T[:3, 3] = g.mean(axis=0) - e.mean(axis=0)
+        return T
+
+    _fails(checks.check_align_rigid, transposed, "transposed")
+    _fails(checks.check_align_rigid, centroid_not_rotated, "rotate the centroid")
+    _fails(checks.check_align_rigid, lambda e, g: A.align_rigid(e - e.mean(axis=0) * 0, g)[:3], "wrong shape")
+
+
 def _pose_update_twist_swapped(mu, Sigma, *args):
     """The right update, but its correction applied as [w; v]."""
     mu_new, Sigma_new = A.pose_update(mu, Sigma, *args)
@@ -641,6 +789,19 @@ def test_smoothing_checks(capsys):
     _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: A.schur_reduce(
         H_pp, H_pm, np.linalg.inv(H_mm), g_p, g_m), "inverse of H_mm")
     _fails(checks.check_schur_reduce, lambda H_pp, H_pm, H_mm, g_p, g_m: (H_pp, g_p), "dropped, not eliminated")
+
+    _passes(checks.check_pose_marginal_covariance, A.pose_marginal_covariance, capsys)
+    checks.check_pose_marginal_covariance(A.pose_marginal_covariance, hidden=True)
+    _passes(checks.check_pose_marginal_covariance,  # the dense inverse of the whole system is right too
+            lambda H_pp, H_pm, H_mm: np.linalg.inv(np.block([[H_pp, H_pm], [H_pm.T, block_diag(*H_mm)]]))[
+                :len(H_pp), :len(H_pp)], capsys)
+    pm = checks.check_pose_marginal_covariance
+    _fails(pm, lambda H_pp, H_pm, H_mm: np.linalg.inv(H_pp), "conditions on the landmarks")
+    _fails(pm, lambda H_pp, H_pm, H_mm: A.schur_reduce(H_pp, H_pm, H_mm, np.zeros(len(H_pp)),
+                                                       np.zeros(H_pm.shape[1]))[0], "not S itself")
+    _fails(pm, lambda H_pp, H_pm, H_mm: A.pose_marginal_covariance(H_pp, H_pm, np.linalg.inv(H_mm)), "inverse of H_mm")
+    _fails(pm, lambda H_pp, H_pm, H_mm: np.linalg.inv(2 * H_pp - np.linalg.inv(
+        A.pose_marginal_covariance(H_pp, H_pm, H_mm))), "added the correction")
 
     def step_plus(T, p_body, q_world):  # the step of -r: twice the distance the other way
         return A.gauss_newton_step(T, p_body, 2 * (p_body @ T[:3, :3].T + T[:3, 3]) - q_world)

@@ -14,6 +14,8 @@ from visla_edu import release
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"
 NAMES = sorted(p.name for p in SOLUTIONS.glob("*.ipynb"))
+#: The lessons: every notebook but the reference pages (the notation page).
+LESSONS = [n for n in NAMES if not release.is_reference_page(nbformat.read(str(SOLUTIONS / n), as_version=4))]
 #: Library calls that draw a tqdm bar unless told not to.
 PROGRESS_CALLS = {"run_filter", "run_smoother"}
 
@@ -46,7 +48,7 @@ def test_points_quoted_at_the_top_are_the_graded_points(name):
         assert int(number) == _points(nb), f"{name}: the top says {number} points, the graded cells give {_points(nb)}"
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", LESSONS)
 def test_lesson_ends_with_questions_answers_and_references(name):
     markdown = _markdown(_notebook(name))
     questions = [i for i, text in enumerate(markdown) if "Check your understanding" in text]
@@ -57,7 +59,7 @@ def test_lesson_ends_with_questions_answers_and_references(name):
     assert answers and answers[0] > questions[0], f"{name}: the questions have no answers region after them"
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", LESSONS)
 def test_figures_are_inline_so_headless_runs_keep_them(name):
     first = next(c for c in _notebook(name).cells if c.cell_type == "code")
     assert first.source.lstrip().startswith("%matplotlib inline"), (
@@ -104,3 +106,30 @@ def test_headless_run_keeps_an_inline_figure(monkeypatch):
     nbclient.NotebookClient(nb, timeout=120, kernel_name="python3").execute()
     kinds = [out.get("output_type") for out in nb.cells[0].outputs]
     assert any("image/png" in out.get("data", {}) for out in nb.cells[0].outputs), kinds
+
+
+@pytest.mark.parametrize("name", LESSONS)
+def test_every_lesson_links_the_notation_page(name):
+    first = next(c.source for c in _notebook(name).cells if c.cell_type == "markdown")
+    assert "(notation.ipynb)" in first, f"{name}: the first cell does not link the notation page"
+
+
+def _notation_rows():
+    table = next(c.source for c in _notebook("notation.ipynb").cells if c.source.lstrip().startswith("| symbol |"))
+    return [line.split(" | ")[0].lstrip("| ").strip() for line in table.splitlines()[2:] if line.startswith("|")]
+
+
+def test_the_notation_page_lists_each_symbol_once():
+    symbols = []
+    for row in _notation_rows():
+        symbols += [part.strip() for part in re.split(r"[,;]", row) if part.strip()]
+    repeated = sorted({s for s in symbols if symbols.count(s) > 1})
+    assert not repeated, f"symbols listed twice on the notation page: {repeated}"
+    for symbol in ("$K$", "$L$", "$\\Sigma$", "$H$", "$\\Lambda$", "$V$", "$W$", "$\\lambda$", "$\\rho$", "$z$"):
+        assert symbol in symbols, symbol
+
+
+def test_no_notebook_speaks_of_a_seed_report():
+    for folder in (SOLUTIONS, ROOT / "notebooks"):
+        for path in sorted(folder.glob("*.ipynb")):
+            assert "seed report" not in path.read_text(encoding="utf-8").lower(), path.name

@@ -255,6 +255,8 @@ def test_summary_mentions_mode_and_counts(tiny, tiny_results):
     assert f"{tiny.num_frames} frames" in text
     assert f"{int(np.isfinite(r.landmarks[:, 0]).sum())} of {tiny.num_landmarks} landmarks" in text
     assert f"used {totals['used']}" in text and "gated as outliers" in text
+    # one definition of the gated share everywhere: gated / (used + gated), metrics.gated_share
+    assert f"gated as outliers: {100 * metrics.gated_share(totals):.2f}% of the observations the gate tested" in text
     assert sum(totals.values()) == tiny.num_observations
     assert "(dense)" in run.run_filter(tiny, "slam", CFG, dense=True).summary()
     assert "deadreckon" in tiny_results["deadreckon"].summary()

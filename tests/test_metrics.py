@@ -339,3 +339,10 @@ def test_chi2_quantile_is_scipy_stats_chi2_ppf():
     edge = metrics.chi2_quantile(np.array([0.0, 1.0, 1.5]), 3)
     assert edge[0] == 0 and np.isinf(edge[1]) and np.isnan(edge[2])
     assert np.isnan(metrics.chi2_quantile(0.5, 0)) and np.isnan(metrics.chi2_quantile(0.5, -2))
+
+
+def test_gated_share_is_gated_over_used_plus_gated():
+    assert metrics.gated_share({"used": 75, "gated": 25, "new": 100, "no depth": 7, "too far": 3, "ignored": 9}) == 0.25
+    assert metrics.gated_share({"used": 10}) == 0.0
+    assert metrics.gated_share({"new": 5, "gated": 0, "used": 0}) == 0.0  # the gate tested nothing
+    assert metrics.gated_share({"gated": 4}) == 1.0

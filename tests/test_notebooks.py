@@ -28,6 +28,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"
 STUDENT = STUDENT_NOTEBOOKS
 NAMES = sorted(p.name for p in SOLUTIONS.glob("*.ipynb"))
+#: Reference pages (the notation page): no exercises, no code; exempt from the per-lesson checks.
+REFERENCE_PAGES = [n for n in NAMES if release.is_reference_page(nbformat.read(str(SOLUTIONS / n), as_version=4))]
+LESSONS = [n for n in NAMES if n not in REFERENCE_PAGES]
 MAX_BYTES = 1_000_000
 #: Seconds one notebook may take (the course budget is 5 minutes for all of them).
 CELL_TIMEOUT = 600
@@ -99,7 +102,15 @@ def test_stored_without_outputs_and_small(folder, name):
 # --------------------------------------------------------------------------- structure
 
 
-@pytest.mark.parametrize("name", NAMES)
+def test_the_notation_page_is_the_reference_page_and_has_no_code():
+    assert REFERENCE_PAGES == ["notation.ipynb"]
+    for folder in (SOLUTIONS, STUDENT):
+        nb = _read(folder / "notation.ipynb")
+        assert all(c.cell_type == "markdown" for c in nb.cells), folder
+        assert not any(_nbgrader(c) for c in nb.cells), folder
+
+
+@pytest.mark.parametrize("name", LESSONS)
 def test_solution_notebook_structure(name):
     nb = _read(SOLUTIONS / name)
     ids = [_nbgrader(c)["grade_id"] for c in nb.cells if _nbgrader(c)]
@@ -141,7 +152,7 @@ def _check_graded_cell(source, where):
         assert fn in checks.__all__, f"{where}: checks.{fn} does not exist"
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", LESSONS)
 def test_student_notebook_has_stubs_and_no_solutions(name):
     nb = _read(STUDENT / name)
     text = "\n".join(c.source for c in nb.cells)
@@ -200,14 +211,14 @@ _REJECTED_ANSWERS = [
      "def numerical_jacobian(f, x, eps=1e-6):\n    x = np.asarray(x, dtype=float)\n"
      "    return np.stack([(np.asarray(f(x + eps * e)) - np.asarray(f(x - eps * e))) / (2 * eps)"
      " for e in np.eye(x.size)])", "03-11"),
-    ("04_landmark_mapping.ipynb", "landmark_update",  # world_T_imu where its inverse belongs
+    ("05_landmark_mapping.ipynb", "landmark_update",  # world_T_imu where its inverse belongs
      "def landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var):\n"
      "    q = cam_T_imu @ world_T_imu @ np.r_[m, 1.0]\n"
      "    H = Ks @ camera.projection_jacobian(q) @ cam_T_imu @ world_T_imu[:, :3]\n"
      "    K = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))\n"
-     "    return m + K @ (z - Ks @ camera.projection(q)), (np.eye(3) - K @ H) @ Sigma", "04-12"),
-    ("06_joint_slam.ipynb", "dense_covariance_bytes",  # the stride ignored
-     "def dense_covariance_bytes(num_landmarks, stride=1):\n    return (6 + 3 * num_landmarks) ** 2 * 8", "06-08"),
+     "    return m + K @ (z - Ks @ camera.projection(q)), (np.eye(3) - K @ H) @ Sigma", "05-12"),
+    ("09_active_set.ipynb", "dense_covariance_bytes",  # the stride ignored
+     "def dense_covariance_bytes(num_landmarks, stride=1):\n    return (6 + 3 * num_landmarks) ** 2 * 8", "09-08"),
 ]
 
 

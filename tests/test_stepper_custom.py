@@ -1,4 +1,4 @@
-"""The stepper steps a filter it did not build: any object with the step interface (notebook 09)."""
+"""The stepper steps a filter it did not build: any object with the step interface (notebook 12)."""
 
 import numpy as np
 import pytest

@@ -115,3 +115,30 @@ def test_each_notebook_states_its_own_points_in_its_time_line(name):
     stated = re.findall(r"\((\d+) points?\)", time_line)
     points = sum(c.metadata["nbgrader"]["points"] for c in _graded(name))
     assert stated == [f"{points:g}"], f"{name}: the Time line says {stated} points, the graded cells {points:g}"
+
+
+def _time_line_minutes(first_cell):
+    """Minutes a notebook's Time line states: "about N minutes: ..." or the sum of its "N minutes" parts."""
+    line = re.search(r"\*\*Time[:.]\*\*(.*?)(?:\n\n|$)", first_cell, re.S).group(1)
+    total = re.match(r"\s*about (\d+) minutes:", line, re.I)
+    return int(total.group(1)) if total else sum(int(n) for n in re.findall(r"(\d+) minutes", line))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_each_notebook_fits_a_75_minute_lab_by_its_own_time_line(name):
+    first = nbformat.read(str(SOLUTIONS / f"{name}.ipynb"), as_version=4).cells[0].source
+    minutes = _time_line_minutes(first)
+    assert 0 < minutes <= 75, f"{name}: the Time line adds up to {minutes} minutes (a lab is 75)"
+
+
+def test_the_time_line_parser_reads_both_forms():
+    assert _time_line_minutes("**Time:** about 70 minutes: 40 for reading, 30 for the exercises (3 points).") == 70
+    assert _time_line_minutes("**Time.** About 20 minutes of reading, and 55 minutes for the exercises.") == 75
+
+
+def test_the_notebooks_are_numbered_in_teaching_order():
+    """The capstone (your own filter) comes before the smoother that is compared with it."""
+    order = [name for name in NAMES if name[:2].isdigit()]
+    assert order == sorted(order)
+    capstone = next(i for i, name in enumerate(order) if "capstone" in name)
+    assert all(i > capstone for i, name in enumerate(order) if "smooth" in name), order

@@ -10,6 +10,7 @@ import numpy as np
 
 from visla_edu._files import atomic_write, expand_user
 from visla_edu.codes import STATUS_NAMES
+from visla_edu.metrics import gated_share
 
 __all__ = ["RunResult", "RunArrays", "save_result", "load_result"]
 
@@ -92,14 +93,14 @@ class RunResult:
     def summary(self):
         """A few lines a student can read: mode, counts, timing."""
         totals = self.status_totals()
-        seen = sum(v for k, v in totals.items() if k != "ignored")
         lines = [
             f"{self.name}: mode {self.mode}{' (dense)' if self.dense else ''}, {len(self.time_stamps)} frames, "
             f"{int(np.isfinite(self.landmarks[:, 0]).sum())} of {len(self.landmarks)} landmarks mapped",
             "observations: " + ", ".join(f"{k} {v}" for k, v in totals.items() if v),
         ]
-        if seen:
-            lines.append(f"gated as outliers: {100 * totals['gated'] / seen:.2f}% of observations")
+        if totals["used"] + totals["gated"]:
+            lines.append(f"gated as outliers: {100 * gated_share(totals):.2f}% of the observations the gate "
+                         "tested (gated / (used + gated))")
         if self.track_counts:
             c = self.track_counts
             lines.append(f"tracks: {c['tracks_used']} used in multi-frame updates, {c['tracks_gated']} gated whole, "

@@ -1,16 +1,16 @@
-"""Notebook 09's loop skeleton: VIO and joint SLAM assembled from functions passed in.
+"""Notebook 12's loop skeleton: VIO and joint SLAM assembled from functions passed in.
 
-The capstone notebook has students assemble the filter of notebooks 05-06 from their own
+The capstone notebook has students assemble the filter of notebooks 06-09 from their own
 functions. This module is the part they do not write: a filter with the library's step
 interface (``step()`` returns a :class:`~visla_edu.filters.StepRecord`, so
 :class:`visla_edu.stepper.Stepper` can step it) whose loop -- data, landmark bookkeeping,
 gating, retiring finished tracks, what is recorded -- calls two sets of functions:
 
-* :class:`Parts`, the exercises of notebooks 01-06 with the notebooks' signatures
+* :class:`Parts`, the exercises of notebooks 01-09 with the notebooks' signatures
   (``se3_exp``, ``pose_transition``, ``project``, ``pose_jacobian``, ``landmark_jacobian``,
   ``init_landmark``, ``odot``, ``pose_update``, ``slam_jacobian``, ``marginalize``);
   :func:`library_parts` gives the library's, and ``dataclasses.replace`` swaps in one's own;
-* :class:`Steps`, the three assembly functions notebook 09 asks for, each taking ``parts``
+* :class:`Steps`, the three assembly functions notebook 12 asks for, each taking ``parts``
   first: ``predict(parts, world_T_imu, Sigma, u, tau, W) -> (world_T_imu, Sigma)``,
   ``add_landmarks(parts, world_T_imu, Sigma, z, K, b, imu_T_cam, C_pixels) -> (p_new, Sigma)``
   and ``slam_update(parts, world_T_imu, Sigma, p_active, slots, z, Ks, cam_T_imu, noise_var)
@@ -40,31 +40,31 @@ POSE_DIM = 6
 
 @dataclass(frozen=True)
 class Parts:
-    """The exercise functions of notebooks 01-06, with the notebooks' signatures.
+    """The exercise functions of notebooks 01-09, with the notebooks' signatures.
 
     Attributes
     ----------
     se3_exp : callable
         ``se3_exp(u (6,)) -> (4, 4)`` (01).
     pose_transition : callable
-        ``pose_transition(u (6,), tau) -> F (6, 6)`` (05).
+        ``pose_transition(u (6,), tau) -> F (6, 6)`` (06).
     project : callable
         ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)`` (02).
     pose_jacobian : callable
         ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` (03).
     landmark_jacobian : callable
-        ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)`` (04).
+        ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)`` (05).
     init_landmark : callable
-        ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> m (3,)`` (04).
+        ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> m (3,)`` (05).
     odot : callable
         ``odot(s (4,)) -> (4, 6)`` (03).
     pose_update : callable
         ``pose_update(mu, Sigma (6, 6), z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var)
-        -> (mu, Sigma)`` (05).
+        -> (mu, Sigma)`` (07).
     slam_jacobian : callable
-        ``slam_jacobian(J_pose (k, 4, 6), J_landmark (k, 4, 3), slots (k,), n) -> H (4k, 6 + 3n)`` (06).
+        ``slam_jacobian(J_pose (k, 4, 6), J_landmark (k, 4, 3), slots (k,), n) -> H (4k, 6 + 3n)`` (08).
     marginalize : callable
-        ``marginalize(Sigma, keep) -> Sigma[keep][:, keep]`` (06).
+        ``marginalize(Sigma, keep) -> Sigma[keep][:, keep]`` (09).
     """
 
     se3_exp: Callable
@@ -81,7 +81,7 @@ class Parts:
 
 @dataclass(frozen=True)
 class Steps:
-    """The three assembly functions of notebook 09 (each takes :class:`Parts` first).
+    """The three assembly functions of notebook 12 (each takes :class:`Parts` first).
 
     Attributes
     ----------

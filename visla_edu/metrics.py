@@ -1,4 +1,4 @@
-"""Accuracy and consistency metrics: ATE, RPE, KITTI drift, NEES, NIS and chi-square bounds.
+"""Accuracy and consistency metrics: ATE, RPE, KITTI drift, NEES, NIS, chi-square bounds, the gated share.
 
 Errors of a pose estimate ``mu`` against the truth ``T`` use the filter's own perturbation
 convention: ``T = mu exp(hat(e))``, so ``e = se3_log(inv(mu) @ T)`` (twist ``[v; w]``).
@@ -13,7 +13,8 @@ import numpy as np
 from visla_edu import lie
 
 __all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "nis_band", "average_nees_bounds",
-           "DRIFT_LENGTHS", "DRIFT_STEP", "path_distances", "kitti_drift", "TrajectoryEvaluation", "evaluate"]
+           "DRIFT_LENGTHS", "DRIFT_STEP", "path_distances", "kitti_drift", "TrajectoryEvaluation", "evaluate",
+           "gated_share"]
 
 
 #: Largest ``|R^T R - I|`` entry (and last-row deviation) a pose may have: what the trajectory
@@ -433,3 +434,26 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
         ate_raw=ate(est[:n], gt, align=False), ate_aligned=ate(est[:n], gt, align=True),
         drift_translation=translation, drift_rotation=rotation, drift_segments=segments, drift_note=note,
         path_length=length, frames=n, total_frames=len(est))
+
+
+def gated_share(status_totals):
+    """The gated share of a run: the observations the gate rejected among those it tested.
+
+    ``gated / (used + gated)``: the one definition the course uses (:meth:`visla_edu.run.RunResult.summary`
+    and the notebooks). Observations the gate never saw (new landmarks, no depth, too far,
+    ignored) are left out, so the share compares directly with ``1 - gate_probability``, what a
+    consistent filter without outliers rejects.
+
+    Parameters
+    ----------
+    status_totals : dict
+        Observation counts by status name, as :meth:`visla_edu.run.RunResult.status_totals`
+        returns them; ``"used"`` and ``"gated"`` are read (missing ones count as 0).
+
+    Returns
+    -------
+    float
+        In ``[0, 1]``; 0 when the gate tested no observation.
+    """
+    used, gated = int(status_totals.get("used", 0)), int(status_totals.get("gated", 0))
+    return gated / (used + gated) if used + gated else 0.0

@@ -64,6 +64,7 @@ __all__ = [
     "POINTS_END",
     "points_table",
     "update_points_table",
+    "is_reference_page",
     "main",
 ]
 
@@ -155,7 +156,7 @@ def _enclosing_function(lines_before, indent):
     """Name of the function whose body holds a solution region indented by ``indent``, or None.
 
     The nearest ``def name(`` above the region with a shorter indentation: the student's
-    function, whatever the exercise's grade id (notebook 09's ``capstone_predict`` is ``predict``).
+    function, whatever the exercise's grade id (notebook 12's ``capstone_predict`` is ``predict``).
     """
     for line in reversed(lines_before):
         match = re.match(r"(\s*)def (\w+)\(", line)
@@ -404,6 +405,24 @@ def clean_sources(src_dir=_DEFAULT_SRC):
             _write_text(path, text)
             written.append(path)
     return written
+
+
+def is_reference_page(nb):
+    """True for a reference page (the notation page): a notebook without exercises or code.
+
+    Marked by the notebook metadata ``{"visla_edu": {"reference_page": true}}``; the release
+    handles it like any notebook (it has nothing to strip), and the tests exempt it from the
+    per-lesson checks (exercises, graded cells, questions, the first code cell).
+
+    Parameters
+    ----------
+    nb : nbformat.NotebookNode
+
+    Returns
+    -------
+    bool
+    """
+    return bool(nb.metadata.get("visla_edu", {}).get("reference_page", False))
 
 
 def _graded_cells(nb):

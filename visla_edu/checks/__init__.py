@@ -37,8 +37,8 @@ import importlib as _importlib
 import sys as _sys
 
 #: Submodules in dependency order; a reload of this package reloads them all.
-_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_primer", "_kinematics", "_camera", "_jacobians", "_filters",
-               "_consistency", "_smoothing", "_capstone")
+_SUBMODULES = ("_hiding", "_core", "_inputs", "_data", "_diagnostics", "_primer", "_kinematics", "_uncertainty", "_camera", "_jacobians", "_filters",
+               "_observability", "_consistency", "_smoothing", "_capstone")
 
 
 def _load_submodules():
@@ -56,29 +56,40 @@ _load_submodules()
 from visla_edu.checks._camera import (check_init_landmark, check_project, check_stereo_matrix,  # noqa: E402
                                       check_triangulate)
 from visla_edu.checks._capstone import (capstone_steps, check_capstone_landmarks,  # noqa: E402
-                                        check_capstone_predict, check_capstone_slam)
-from visla_edu.checks._consistency import check_average_nees_bounds, check_motion_noise, check_nees  # noqa: E402
+                                        check_capstone_predict, check_capstone_slam, reference_capstone_steps)
+from visla_edu.checks._consistency import (check_align_rigid, check_average_nees_bounds, check_gate,  # noqa: E402
+                                           check_motion_noise, check_nees)
 from visla_edu.checks._core import student_or_reference  # noqa: E402
 from visla_edu.checks._data import check_observations_at, check_track_spans  # noqa: E402
-from visla_edu.checks._filters import (check_dense_covariance_bytes, check_landmark_update,  # noqa: E402
-                                       check_marginalize, check_pose_update, check_slam_jacobian,
-                                       reference_dense_covariance_bytes)
+from visla_edu.checks._diagnostics import check_white_noise  # noqa: E402
+from visla_edu.checks._filters import (check_dense_covariance_bytes, check_landmark_observation_noise,  # noqa: E402
+                                       check_landmark_update, check_marginalize, check_pose_update,
+                                       check_slam_jacobian, reference_dense_covariance_bytes)
 from visla_edu.checks._hiding import LibraryFunctionHidden  # noqa: E402
 from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
                                          check_pose_jacobian, check_projection_jacobian,
                                          reference_numerical_jacobian)
-from visla_edu.checks._kinematics import (check_curly_hat, check_dead_reckon, check_hat,  # noqa: E402
-                                          check_pose_transition, check_se3_exp, check_so3_exp)
+from visla_edu.checks._kinematics import (check_dead_reckon, check_hat, check_se3_exp, check_so3_exp,  # noqa: E402
+                                          check_so3_log)
+from visla_edu.checks._observability import (check_invariant_pose_jacobian, check_slam_null_space,  # noqa: E402
+                                             reference_slam_null_space)
 from visla_edu.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
+from visla_edu.checks._uncertainty import (check_curly_hat, check_left_pose_prediction,  # noqa: E402
+                                           check_pose_transition, reference_left_pose_prediction)
 from visla_edu.checks._smoothing import (check_gauss_newton_step, check_motion_residual,  # noqa: E402
-                                         check_schur_reduce, reference_gauss_newton_step, reference_schur_reduce)
+                                         check_pose_marginal_covariance, check_schur_reduce,
+                                         reference_gauss_newton_step, reference_pose_marginal_covariance,
+                                         reference_schur_reduce)
 
 __all__ = [
     "student_or_reference",
     "reference_numerical_jacobian",
     "reference_dense_covariance_bytes",
     "reference_schur_reduce",
+    "reference_pose_marginal_covariance",
     "reference_gauss_newton_step",
+    "reference_left_pose_prediction",
+    "reference_slam_null_space",
     "LibraryFunctionHidden",
     # 00 know your data
     "check_observations_at",
@@ -89,8 +100,8 @@ __all__ = [
     # 01 SE(3) kinematics
     "check_hat",
     "check_so3_exp",
+    "check_so3_log",
     "check_se3_exp",
-    "check_dead_reckon",
     # 02 stereo camera
     "check_stereo_matrix",
     "check_project",
@@ -100,29 +111,44 @@ __all__ = [
     "check_odot",
     "check_numerical_jacobian",
     "check_pose_jacobian",
-    # 04 landmark mapping
+    # 04 diagnose and calibrate
+    "check_dead_reckon",
+    "check_white_noise",
+    # 05 landmark mapping
     "check_landmark_jacobian",
     "check_init_landmark",
     "check_landmark_update",
-    # 05 pose uncertainty
+    # 06 pose uncertainty
     "check_curly_hat",
     "check_pose_transition",
+    "check_left_pose_prediction",
+    # 07 visual-inertial odometry
     "check_pose_update",
-    # 06 joint SLAM
+    "check_landmark_observation_noise",
+    # 08 joint SLAM
     "check_slam_jacobian",
+    "check_slam_null_space",
+    # 09 the active set
     "check_dense_covariance_bytes",
     "check_marginalize",
-    # 07 tuning and consistency
+    # 10 consistency
     "check_motion_noise",
     "check_nees",
     "check_average_nees_bounds",
-    # 08 from filtering to smoothing
-    "check_motion_residual",
-    "check_schur_reduce",
-    "check_gauss_newton_step",
-    # 09 capstone
+    "check_invariant_pose_jacobian",
+    # 11 outliers and real data
+    "check_gate",
+    "check_align_rigid",
+    # 12 capstone
     "check_capstone_predict",
     "check_capstone_landmarks",
     "check_capstone_slam",
     "capstone_steps",
+    "reference_capstone_steps",
+    # 13 smoothing
+    "check_motion_residual",
+    "check_schur_reduce",
+    # 14 filter and smoother
+    "check_gauss_newton_step",
+    "check_pose_marginal_covariance",
 ]

@@ -1,4 +1,4 @@
-"""Checks of notebooks 02 and 04 (the stereo camera): Ks, projection, triangulation, initialisation."""
+"""Checks of notebooks 02 and 05 (the stereo camera): Ks, projection, triangulation, initialisation."""
 
 import numpy as np
 
@@ -209,7 +209,7 @@ def _init_variants(p_cam, imu_T_cam, T):
 
 @exercise_check
 def check_init_landmark(init_landmark, hidden=False):
-    """Exercise 04: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point.
+    """Exercise 05: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point.
 
     With the simulator's rig (hidden: another one), at the identity and at 3 random poses
     (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m) observed without noise;

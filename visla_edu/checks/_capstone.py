@@ -1,4 +1,4 @@
-"""Checks of notebook 09 (the capstone): the three assembly functions and the loops they drive.
+"""Checks of notebook 12 (the capstone): the three assembly functions and the loops they drive.
 
 Each check first tests the student's function on random states (naming the usual mistakes),
 with spy parts that record which of the notebooks' functions it calls (the assembly must go
@@ -18,7 +18,8 @@ from visla_edu.checks._core import _hidden_seed, as_array, compare, exercise_che
 from visla_edu.checks._inputs import points_in_view, random_covariance, random_pose, stereo_camera
 from visla_edu.filters import FilterConfig
 
-__all__ = ["check_capstone_predict", "check_capstone_landmarks", "check_capstone_slam", "capstone_steps"]
+__all__ = ["check_capstone_predict", "check_capstone_landmarks", "check_capstone_slam", "capstone_steps",
+           "reference_capstone_steps"]
 
 #: Largest position difference (m) between the student's loop and the reference over a drive.
 LOOP_TOLERANCE = 1e-6
@@ -84,6 +85,19 @@ def _reference_slam_update(parts, world_T_imu, Sigma, p_active, slots, z, Ks, ca
 
 
 REFERENCE = capstone.Steps(_reference_predict, _reference_add_landmarks, _reference_slam_update)
+
+
+def reference_capstone_steps():
+    """The checks' reference assembly as :class:`visla_edu.capstone.Steps` (nothing printed).
+
+    Notebook 07 runs the capstone's VIO loop with the student's ``pose_update`` before the
+    capstone's own exercises exist; the loop's prediction is this reference.
+
+    Returns
+    -------
+    visla_edu.capstone.Steps
+    """
+    return REFERENCE
 
 
 # ---------------------------------------------------------------- spies and drives
@@ -168,7 +182,7 @@ _PREDICT_HIDDEN = (motion.predict_pose, motion.predict_pose_covariance, motion.p
 
 @exercise_check
 def check_capstone_predict(predict, hidden=False):
-    """Exercise 09.1: ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W) -> (world_T_imu, Sigma)``.
+    """Exercise 12.1: ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W) -> (world_T_imu, Sigma)``.
 
     Then the VIO loop (``parts.pose_update`` with the student's prediction) on a simulated drive.
 
@@ -250,7 +264,7 @@ def _landmark_variants(parts, T, Sigma, z, c, C_pixels):
     G_left = np.array([np.c_[np.eye(3), -lie.hat(p)] for p in p_new])  # exp(d^) T: world-frame perturbation
     G_body_frame = T[:3, :3].T @ G  # forgot the rotation to the world frame
     return [
-        ("the new landmark's cross-covariance G Sigma_px is missing\n(the textbook shortcut: notebook 06, "
+        ("the new landmark's cross-covariance G Sigma_px is missing\n(the textbook shortcut: notebook 08, "
          "section 5, shows it makes the filter overconfident)", lambda: _augmented(Sigma, G, C_pixels, cross=False)),
         ("the new landmarks are correlated with each other too: G Sigma_pp G^T is one (3k, 3k) block",
          lambda: _augmented(Sigma, G, C_pixels, joint_block=False)),
@@ -274,7 +288,7 @@ def _pose_block(Sigma, G):
 
 @exercise_check
 def check_capstone_landmarks(add_landmarks, hidden=False):
-    """Exercise 09.2: ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
+    """Exercise 12.2: ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
     -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``.
 
     With the simulator's rig (hidden: another one), for 3 states (``n`` landmarks in the state,
@@ -354,7 +368,7 @@ _SLAM_HIDDEN = (ekf.joint_update, ekf.joint_correction, ekf.pose_update, ekf.cho
 
 @exercise_check
 def check_capstone_slam(slam_update, hidden=False):
-    """Exercise 09.3: ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks,
+    """Exercise 12.3: ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks,
     cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``.
 
     Then the joint SLAM loop with it, against the library's ``slam_error="right"`` filter.
@@ -362,8 +376,8 @@ def check_capstone_slam(slam_update, hidden=False):
     With the simulator's rig (hidden: another one), for states of 4 landmarks with 2 observed
     and 6 with all 6 observed (hidden: 2 of 5, 1 of 1 and 5 of 8), ``noise_var = 4``. The result
     must be a tuple of three; compared with the joint EKF update through ``parts`` (``H`` from
-    ``parts.slam_jacobian``, ``K = Sigma H^T S^-1``, the pose corrected on the right by
-    ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - K H) Sigma``
+    ``parts.slam_jacobian``, ``L = Sigma H^T S^-1``, the pose corrected on the right by
+    ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - L H) Sigma``
     symmetrised): pose ``rtol=1e-7``, ``atol=1e-8``; covariance ``rtol=1e-6``, ``atol=1e-10``;
     landmarks ``rtol=1e-7``, ``atol=1e-8``. Recognises the correction on the left, its sign, a
     covariance that does not change, and the landmarks left in place. The function must call
@@ -417,7 +431,7 @@ def check_capstone_slam(slam_update, hidden=False):
         ], rtol=1e-7, atol=1e-8)
         D = 6 + 3 * n
         compare(name, as_array(out[1], name, (D, D), "covariance"), ref[1], f"(covariance) {where}", [
-            ("the covariance did not change: Sigma <- (I - K H) Sigma", lambda: Sigma),
+            ("the covariance did not change: Sigma <- (I - L H) Sigma", lambda: Sigma),
         ], rtol=1e-6, atol=1e-10)
         compare(name, as_array(out[2], name, (n, 3), "landmark means"), ref[2], f"(landmark means) {where}", [
             ("every landmark in the state moves: p_active + dx[6:].reshape(-1, 3)\n(the unobserved ones too, "

@@ -1,17 +1,17 @@
-"""Checks of notebook 07 (tuning and consistency): the motion noise W, NEES and its chi-square band."""
+"""Checks of notebooks 10 and 11 (consistency, outliers and real data): W, NEES and its band, the gate, the alignment."""
 
 import numpy as np
 
 from visla_edu import ekf, metrics, motion
 from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import random_covariance
+from visla_edu.checks._inputs import random_covariance, random_pose
 
-__all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds"]
+__all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds", "check_gate", "check_align_rigid"]
 
 
 @exercise_check
 def check_motion_noise(motion_noise, hidden=False):
-    """Exercise 07: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``.
+    """Exercise 10: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``.
 
     ``W = tau^2 diag(sigma_v^2, sigma_v^2, sigma_v^2, sigma_w^2, sigma_w^2, sigma_w^2)``:
     compares with :func:`visla_edu.motion.motion_noise` (``rtol=1e-9``, ``atol=1e-15``) for 3
@@ -66,7 +66,7 @@ def check_motion_noise(motion_noise, hidden=False):
 
 @exercise_check
 def check_nees(nees, hidden=False):
-    """Exercise 07: ``nees(error (n,), cov (n, n)) -> float`` = ``e^T cov^-1 e``.
+    """Exercise 10: ``nees(error (n,), cov (n, n)) -> float`` = ``e^T cov^-1 e``.
 
     For random errors of dimension 3, 6 and 6 (hidden: 1, 4, 6 and 15) drawn from random
     covariances; the result must be one number (an array of one entry fails). Compares with
@@ -116,7 +116,7 @@ def check_nees(nees, hidden=False):
 
 @exercise_check
 def check_average_nees_bounds(average_nees_bounds, hidden=False):
-    """Exercise 07: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES.
+    """Exercise 10: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES.
 
     The two-sided chi-square quantiles of ``n dof`` degrees of freedom at ``(1 - p) / 2`` and
     ``1 - (1 - p) / 2``, divided by ``n``: compares (``rtol=1e-6``) for 4 fixed ``(dof, n, p)``
@@ -167,3 +167,175 @@ def check_average_nees_bounds(average_nees_bounds, hidden=False):
             ("the bounds are swapped: return (lower, upper)", lambda: ref[::-1]),
         ], rtol=1e-6)
     ok(f"{name}: chi-square bounds of the average NEES", hidden)
+
+
+# --------------------------------------------------------------------------- the gate (notebook 11)
+
+
+def _gate_cases(generator, hidden):
+    """``(innovations (k, 4), S (k, 4, 4), probability)``: distances spread around the gate's threshold."""
+    cases = []
+    for k, probability in (((60, 0.999), (40, 0.9), (25, 0.5)) if hidden else ((50, 0.99), (30, 0.95))):
+        Q = np.linalg.qr(generator.normal(size=(k, 4, 4)))[0]  # random orientations, eigenvalues 0.05 to 20
+        S = Q @ (np.exp(generator.uniform(np.log(0.05), np.log(20.0), (k, 4)))[:, :, None] * np.swapaxes(Q, 1, 2))
+        radius = np.sqrt(generator.uniform(0.0, 2.5, k) * metrics.chi2_quantile(probability, 4))
+        direction = generator.normal(size=(k, 4))
+        direction /= np.sqrt(ekf.mahalanobis_squared(direction, S))[:, None]  # unit Mahalanobis length
+        cases.append((radius[:, None] * direction, S, probability))
+    return cases
+
+
+def _gate_variants(r, S, probability):
+    d2 = ekf.mahalanobis_squared(r, S)
+    threshold = metrics.chi2_quantile(probability, 4)
+    return [
+        ("the gate is the chi-square quantile at probability, not 1 - p\nwith p = 0.999 a consistent filter "
+         "keeps 99.9% of its good observations", lambda: d2 <= metrics.chi2_quantile(1 - probability, 4)),
+        ("compare the SQUARED distance with the chi-square quantile\nr^T S^-1 r is chi-square; its square root "
+         "is not", lambda: np.sqrt(d2) <= threshold),
+        ("the distance uses the inverse of S: r^T S^-1 r, not r^T S r",
+         lambda: np.einsum("ki,kij,kj->k", r, S, r) <= threshold),
+        ("each observation has 4 degrees of freedom (uL, vL, uR, vR)\nthe gate tests one observation at a "
+         "time: chi-square with 4 dof", lambda: d2 <= metrics.chi2_quantile(probability, 2)),
+        ("you returned the rejected ones: True means inside the gate\nkeep d2 <= threshold",
+         lambda: d2 > threshold),
+        ("the distance must use S: r^T S^-1 r, not |r|^2", lambda: np.sum(r * r, axis=1) <= threshold),
+    ]
+
+
+@exercise_check
+def check_gate(gate, hidden=False):
+    """Exercise 11: ``gate(innovations (k, 4), S (k, 4, 4), probability) -> (k,) bool``, inside the gate.
+
+    ``r_i^T S_i^-1 r_i <= chi2.ppf(probability, 4)`` for each observation. On 2 batches (50 and 30
+    observations, probabilities 0.99 and 0.95; hidden: 3 other batches) of random innovation
+    covariances with squared distances spread from 0 to 2.5 times the threshold; compares with
+    :func:`visla_edu.ekf.mahalanobis_squared` and :func:`visla_edu.metrics.chi2_quantile` (the
+    masks must agree exactly). Recognises the quantile at ``1 - p``, the distance not squared,
+    ``S`` not inverted, 2 degrees of freedom, the rejected ones returned, and ``|r|^2``. Hides
+    :func:`visla_edu.ekf.mahalanobis_squared`.
+
+    Parameters
+    ----------
+    gate : callable
+        The student's function: innovations ``z - z_pred`` (k, 4), their covariances (k, 4, 4)
+        and the gate probability to a boolean mask (k,), True for the observations to use.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
+    name = "gate"
+    call = student(gate, name, hide=[ekf.mahalanobis_squared])
+    for r, S, probability in _gate_cases(rng(hidden), hidden):
+        k = len(r)
+        got = as_array(call(r, S, probability), name, (k,), "mask")
+        ref = ekf.mahalanobis_squared(r, S) <= metrics.chi2_quantile(probability, 4)
+        compare(name, got, ref, f"for {k} innovations, probability {probability}",
+                [(hint, lambda f=f: np.asarray(f(), dtype=float)) for hint, f in _gate_variants(r, S, probability)],
+                rtol=0, atol=0)
+    ok(f"{name}: r^T S^-1 r <= chi2.ppf(p, 4) for every observation", hidden)
+
+
+# --------------------------------------------------------------------------- the alignment (notebook 11)
+
+
+def _rigid(R, t):
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+def _align_parts(p_est, p_gt):
+    """Centroids, the SVD factors of the cross-covariance and the reflection fix of the Kabsch solution."""
+    mu_e, mu_g = p_est.mean(axis=0), p_gt.mean(axis=0)
+    U, _, Vt = np.linalg.svd((p_est - mu_e).T @ (p_gt - mu_g))
+    return mu_e, mu_g, U, Vt, np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+
+
+def _align_variants(p_est, p_gt, ref):
+    mu_e, mu_g, U, Vt, D = _align_parts(p_est, p_gt)
+    R = ref[:3, :3]
+    U0, _, Vt0 = np.linalg.svd(p_est.T @ p_gt)
+    return [
+        ("the rotation block is transposed: R = Q D U^T\nwith U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt - c_gt)^T)",
+         lambda: _rigid(R.T, mu_g - R.T @ mu_e)),
+        ("the result is a reflection (det -1): fix the sign\nR = Q diag(1, 1, det(Q U^T)) U^T is the best "
+         "rotation; without the fix the SVD may give a mirror image", lambda: _rigid(Vt.T @ U.T, mu_g - Vt.T @ U.T @ mu_e)),
+        ("rotate the centroid: p = c_gt - R c_est, not c_gt - c_est",
+         lambda: _rigid(R, mu_g - mu_e)),
+        ("remove the centroids before the SVD\nthe cross-covariance is sum (p_est - c_est)(p_gt - c_gt)^T",
+         lambda: _rigid(Vt0.T @ U0.T, mu_g - Vt0.T @ U0.T @ mu_e)),
+        ("you returned est_T_gt, the inverse: map p_est onto p_gt",
+         lambda: np.linalg.inv(ref)),
+    ]
+
+
+def _align_cases(generator, hidden):
+    """``(p_est, p_gt)`` pairs: a noisy rigidly moved drive, and one whose best fit the SVD gives as a reflection."""
+    cases = []
+    for n in ((200, 12) if not hidden else (300, 40, 8)):
+        along = np.cumsum(generator.normal([1.0, 0.0, 0.0], [0.2, 0.3, 0.05], (n, 3)), axis=0)
+        gt_T_est = random_pose(generator, scale=50.0)
+        p_est = along
+        p_gt = p_est @ gt_T_est[:3, :3].T + gt_T_est[:3, 3] + generator.normal(scale=0.3, size=(n, 3))
+        cases.append((p_est, p_gt))
+    planar = np.c_[generator.normal(size=(10, 2)) * 10, np.zeros(10)]  # flat, then mirrored: det(V U^T) = -1
+    cases.append((planar, planar * [1.0, -1.0, 1.0] + generator.normal(scale=0.01, size=(10, 3))))
+    return cases
+
+
+@exercise_check
+def check_align_rigid(align_rigid, hidden=False):
+    """Exercise 11: ``align_rigid(p_est (N, 3), p_gt (N, 3)) -> gt_T_est (4, 4)``, the best rigid alignment.
+
+    The rotation ``R`` and translation ``p`` minimising ``sum |p_gt - (R p_est + p)|^2`` (Kabsch,
+    no scale): ``R = Q diag(1, 1, det(Q U^T)) U^T`` from ``U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt -
+    c_gt)^T)`` and ``p = c_gt - R c_est``. On 2 noisy drives moved by a random rigid motion (200 and
+    12 positions; hidden: 300, 40 and 8) and on a flat set of points compared with its mirror image
+    (the SVD then gives a reflection); compares with :func:`visla_edu.metrics.align_se3`
+    (``rtol=1e-7``, ``atol=1e-8``). Recognises the transposed rotation, the reflection not fixed,
+    the centroid not rotated, the centroids not removed and the inverse transform. Hides
+    :func:`visla_edu.metrics.align_se3` and :func:`visla_edu.metrics.ate`.
+
+    Parameters
+    ----------
+    align_rigid : callable
+        The student's function: estimated and true positions (N, 3), row ``i`` the same frame, to
+        the pose ``gt_T_est`` (4, 4) that best maps the estimate onto the truth.
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
+    name = "align_rigid"
+    call = student(align_rigid, name, hide=[metrics.align_se3, metrics.ate])
+    for p_est, p_gt in _align_cases(rng(hidden), hidden):
+        ref = metrics.align_se3(p_est, p_gt)
+        got = as_array(call(p_est, p_gt), name, (4, 4), "pose gt_T_est")
+        flat = not np.any(p_est[:, 2])
+        compare(name, got, ref, f"for {len(p_est)} {'flat, mirrored ' if flat else ''}positions",
+                _align_variants(p_est, p_gt, ref), rtol=1e-7, atol=1e-8)
+    ok(f"{name}: R = Q diag(1, 1, det(Q U^T)) U^T, p = c_gt - R c_est", hidden)

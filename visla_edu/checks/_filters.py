@@ -1,4 +1,5 @@
-"""Checks of notebooks 04-06 (the EKF): landmark and pose updates, the joint Jacobian, memory, marginals."""
+"""Checks of notebooks 05, 07-09 (the EKF): landmark and pose updates, observation noise, the joint Jacobian, memory,
+marginals."""
 
 import numpy as np
 
@@ -12,6 +13,7 @@ from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, notebook_rig_v
 __all__ = [
     "check_landmark_update",
     "check_pose_update",
+    "check_landmark_observation_noise",
     "check_slam_jacobian",
     "check_dense_covariance_bytes",
     "reference_dense_covariance_bytes",
@@ -60,8 +62,8 @@ def _landmark_covariance_variants(m, Sigma, T, camera, noise_var):
     H = camera.jacobian_landmark(T, m[None])[0]
     gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(4))
     return [
-        ("Sigma_new = (I - K H) Sigma, with a minus sign", lambda: (np.eye(3) + gain @ H) @ Sigma),
-        ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
+        ("Sigma_new = (I - L H) Sigma, with a minus sign", lambda: (np.eye(3) + gain @ H) @ Sigma),
+        ("the covariance did not change: Sigma_new = (I - L H) Sigma", lambda: Sigma),
         ("the observation noise is missing from S = H Sigma H^T + noise_var I",
          lambda: Sigma - Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T) @ H @ Sigma),
     ]
@@ -75,14 +77,14 @@ def _pair(out, name, what):
 
 @exercise_check
 def check_landmark_update(landmark_update, hidden=False):
-    """Exercise 04: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``.
+    """Exercise 05: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``.
 
     With the simulator's rig (hidden: another one), 4 cases (hidden: 6): a random pose, a
     landmark at 4 to 40 m observed with 2 px noise per coordinate, a prior mean 1 m off (normal)
     and a random prior covariance; ``noise_var = 4`` (hidden: 1). Compares with
     :func:`visla_edu.ekf.landmark_update` (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``,
     ``atol=1e-8``). Recognises a flipped innovation, a mean or covariance that does not change,
-    ``(I + K H) Sigma``, the pixel noise missing from ``S`` or squared (``noise_var^2``) and
+    ``(I + L H) Sigma``, the pixel noise missing from ``S`` or squared (``noise_var^2``) and
     transposed rotations. Hides
     ``ekf.landmark_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
     ``kalman.update``.
@@ -165,7 +167,7 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
     transposed.append(lambda: _pose_update_with(mu, Sigma, z, p_world, camera.Ks,
                                                 rotation_transposed(camera.cam_T_imu), noise_var)[0])
     return [
-        ("the correction is applied on the left; use mu_new = mu @ se3_exp(K r)\n"
+        ("the correction is applied on the left; use mu_new = mu @ se3_exp(L r)\n"
          "with the right perturbation T = mu exp(delta^) the correction K (z - z_pred) multiplies mu "
          "on the right",
          lambda: _pose_update_with(*args, side="left")[0]),
@@ -173,7 +175,7 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
          "(-Ks dpi/dq o_T_i (mu^-1 m)^odot) and the innovation z - z_pred",
          lambda: _pose_update_with(*args, sign=-1.0)[0]),
         ("the pose did not move", lambda: mu),
-        ("wrong twist order: the correction K r is [v; w] (linear first), as se3_exp expects",
+        ("wrong twist order: the correction L r is [v; w] (linear first), as se3_exp expects",
          lambda: _pose_update_with(*args, swap=True)[0]),
         ("the innovation is not stacked like H: use (z - z_pred).ravel()\n"
          "H stacks the observations one after the other (4 rows each: uL, vL, uR, vR of observation "
@@ -186,14 +188,14 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
 
 @exercise_check
 def check_pose_update(pose_update, hidden=False):
-    """Exercise 05: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``.
+    """Exercise 07: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``.
 
     With the simulator's rig (hidden: another one), 3 cases (hidden: 5, the first with a single
     observation): 8 landmarks in view at 4 to 40 m observed with 1 px noise, a random pose
     covariance and a mean drawn from it around the true pose; ``noise_var`` 4, 1 and 9 (hidden:
     then 2.25 and 0.25), so a function that ignores it fails. Compares with the EKF update
-    written out in the checks (``H`` stacked over the observations, ``K = Sigma H^T (H Sigma H^T
-    + noise_var I)^-1``, ``mu exp(K r)``, ``(I - K H) Sigma``; mean ``rtol=1e-6``,
+    written out in the checks (``H`` stacked over the observations, ``L = Sigma H^T (H Sigma H^T
+    + noise_var I)^-1``, ``mu exp(L r)``, ``(I - L H) Sigma``; mean ``rtol=1e-6``,
     ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the correction applied
     on the left, its sign, a pose that does not move, the twist order, an innovation stacked
     column by column (unlike ``H``), transposed rotations, a
@@ -247,9 +249,84 @@ def check_pose_update(pose_update, hidden=False):
                     hidden, lambda c=stereo_camera(): _pose_update_with(*args[:4], c.Ks, c.cam_T_imu, noise_var)[0]),
                 rtol=1e-6, atol=1e-7, extra=not_se3)
         compare(name, as_array(out[1], name, (6, 6), "covariance"), S_ref, "(covariance)", [
-            ("the covariance did not change: Sigma_new = (I - K H) Sigma", lambda: Sigma),
+            ("the covariance did not change: Sigma_new = (I - L H) Sigma", lambda: Sigma),
         ], rtol=1e-6, atol=1e-10)
-    ok(f"{name}: pose and covariance agree with the reference update mu exp(K r), (I - K H) Sigma", hidden)
+    ok(f"{name}: pose and covariance agree with the reference update mu exp(L r), (I - L H) Sigma", hidden)
+
+
+def _observation_noise_cases(generator, hidden):
+    """``(J_landmark (k, 4, 3), Sigma_landmark (k, 3, 3), noise_var)``: Jacobians of landmarks in view."""
+    camera = stereo_camera(hidden)
+    cases = []
+    for k, noise_var in (((1, 2.25), (6, 0.25), (3, 4.0)) if hidden else ((5, 1.0), (2, 4.0))):
+        T = random_pose(generator)
+        p_world = points_in_view(generator, T, camera.imu_T_cam, k, depth=(3.0, 80.0))
+        J_landmark = camera.jacobian_landmark(T, p_world)
+        Sigma_landmark = np.stack([random_covariance(generator, 3) * generator.uniform(0.01, 0.5) for _ in range(k)])
+        cases.append((J_landmark, Sigma_landmark, noise_var))
+    return cases
+
+
+def _observation_noise_variants(J, Sigma, noise_var):
+    Jt = np.swapaxes(J, 1, 2)
+    I4 = np.eye(4)
+    return [
+        ("the landmarks are not exact: add H_lm Sigma_m H_lm^T\nthe pixel noise alone treats every landmark "
+         "as exactly known", lambda: np.broadcast_to(noise_var * I4, (len(J), 4, 4))),
+        ("add the pixel noise noise_var * I4 too\nthe observation has its own noise besides the landmark's "
+         "uncertainty", lambda: J @ Sigma @ Jt),
+        ("noise_var is already a variance: do not square it", lambda: J @ Sigma @ Jt + noise_var**2 * I4),
+        ("use noise_var itself, not its square root\nnoise_var is already a variance",
+         lambda: J @ Sigma @ Jt + np.sqrt(noise_var) * I4),
+        ("use the landmark's covariance, not its inverse\nH_lm Sigma_m H_lm^T + noise_var I",
+         lambda: J @ np.linalg.inv(Sigma) @ Jt + noise_var * I4),
+    ]
+
+
+@exercise_check
+def check_landmark_observation_noise(landmark_observation_noise, hidden=False):
+    """Exercise 07: ``landmark_observation_noise(J_landmark (k, 4, 3), Sigma_landmark (k, 3, 3), noise_var) -> (k, 4, 4)``.
+
+    The noise of observation ``i`` of an uncertain landmark: ``noise_var I4 + H_i Sigma_i H_i^T``
+    (the pixel noise plus the landmark's uncertainty seen in the image). With landmark Jacobians
+    of the simulator's rig (hidden: another one) at random poses and random landmark covariances,
+    ``k`` = 5 and 2 (hidden: 1, 6, 3) and ``noise_var`` 1 and 4 (hidden: 2.25, 0.25, 4); compares
+    with :func:`visla_edu.ekf.innovation_covariances` (``rtol=1e-9``, ``atol=1e-12``). Recognises
+    the pixel noise alone (landmarks exact), the landmark part alone, ``noise_var`` squared or
+    square-rooted and the inverse of the landmark covariance. Hides
+    :func:`visla_edu.ekf.innovation_covariances` and :func:`visla_edu.ekf.pose_update`.
+
+    Parameters
+    ----------
+    landmark_observation_noise : callable
+        The student's function: the landmark Jacobians of ``k`` observations (k, 4, 3), their
+        landmarks' covariances (k, 3, 3) and the pixel noise variance (px^2) to the noise
+        covariance of each observation (k, 4, 4).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
+    name = "landmark_observation_noise"
+    call = student(landmark_observation_noise, name, hide=[ekf.innovation_covariances, ekf.pose_update])
+    for J, Sigma, noise_var in _observation_noise_cases(rng(hidden), hidden):
+        k = len(J)
+        got = as_array(call(J, Sigma, noise_var), name, (k, 4, 4), "noise covariances")
+        ref = ekf.innovation_covariances(None, J, None, None, Sigma, noise_var)
+        compare(name, got, ref, f"for {k} observation(s), noise_var = {noise_var}",
+                _observation_noise_variants(J, Sigma, noise_var), rtol=1e-9, atol=1e-12)
+    ok(f"{name}: noise_var I + H_lm Sigma_m H_lm^T for every observation", hidden)
 
 
 def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=True, offset=_POSE_DIM):
@@ -267,7 +344,7 @@ def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=
 
 @exercise_check
 def check_slam_jacobian(slam_jacobian, hidden=False):
-    """Exercise 06: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``.
+    """Exercise 08: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``.
 
     For random blocks and 3 fixed ``(n, slots)`` cases (hidden: 3 others); ``H`` must equal
     exactly the matrix with rows ``4 i .. 4 i + 3`` holding ``J_pose[i]`` in columns 0-5 and
@@ -310,7 +387,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
         got = as_array(call(J_pose, J_landmark, slots, n), name, ref.shape)
         compare(name, got, ref, f"for slots {slots.tolist()} of {n} landmarks", [
             ("the pose columns come first: the state is [pose (6); landmarks (3n)]\n"
-             "(the seed report orders it [landmarks; pose])",
+             "(Javadi's course report orders it [landmarks; pose])",
              lambda: _slam_jacobian_reference(J_pose, J_landmark, slots, n, pose_first=False)),
             ("landmark slot s occupies columns 6 + 3 s ... 6 + 3 s + 2\n(after the 6 pose columns)",
              lambda: _slam_jacobian_reference(J_pose, J_landmark, slots, n, offset=0)),
@@ -321,7 +398,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
 def reference_dense_covariance_bytes(num_landmarks, stride=1):
     """Bytes of the dense float64 joint covariance of the pose and every ``stride``-th landmark.
 
-    ``(6 + 3 n)^2 * 8`` with ``n = ceil(num_landmarks / stride)``: notebook 06's fallback when
+    ``(6 + 3 n)^2 * 8`` with ``n = ceil(num_landmarks / stride)``: notebook 09's fallback when
     the exercise is not finished (hidden while its check runs the student's version).
 
     Parameters
@@ -351,7 +428,7 @@ def reference_dense_covariance_bytes(num_landmarks, stride=1):
 
 @exercise_check
 def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
-    """Exercise 06: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64.
+    """Exercise 09: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64.
 
     For 6 fixed ``(num_landmarks, stride)`` cases (hidden: 6 edge cases, 0 landmarks among
     them, and 3 random ones); compares with :func:`reference_dense_covariance_bytes` to within
@@ -412,7 +489,7 @@ def _marginal_cases(hidden):
 
 @exercise_check
 def check_marginalize(marginalize, hidden=False):
-    """Exercise 06: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``.
+    """Exercise 09: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``.
 
     For 3 random covariances and index sets (hidden: 4); compares with
     ``Sigma[np.ix_(keep, keep)]`` (default tolerances of

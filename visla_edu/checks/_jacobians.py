@@ -1,4 +1,4 @@
-"""Checks of notebooks 03 and 04 (Jacobians): dpi/dq, odot, a gradient checker, pose and landmark Jacobians."""
+"""Checks of notebooks 03 and 05 (Jacobians): dpi/dq, odot, a gradient checker, pose and landmark Jacobians."""
 
 import numpy as np
 
@@ -311,7 +311,7 @@ def _landmark_jacobian_variants(camera, T, m, ref):
 
 @exercise_check
 def check_landmark_jacobian(landmark_jacobian, hidden=False):
-    """Exercise 04: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``.
+    """Exercise 05: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``.
 
     With the simulator's rig (hidden: another one), at the identity and at 3 random poses
     (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m); a 4x4 result fails at

@@ -1,4 +1,4 @@
-"""Checks of notebooks 01 and 05 (SE(3) kinematics): hat, exponentials, dead reckoning, curly-hat, F."""
+"""Checks of notebooks 01 and 04 (SE(3) kinematics): hat, the exponentials, the logarithm, dead reckoning."""
 
 import numpy as np
 import scipy.linalg
@@ -13,8 +13,7 @@ __all__ = [
     "check_so3_exp",
     "check_se3_exp",
     "check_dead_reckon",
-    "check_curly_hat",
-    "check_pose_transition",
+    "check_so3_log",
 ]
 
 _EPS = np.finfo(float).eps
@@ -110,23 +109,12 @@ def _series_C(t):
 def _tiny_angle_failure(name, t, error):
     digits = max(0.0, -np.log10(_EPS / (t * t / 2)))
     return fail(name, f"no small-angle series: digits lost at {t:.0e} rad",
-                f"at the angle t = {t:.0e} rad your result is off by {error:.1e} (relative) in the terms "
-                f"with hat(w); in float64 (1 - cos t)/t^2 keeps only about {digits:.0f} correct digit(s) there "
-                "and (t - sin t)/t^3 fewer.",
+                f"at the angle t = {t:.0e} rad your translation is off by {error:.1e} (relative to |v|); in "
+                f"float64 (1 - cos t)/t^2 keeps only about {digits:.0f} correct digit(s) there and (t - sin t)/t^3 "
+                "fewer, and in J_l v the first multiplies hat(w) v, of size t |v| only, so its error shows.",
                 "Below a small angle (visla-edu switches at 0.1 rad) use the Taylor series "
                 "(1 - cos t)/t^2 ~ 1/2 - t^2/24 + t^4/720, (t - sin t)/t^3 ~ 1/6 - t^2/120 + t^4/5040; "
                 "a guard at exactly t == 0 is not enough.")
-
-
-def _check_tiny_rotation(name, R, w):
-    """Fail if the second-order part ``B hat(w)^2`` of ``R`` lost digits (off-diagonal, symmetric part)."""
-    t = float(np.linalg.norm(w))
-    ref = _series_B(t) * np.array([w[0] * w[1], w[0] * w[2], w[1] * w[2]])
-    sym = 0.5 * (R + R.T)
-    got = sym[[0, 0, 1], [1, 2, 2]]
-    error = float(np.max(np.abs(got - ref) / np.abs(ref)))
-    if not error <= 1e-6:
-        raise _tiny_angle_failure(name, t, error)
 
 
 @exercise_check
@@ -135,10 +123,12 @@ def check_so3_exp(so3_exp, hidden=False):
 
     Compares with :func:`visla_edu.lie.so3_exp` (``atol=1e-9``) on the rotation vectors of
     :func:`~visla_edu.checks._inputs.rotation_vectors` (angles from 0 to pi), then at 3 tiny
-    angles (1e-7, 1e-6 and 1e-5 rad; hidden: 3e-7, 3e-6 and 2e-5) requires the second-order
-    part ``(1 - cos t)/t^2 hat(w)^2`` to relative accuracy 1e-6, which needs the small-angle
-    series. Recognises ``R^T``, an unnormalised axis, a flipped second-order term, NaN near 0
-    and a result that is not a rotation.
+    angles (1e-7, 1e-6 and 1e-5 rad; hidden: 3e-7, 3e-6 and 2e-5) to ``atol=1e-15``. The closed
+    form guarded at exactly 0 passes: its coefficient ``(1 - cos t)/t^2`` loses relative digits
+    near 0, but it multiplies ``hat(w)^2``, of size ``t^2``, so ``R`` keeps full precision (the
+    cancellation that matters is in the translation of :func:`check_se3_exp` and in the log,
+    :func:`check_so3_log`). Recognises ``R^T``, an unnormalised axis, a flipped second-order term,
+    NaN at 0 and a result that is not a rotation.
 
     Hides ``lie.so3_exp``, ``lie.se3_exp``, the library's sin(t)/t and (1 - cos t)/t^2 and
     ``scipy.linalg.expm`` (the exercise is the closed form); ``lie.hat`` stays.
@@ -178,7 +168,8 @@ def check_so3_exp(so3_exp, hidden=False):
              lambda: _rodrigues_minus(w)),
         ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_rotation)
     for w in _tiny_rotation_vectors(generator, hidden):
-        _check_tiny_rotation(name, as_array(call(w), name, (3, 3)), w)
+        compare(name, as_array(call(w), name, (3, 3)), lie.so3_exp(w),
+                f"for w = {fmt(w)} (angle {np.linalg.norm(w):.0e} rad)", atol=1e-15, nan_hint=NEAR_ZERO_HINT)
     ok(f"{name}: Rodrigues agrees with the library from 0 to pi, to full precision at 1e-7 rad", hidden)
 
 
@@ -187,7 +178,7 @@ def _se3_no_jacobian(u):
 
 
 def _se3_with_translation(u, translation):
-    """``se3_exp(u)`` with its translation replaced by ``translation`` (a mistake's V v)."""
+    """``se3_exp(u)`` with its translation replaced by ``translation`` (a mistake's J_l v)."""
     T = lie.se3_exp(u)
     T[:3, 3] = translation
     return T
@@ -202,14 +193,14 @@ def _swapped_v(w):
 
 
 def _se3_jacobian_transposed(u):
-    """The translation ``V^T v`` (the sign of V's hat(w) term flipped): ``V(w)^T = V(-w)``."""
+    """The translation ``J_l^T v`` (the sign of J_l's hat(w) term flipped): ``J_l(w)^T = J_l(-w)``."""
     T = lie.se3_exp(u)
     T[:3, 3] = lie.se3_exp(np.concatenate([u[:3], -u[3:]]))[:3, 3]
     return T
 
 
 def _check_tiny_twist(name, T, u):
-    """Fail if ``V v`` (or the rotation) of ``T = se3_exp(u)`` lost digits at a tiny angle."""
+    """Fail if ``J_l v`` of ``T = se3_exp(u)`` lost digits at a tiny angle (``B hat(w) v`` is of size ``t |v|``)."""
     v, w = u[:3], u[3:]
     t = float(np.linalg.norm(w))
     wv = np.cross(w, v)
@@ -217,7 +208,7 @@ def _check_tiny_twist(name, T, u):
     error = float(np.max(np.abs(T[:3, 3] - ref)) / np.linalg.norm(v))
     if not error <= 1e-12:
         raise _tiny_angle_failure(name, t, error)
-    _check_tiny_rotation(name, T[:3, :3], w)
+    compare(name, T[:3, :3], lie.so3_exp(w), f"the rotation block for w = {fmt(w)}", atol=1e-15)
 
 
 @exercise_check
@@ -226,9 +217,10 @@ def check_se3_exp(se3_exp, hidden=False):
 
     Compares with :func:`visla_edu.lie.se3_exp` (``atol=1e-9``) on the twists of
     :func:`~visla_edu.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
-    at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``V v`` to relative
-    accuracy 1e-12 of ``|v|`` and the rotation as there. Recognises the twist order ``[w; v]``,
-    the inverse pose, the translation ``v`` instead of ``V v`` or ``V^T v``, a transposed rotation
+    at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``J_l v`` to relative
+    accuracy 1e-12 of ``|v|`` (a closed form guarded at exactly 0 is off by about ``eps / t``
+    there: the small-angle series is needed) and the rotation to ``atol=1e-15``. Recognises the twist order ``[w; v]``,
+    the inverse pose, the translation ``v`` instead of ``J_l v`` or ``J_l^T v``, a transposed rotation
     block, NaN near 0 and a result that is not a pose.
 
     Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the SE(3) right Jacobian and its
@@ -265,13 +257,13 @@ def check_se3_exp(se3_exp, hidden=False):
             ("wrong twist order: u = [v; w] (linear first); you used [w; v]",
              lambda: lie.se3_exp(swap_twist(u))),
             ("you returned the inverse pose exp(-u^)\ncheck the signs", lambda: lie.se3_exp(-u)),
-            ("the translation is v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + "
+            ("the translation is v, but it must be J_l v\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
              "(t - sin t)/t^3 hat(w)^2 (the left Jacobian of SO(3))", lambda: _se3_no_jacobian(u)),
-            ("the translation is R v, but it must be V v\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
+            ("the translation is R v, but it must be J_l v\nJ_l = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, ref[:3, :3] @ u[:3])),
-            ("V's two coefficients are swapped\nV = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
+            ("J_l's two coefficients are swapped\nJ_l = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, _swapped_v(u[3:]) @ u[:3])),
-            ("V's hat(w) term has the wrong sign (you used V^T)\nV = I + (1 - cos t)/t^2 hat(w) + "
+            ("J_l's hat(w) term has the wrong sign (you used J_l^T)\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
              "(t - sin t)/t^3 hat(w)^2, with a plus before the hat(w) term", lambda: _se3_jacobian_transposed(u)),
             ("the rotation block is transposed (R^T instead of R)",
              lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
@@ -282,17 +274,27 @@ def check_se3_exp(se3_exp, hidden=False):
     ok(f"{name}: agrees with the library for twists [v; w] from rest to angles near pi", hidden)
 
 
-def _dead_reckon_left(time_stamps, twist_samples):
+def _dead_reckon_left(time_stamps, twist_samples, lag):
+    steps = motion.select_twists(twist_samples, lag)
     poses = [np.eye(4)]
     for t, tau in enumerate(np.diff(time_stamps)):
-        poses.append(lie.se3_exp(tau * twist_samples[t]) @ poses[-1])
+        poses.append(lie.se3_exp(tau * steps[t]) @ poses[-1])
     return np.array(poses)
 
 
-def _dead_reckon_no_tau(time_stamps, twist_samples):
+def _dead_reckon_no_tau(time_stamps, twist_samples, lag):
     poses = [np.eye(4)]
-    for t in range(len(time_stamps) - 1):
-        poses.append(poses[-1] @ lie.se3_exp(twist_samples[t]))
+    for step in motion.select_twists(twist_samples, lag):
+        poses.append(poses[-1] @ lie.se3_exp(step))
+    return np.array(poses)
+
+
+def _dead_reckon_wrapped(time_stamps, twist_samples, lag):
+    """The mistake ``twists[(t + lag) % T]``: past an end the index wraps around instead of stopping."""
+    idx = (np.arange(len(time_stamps) - 1) + lag) % len(twist_samples)
+    poses = [np.eye(4)]
+    for tau, u in zip(np.diff(time_stamps), twist_samples[idx]):
+        poses.append(poses[-1] @ lie.se3_exp(tau * u))
     return np.array(poses)
 
 
@@ -306,23 +308,50 @@ def _drive(generator, T, hidden):
     return time_stamps, samples
 
 
+def _dead_reckon_variants(time_stamps, samples, lag, ref):
+    T = len(time_stamps)
+    return [
+        ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
+         "T_{t+1} = T_t exp(tau_t u_{t+lag}^) (multiply on the right)",
+         lambda: _dead_reckon_left(time_stamps, samples, lag)),
+        ("wrong twist order: u = [v; w] (linear first)",
+         lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]], lag=lag)),
+        (f"the lag was ignored: with lag {lag:+d} the step t -> t+1 uses u_(t{lag:+d})\n"
+         "lag 0 is the course's convention, u_t, the sample at the start of the interval",
+         lambda: motion.dead_reckon(time_stamps, samples)),
+        (f"the lag has the wrong sign: use u_(t{lag:+d}), not u_(t{-lag:+d})\nlag +1 is the sample at the end "
+         "of the interval, u_(t+1)", lambda: motion.dead_reckon(time_stamps, samples, lag=-lag)),
+        ("past an end the index wraps around: clip it\nt + lag must stay in 0 .. T-1 (the first or last sample "
+         "is used again), as np.clip does; a negative index counts from the end in numpy",
+         lambda: _dead_reckon_wrapped(time_stamps, samples, lag)),
+        ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u^)",
+         lambda: _dead_reckon_no_tau(time_stamps, samples, lag)),
+        ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
+         lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples,
+                                    lag=lag)),
+        ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
+    ]
+
+
 @exercise_check
 def check_dead_reckon(dead_reckon, hidden=False):
-    """Exercise 01: ``dead_reckon(time_stamps (T,), twists (T, 6)) -> (T, 4, 4)`` from the identity.
+    """Exercise 04: ``dead_reckon(time_stamps (T,), twists (T, 6), lag=0) -> (T, 4, 4)`` from the identity.
 
-    On a random drive of 30 frames with steps of 0.08 to 0.12 s (hidden: 45 frames, steps
-    from 0.02 s, and zero twists for a stretch: the car stops); compares with
-    :func:`visla_edu.motion.dead_reckon` (lag 0, ``atol=1e-8``), i.e.
-    ``T_{t+1} = T_t exp(tau_t u_t^)`` from ``T_0 = I``. Recognises multiplication on the left,
-    the twist order ``[w; v]``, ``u_{t+1}`` for the step ``t -> t+1``, a missing ``tau``, one
-    constant ``tau`` and inverted poses. Hides ``motion.dead_reckon`` and
-    ``motion.predict_pose``.
+    ``T_{t+1} = T_t exp(tau_t u_{t+lag}^)`` from ``T_0 = I``, the index ``t + lag`` clipped to
+    ``0 .. T-1`` (:func:`visla_edu.motion.select_twists`). On a random drive of 30 frames with
+    steps of 0.08 to 0.12 s, with the lags 0 and +1 (hidden: 45 frames, steps from 0.02 s, zero
+    twists for a stretch (the car stops), the lags 0, +1, -1 and +2); compares with
+    :func:`visla_edu.motion.dead_reckon` (``atol=1e-8``). A function without a ``lag`` argument
+    fails with a hint. Recognises multiplication on the left, the twist order ``[w; v]``, the lag
+    ignored or with the wrong sign, an index that wraps around at an end instead of being
+    clipped, a missing ``tau``, one constant ``tau`` and inverted poses. Hides
+    ``motion.dead_reckon``, ``motion.select_twists`` and ``motion.predict_pose``.
 
     Parameters
     ----------
     dead_reckon : callable
-        The student's function: time stamps (T,) and body twists ``[v; w]`` (T, 6) to the poses
-        ``world_T_imu`` (T, 4, 4).
+        The student's function: time stamps (T,), body twists ``[v; w]`` (T, 6) and the lag (an
+        int) to the poses ``world_T_imu`` (T, 4, 4).
     hidden : bool
         Run the hidden cases instead (other inputs, the random ones drawn from
         ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
@@ -342,39 +371,84 @@ def check_dead_reckon(dead_reckon, hidden=False):
     name = "dead_reckon"
     T = 45 if hidden else 30
     time_stamps, samples = _drive(rng(hidden), T, hidden)
-    call = student(dead_reckon, name, hide=[motion.dead_reckon, motion.predict_pose])
-    got = as_array(call(time_stamps, samples), name, (T, 4, 4))
-    ref = motion.dead_reckon(time_stamps, samples)
-    compare(name, got, ref, f"on a random {T}-step drive", [
-        ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
-         "T_{t+1} = T_t exp(tau_t u_t^) (multiply on the right)", lambda: _dead_reckon_left(time_stamps, samples)),
-        ("wrong twist order: u = [v; w] (linear first)",
-         lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]])),
-        ("the step from t to t+1 must use u_t, not u_{t+1}\nu_t is the sample at the start of the interval",
-         lambda: motion.dead_reckon(time_stamps, samples, lag=1)),
-        ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u_t^)",
-         lambda: _dead_reckon_no_tau(time_stamps, samples)),
-        ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
-         lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples)),
-        ("the poses are inverted (imu_T_world): visla-edu stores world_T_imu", lambda: lie.se3_inv(ref)),
-    ], atol=1e-8)
-    ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon", hidden)
+    call = student(dead_reckon, name, hide=[motion.dead_reckon, motion.select_twists, motion.predict_pose])
+    lags = (0, 1, -1, 2) if hidden else (0, 1)
+    for lag in lags:
+        try:
+            out = call(time_stamps, samples, lag)
+        except AssertionError as err:
+            if "positional argument" in str(err):
+                raise fail(name, "dead_reckon needs a third argument, the lag",
+                           "the signature is dead_reckon(time_stamps, twists, lag=0)") from None
+            raise
+        got = as_array(out, name, (T, 4, 4))
+        ref = motion.dead_reckon(time_stamps, samples, lag=lag)
+        compare(name, got, ref, f"on a random {T}-step drive with lag {lag:+d}",
+                _dead_reckon_variants(time_stamps, samples, lag, ref), atol=1e-8)
+    ok(f"{name}: the {T}-pose trajectory agrees with motion.dead_reckon at the lags {list(lags)}", hidden)
+
+
+# --------------------------------------------------------------------------- the logarithm
+
+
+def _log_arccos(R):
+    """The mistake: the angle from arccos((tr R - 1)/2), the axis from the antisymmetric part."""
+    s = 0.5 * lie.vee(R - R.T)
+    theta = np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))
+    norm = np.linalg.norm(s)
+    return np.zeros(3) if norm == 0 else theta / norm * s
+
+
+def _log_arcsin(R):
+    """The mistake: the angle from arcsin(|s|), which cannot exceed pi/2."""
+    s = 0.5 * lie.vee(R - R.T)
+    norm = np.linalg.norm(s)
+    return np.zeros(3) if norm == 0 else np.arcsin(min(norm, 1.0)) / norm * s
+
+
+def _log_cases(generator, hidden):
+    """Rotation vectors with angles 0 to 3 rad, and tiny ones where arccos loses its digits."""
+    angles = [0.0, 1e-9, 3e-8, 2e-6, 1e-4, 0.05, 0.5, 1.2, 2.0, 2.6, 3.0]
+    tiny = [1e-9, 1e-7, 1e-5]
+    if hidden:
+        angles = [0.0, 3e-9, 2e-7, 5e-5, 0.0999, 0.1001, 0.8, 1.6, 2.3, 2.9]
+        tiny = [3e-9, 4e-8, 2e-6]
+    return [a * unit(generator) for a in angles], [a * unit(generator) for a in tiny]
+
+
+def _log_variants(R, ref):
+    return [
+        ("the angle from arccos loses its digits near 0: use atan2\nat a small angle (tr R - 1)/2 = cos t is "
+         "about 1 - t^2/2 and rounds away t: take t = atan2(|s|, (tr R - 1)/2) with s = vee(R - R^T)/2",
+         lambda: _log_arccos(R)),
+        ("arcsin gives angles up to pi/2 only: use atan2\nt = atan2(|s|, (tr R - 1)/2) with s = vee(R - R^T)/2 "
+         "covers 0 to pi", lambda: _log_arcsin(R)),
+        ("you returned -w: the log of R^T\nthe axis is vee(R - R^T) / 2 = sin(t) a, not vee(R^T - R)",
+         lambda: -ref),
+        ("twice the rotation vector: s = vee(R - R^T) / 2\nvee(R - R^T) is 2 sin(t) a", lambda: 2 * ref),
+        ("half the rotation vector: s = vee(R - R^T) / 2 = sin(t) a\nw = t / sin(t) s", lambda: 0.5 * ref),
+    ]
 
 
 @exercise_check
-def check_curly_hat(curly_hat, hidden=False):
-    """Exercise 05: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
+def check_so3_log(so3_log, hidden=False):
+    """Exercise 01: ``so3_log(R (3, 3)) -> w (3,)``, the rotation vector, accurate at small angles.
 
-    On ``[1, 2, 3, 4, 5, 6]`` and 4 random twists (hidden: the zero twist, a tiny rotation
-    ``[0, 0, 0, 1e-9, 0, 0]`` and 4 random ones); compares with :func:`visla_edu.lie.curly_hat`
-    (default tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the twist
-    order, ``hat(v)`` in the lower-left block, ``curly_hat(-u)`` and the transpose. Hides
-    ``lie.curly_hat``.
+    On rotations ``lie.so3_exp(w)`` with angles from 0 to 3 rad (near pi another formula is
+    needed, the library's; the exercise stops at 3 rad) compares with
+    :func:`visla_edu.lie.so3_log` (``atol=1e-12``), then at 3 tiny angles (1e-9, 1e-7 and 1e-5
+    rad; hidden: other angles and axes) to ``atol=1e-15``: the angle read with ``arccos`` is off by
+    about ``eps / t`` there, the one read with ``atan2`` of the antisymmetric part is not.
+    Recognises the ``arccos`` angle, the ``arcsin`` angle (wrong above pi/2), ``-w``, twice and
+    half the rotation vector, NaN at the identity and a matrix result. Hides ``lie.so3_log``,
+    ``lie.se3_log`` and the library's sin(t)/t; ``lie.vee`` and ``lie.hat`` stay (scipy's general
+    ``scipy.linalg.logm`` cannot be hidden: the exercise text asks for the formula).
 
     Parameters
     ----------
-    curly_hat : callable
-        The student's function: a twist ``u = [v; w]`` (6,) to its adjoint matrix (6, 6).
+    so3_log : callable
+        The student's function: a rotation matrix (3, 3) to its rotation vector ``w`` (3,), with
+        ``so3_exp(w) == R`` and an angle ``|w|`` in [0, pi].
     hidden : bool
         Run the hidden cases instead (other inputs, the random ones drawn from
         ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
@@ -391,78 +465,19 @@ def check_curly_hat(curly_hat, hidden=False):
     ValueError
         ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
     """
-    name = "curly_hat"
-    generator = rng(hidden)
-    fixed = [np.zeros(6), np.array([0.0, 0, 0, 1e-9, 0, 0])] if hidden else [np.array([1.0, 2, 3, 4, 5, 6])]
-    call = student(curly_hat, name, hide=[lie.curly_hat])
-    cases = fixed + [generator.normal(size=6) for _ in range(4)]
-    for u in cases:
-        got = as_array(call(u), name, (6, 6))
-        ref = lie.curly_hat(u)
-        v, w = lie.hat(u[:3]), lie.hat(u[3:])
-        Z = np.zeros((3, 3))
-        compare(name, got, ref, f"for u = {fmt(u)}", [
-            ("wrong twist order: u = [v; w]\nthe diagonal blocks are hat(w) = hat(u[3:]) and the "
-             "off-diagonal one hat(v) = hat(u[:3])", lambda: lie.curly_hat(swap_twist(u))),
-            ("hat(v) belongs in the upper-right block\n[[hat(w), hat(v)], [0, hat(w)]] for [v; w]",
-             lambda: np.block([[w, Z], [v, w]])),
-            ("the signs are flipped (you built curly_hat(-u))", lambda: -ref),
-            ("curly_hat is transposed", lambda: ref.T),
-        ])
-    ok(f"{name}: [[hat(w), hat(v)], [0, hat(w)]] agrees with the library on {len(cases)} twists [v; w]", hidden)
-
-
-@exercise_check
-def check_pose_transition(pose_transition, hidden=False):
-    """Exercise 05: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
-
-    On every other twist of :func:`~visla_edu.checks._inputs.twists` (10 visible, 8 hidden),
-    each with a step ``tau`` uniform in 0.05 to 0.2 s; a 4x4 result fails at once. Compares
-    with :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Recognises a
-    missing minus sign, the transpose, the twist order and the first-order ``I - tau
-    curly_hat(u)``.
-
-    Hides ``motion.pose_transition``, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp``
-    stays.
-
-    Parameters
-    ----------
-    pose_transition : callable
-        The student's function: a body twist ``u = [v; w]`` (6,) and the step ``tau`` (s) to the
-        perturbation transition ``F`` (6, 6).
-    hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
-    """
-    name = "pose_transition"
-    generator = rng(hidden)
-    call = student(pose_transition, name, hide=[motion.pose_transition, motion.imu_step, lie.adjoint])
-    for u in twists(generator, hidden)[1 if hidden else 0::2]:
-        tau = float(generator.uniform(0.05, 0.2))
-        out = call(u, tau)
-        if np.shape(out) == (4, 4):
-            raise fail(name, "got a 4x4 matrix; F is 6x6, it acts on perturbations",
-                       "use the adjoint of exp(-tau u^), a 6x6 matrix")
-        got = as_array(out, name, (6, 6))
-        ref = motion.pose_transition(u, tau)
-        compare(name, got, ref, f"for u = {fmt(u)}, tau = {tau:.3f}", [
-            ("missing minus sign: F = exp(-tau curly_hat(u)) = Ad(exp(-tau u^))\nthe perturbation is "
-             "carried backwards through the motion step", lambda: motion.pose_transition(u, -tau)),
-            ("F is transposed", lambda: ref.T),
-            ("wrong twist order: u = [v; w]", lambda: motion.pose_transition(swap_twist(u), tau)),
-            ("you used I - tau curly_hat(u), the first-order approximation\nuse the exact closed form "
-             "Ad(exp(-tau u^))", lambda: np.eye(6) - tau * lie.curly_hat(u)),
-        ], rtol=1e-7, atol=1e-9, nan_hint=NEAR_ZERO_HINT)
-    ok(f"{name}: closed form agrees with expm(-tau curly_hat(u)), including at rest", hidden)
+    name = "so3_log"
+    cases, tiny = _log_cases(rng(hidden), hidden)
+    call = student(so3_log, name, hide=[lie.so3_log, lie.se3_log, lie._near_pi_log, lie._sin_over_theta])
+    nan_hint = ("at the identity\nthere the angle and s are 0 and t / sin(t) is 0 / 0: return zeros, or use the "
+                "series t / sin(t) ~ 1 + t^2/6 below a small angle")
+    for w, atol in [(w, 1e-12) for w in cases] + [(w, 1e-15) for w in tiny]:
+        R = lie.so3_exp(w)
+        out = call(R)
+        if np.shape(out) == (3, 3):
+            raise fail(name, "return the rotation vector (3,), not a matrix",
+                       "so3_log returns w = vee(log R), with so3_exp(w) == R")
+        ref = lie.so3_log(R)
+        compare(name, as_array(out, name, (3,), "rotation vector"), ref,
+                f"for the rotation by {np.linalg.norm(w):.3g} rad about {fmt(w / max(np.linalg.norm(w), 1e-300))}",
+                _log_variants(R, ref), rtol=0, atol=atol, nan_hint=nan_hint)
+    ok(f"{name}: agrees with the library from 0 to 3 rad, to full precision at 1e-9 rad", hidden)

@@ -40,16 +40,16 @@ def _update_variants(m, var, z, r):
     swapped = r / (var + r)
     by_std = np.sqrt(var) / (np.sqrt(var) + np.sqrt(r))
     return [
-        ("the variance must shrink: (1 - K) * variance\nan update adds information; only the prediction "
+        ("the variance must shrink: (1 - L) * variance\nan update adds information; only the prediction "
          "makes the variance grow", lambda: np.array([right[0], var])),
-        ("K = variance / (variance + r): you swapped the two\nthe gain is near 1 when the prior is uncertain "
+        ("the gain L is variance / (variance + V): you swapped them\nV is the noise variance; the gain is near 1 when the prior is uncertain "
          "(trust the measurement)", lambda: np.array([m + swapped * (z - m), (1 - swapped) * var])),
         ("use variances, not standard deviations, in the gain",
          lambda: np.array([m + by_std * (z - m), (1 - by_std) * var])),
         ("the innovation is z - mean, not mean - z", lambda: np.array([m - gain * (z - m), right[1]])),
-        ("K = variance / (variance + r), not variance / r",
+        ("the gain L is variance / (variance + V), not variance / V",
          lambda: np.array([m + var / r * (z - m), (1 - var / r) * var])),
-        ("the new variance is (1 - K) * variance, not variance - K", lambda: np.array([right[0], var - gain])),
+        ("the new variance is (1 - L) * variance, not variance - L", lambda: np.array([right[0], var - gain])),
         ("return (mean, variance), in this order", lambda: np.array([right[1], right[0]])),
     ]
 
@@ -58,12 +58,12 @@ def _update_variants(m, var, z, r):
 def check_kalman_update_1d(kalman_update_1d, hidden=False):
     """Exercise 00b: ``kalman_update_1d(mean, variance, z, noise_variance) -> (mean, variance)``.
 
-    ``K = variance / (variance + r)``, ``(mean + K (z - mean), (1 - K) variance)``: compares
+    ``L = variance / (variance + V)`` (``V`` the noise variance), ``(mean + L (z - mean), (1 - L) variance)``: compares
     with :func:`visla_edu.kalman.update_1d` (``rtol=1e-9``, ``atol=1e-12``) on 4 fixed cases
     (hidden: 4 random ones, a certain prior with variance 0 and a perfect sensor with noise
     variance 0). The result must be a pair of single numbers. Recognises a variance that does
     not shrink, a swapped gain, standard deviations in the gain, a flipped innovation,
-    ``variance / r`` as the gain, ``variance - K`` and the pair swapped. Hides
+    ``variance / V`` as the gain, ``variance - L`` and the pair swapped. Hides
     ``kalman.update_1d``, ``kalman.update`` and ``ekf.cholesky_update``.
 
     Parameters
@@ -96,11 +96,11 @@ def check_kalman_update_1d(kalman_update_1d, hidden=False):
         with np.errstate(all="ignore"):
             compare(name, got, ref, f"for mean {m:g}, variance {var:g}, z {z:g}, noise variance {r:g}",
                     _update_variants(m, var, z, r), rtol=1e-9, atol=1e-12)
-    ok(f"{name}: K = var / (var + r), mean + K (z - mean), (1 - K) var", hidden)
+    ok(f"{name}: L = var / (var + V), mean + L (z - mean), (1 - L) var", hidden)
 
 
 def _predict_cases(hidden):
-    """``(x, P, F, Q)``: a position-velocity model, then random models (F not symmetric)."""
+    """``(x, Sigma, F, W)``: a position-velocity model, then random models (F not symmetric)."""
     generator = rng(hidden)
     tau = 0.1 if not hidden else 0.25
     F_cv = np.array([[1.0, tau], [0.0, 1.0]])
@@ -115,20 +115,20 @@ def _predict_cases(hidden):
 
 @exercise_check
 def check_kalman_predict(kalman_predict, hidden=False):
-    """Exercise 00b: ``kalman_predict(x, P, F, Q) -> (F x, F P F^T + Q)``.
+    """Exercise 00b: ``kalman_predict(x, Sigma, F, W) -> (F x, F Sigma F^T + W)``.
 
     On a position-velocity model (step 0.1 s; hidden: 0.25 s) and random models with 3 and 4
     states (hidden: 1, 3 and 5), ``F`` not symmetric; compares mean and covariance with
     :func:`visla_edu.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Recognises a mean that
-    does not move, ``F.T @ x``, a missing ``Q``, ``F.T P F``, a missing or untransposed right
-    factor, and ``F (P + Q) F^T``. Hides ``kalman.predict`` and ``motion.predict_pose_covariance``
+    does not move, ``F.T @ x``, a missing ``W``, ``F.T Sigma F``, a missing or untransposed right
+    factor, and ``F (Sigma + W) F^T``. Hides ``kalman.predict`` and ``motion.predict_pose_covariance``
     (``F P F^T + W`` for any size).
 
     Parameters
     ----------
     kalman_predict : callable
-        The student's function: mean ``x`` (n,), covariance ``P`` (n, n), transition ``F``
-        (n, n) and process noise ``Q`` (n, n) to the pair (mean (n,), covariance (n, n)).
+        The student's function: mean ``x`` (n,), covariance ``Sigma`` (n, n), transition ``F``
+        (n, n) and motion noise ``W`` (n, n) to the pair (mean (n,), covariance (n, n)).
     hidden : bool
         Run the hidden cases instead (other inputs, the random ones drawn from
         ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
@@ -159,10 +159,10 @@ def check_kalman_predict(kalman_predict, hidden=False):
             ("the mean is F @ x, not F.T @ x", lambda: F.T @ x),
         ], rtol=1e-9, atol=1e-12)
         compare(name, got_P, ref_P, where, [
-            ("add the process noise Q to the covariance", lambda: F @ P @ F.T),
-            ("F @ P @ F.T, not F.T @ P @ F (transposed)", lambda: F.T @ P @ F + Q),
-            ("multiply by F.T on the right too: F @ P @ F.T + Q", lambda: F @ P + Q),
-            ("the second F is transposed: F @ P @ F.T + Q", lambda: F @ P @ F + Q),
-            ("Q is added after propagating: F (P + Q) F^T is wrong", lambda: F @ (P + Q) @ F.T),
+            ("add the motion noise W to the covariance", lambda: F @ P @ F.T),
+            ("F @ Sigma @ F.T, not F.T @ Sigma @ F (transposed)", lambda: F.T @ P @ F + Q),
+            ("multiply by F.T on the right too: F @ Sigma @ F.T + W", lambda: F @ P + Q),
+            ("the second F is transposed: F @ Sigma @ F.T + W", lambda: F @ P @ F + Q),
+            ("W is added after propagating: F (Sigma + W) F^T is wrong", lambda: F @ (P + Q) @ F.T),
         ], rtol=1e-9, atol=1e-12)
-    ok(f"{name}: (F x, F P F^T + Q) for a position-velocity model and random ones", hidden)
+    ok(f"{name}: (F x, F Sigma F^T + W) for a position-velocity model and random ones", hidden)

@@ -1,7 +1,8 @@
-"""Checks of notebook 08 (from filtering to smoothing): the motion factor, the Schur complement, a Gauss-Newton step.
+"""Checks of notebooks 13 and 14 (smoothing): the motion factor, the Schur complement, a Gauss-Newton step
+and the poses' marginal covariance.
 
 Conventions: poses ``world_T_imu``, right perturbation ``T <- T exp(delta^)``, twists
-``[rho; phi]`` (linear first), the Gauss-Newton system ``H dx = -g``.
+``[v; w]`` (linear first), the Gauss-Newton system ``H dx = -g``.
 """
 
 import numpy as np
@@ -11,8 +12,9 @@ from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, 
 from visla_edu.checks._inputs import random_pose, swap_twist
 from visla_edu.smoother import motion_residuals
 
-__all__ = ["check_motion_residual", "check_schur_reduce", "check_gauss_newton_step",
-           "reference_motion_residual", "reference_schur_reduce", "reference_gauss_newton_step"]
+__all__ = ["check_motion_residual", "check_schur_reduce", "check_pose_marginal_covariance", "check_gauss_newton_step",
+           "reference_motion_residual", "reference_schur_reduce", "reference_pose_marginal_covariance",
+           "reference_gauss_newton_step"]
 
 
 # --------------------------------------------------------------------------- the motion factor
@@ -84,7 +86,7 @@ def _motion_variants(T_prev, T_next, step_inv):
 
 @exercise_check
 def check_motion_residual(motion_residual, hidden=False):
-    """Exercise 08: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``.
+    """Exercise 13: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``.
 
     For 3 steps whose next pose is the IMU prediction times an error of size 0.05, 0.2 and 0.5
     (hidden: 0, 1e-7, 0.3 and 0.9); the result must be a tuple of three. Compares with
@@ -206,7 +208,7 @@ def _schur_variants(H_pp, H_pm, H_mm, g_p, g_m):
 
 @exercise_check
 def check_schur_reduce(schur_reduce, hidden=False):
-    """Exercise 08: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``.
+    """Exercise 13: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``.
 
     For 2 random systems of ``J^T J`` form (6 pose entries and 2 landmarks, 12 and 4; hidden:
     4 systems, up to 40 landmarks); the result must be a tuple ``(S, b)``. Compares with
@@ -248,6 +250,86 @@ def check_schur_reduce(schur_reduce, hidden=False):
         compare(name, as_array(out[0], name, (p, p), "reduced matrix S"), S_ref, where, S_var, rtol=1e-7, atol=1e-9)
         compare(name, as_array(out[1], name, (p,), "reduced gradient b"), b_ref, where, b_var, rtol=1e-7, atol=1e-9)
     ok(f"{name}: S = H_pp - H_pm H_mm^-1 H_pm^T, b = g_p - H_pm H_mm^-1 g_m", hidden)
+
+
+def reference_pose_marginal_covariance(H_pp, H_pm, H_mm):
+    """Marginal covariance of the poses: the inverse of the Schur complement, ``S^-1``.
+
+    The Gaussian with information matrix ``H = [[H_pp, H_pm], [H_pm^T, blockdiag(H_mm)]]`` has
+    covariance ``H^-1``; its pose block (the poses' marginal, the landmarks' uncertainty
+    included) is ``(H_pp - H_pm H_mm^-1 H_pm^T)^-1`` by the block inverse.
+
+    Parameters
+    ----------
+    H_pp : ndarray, shape (p, p)
+    H_pm : ndarray, shape (p, 3 L)
+    H_mm : ndarray, shape (L, 3, 3)
+
+    Returns
+    -------
+    ndarray, shape (p, p)
+    """
+    S, _ = reference_schur_reduce(H_pp, H_pm, H_mm, np.zeros(len(H_pp)), np.zeros(H_pm.shape[1]))
+    return np.linalg.inv(S)
+
+
+def _marginal_variants(H_pp, H_pm, H_mm):
+    S_variants, _ = _schur_variants(H_pp, H_pm, H_mm, np.zeros(len(H_pp)), np.zeros(H_pm.shape[1]))
+    S = H_pp - S_variants[2][1]()
+    return [
+        ("inv(H_pp) conditions on the landmarks: use inv(S)\ninv(H_pp) is the poses' covariance if the "
+         "landmarks were known exactly; the marginal includes their uncertainty: inv(S) with "
+         "S = H_pp - H_pm H_mm^-1 H_pm^T", lambda: np.linalg.inv(H_pp)),
+        ("the covariance is inv(S), not S itself\nS is the poses' information matrix", lambda: S),
+        ("you added the correction H_pm H_mm^-1 H_pm^T\nS = H_pp - H_pm H_mm^-1 H_pm^T",
+         lambda: np.linalg.inv(S_variants[0][1]())),
+        ("use the inverse of H_mm inside S, not H_mm itself", lambda: np.linalg.inv(S_variants[1][1]())),
+        ("the covariance is inv(S), not inv(H_pp) - inv(S)\n(the block inverse of H)",
+         lambda: np.linalg.inv(H_pp) - np.linalg.inv(S)),
+    ]
+
+
+@exercise_check
+def check_pose_marginal_covariance(pose_marginal_covariance, hidden=False):
+    """Exercise 14: ``pose_marginal_covariance(H_pp, H_pm, H_mm (L, 3, 3)) -> (p, p)``, the poses' marginal.
+
+    The pose block of ``H^-1``, i.e. ``S^-1`` with the Schur complement ``S = H_pp - H_pm H_mm^-1
+    H_pm^T``: compares with :func:`reference_pose_marginal_covariance` (``rtol=1e-6``,
+    ``atol=1e-10``) on the systems of :func:`check_schur_reduce`. Recognises ``inv(H_pp)`` (the
+    covariance given the landmarks: conditioning, not marginalising), ``S`` not inverted, the
+    correction added, ``H_mm`` not inverted and ``inv(H_pp) - inv(S)``. Hides
+    :func:`reference_pose_marginal_covariance` (the student's own ``schur_reduce`` may be used;
+    :func:`reference_schur_reduce` is hidden too).
+
+    Parameters
+    ----------
+    pose_marginal_covariance : callable
+        The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L) and the landmark blocks
+        ``H_mm`` (L, 3, 3) of an information matrix to the poses' marginal covariance (p, p).
+    hidden : bool
+        Run the hidden cases instead (other inputs, the random ones drawn from
+        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
+        False prints one ``✓ ...`` line on success.
+
+    Raises
+    ------
+    AssertionError
+        The result has the wrong type, shape or values (the first line names the likely
+        mistake), or the function raised, called a hidden library function or changed
+        ``visla_edu``.
+    NotImplementedError
+        The function is still the notebook's stub.
+    ValueError
+        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+    """
+    name = "pose_marginal_covariance"
+    call = student(pose_marginal_covariance, name, hide=[reference_pose_marginal_covariance, reference_schur_reduce])
+    for H_pp, H_pm, H_mm, _, _ in _schur_cases(rng(hidden), hidden):
+        p, L = len(H_pp), len(H_mm)
+        got = as_array(call(H_pp, H_pm, H_mm), name, (p, p), "covariance")
+        compare(name, got, reference_pose_marginal_covariance(H_pp, H_pm, H_mm), f"for {p // 6} poses and {L} landmarks",
+                _marginal_variants(H_pp, H_pm, H_mm), rtol=1e-6, atol=1e-10)
+    ok(f"{name}: inv(H_pp - H_pm H_mm^-1 H_pm^T), the poses' marginal with the landmarks' uncertainty", hidden)
 
 
 # --------------------------------------------------------------------------- a Gauss-Newton step
@@ -325,7 +407,7 @@ def _gauss_newton_variants(T, p_body, q_world):
 
 @exercise_check
 def check_gauss_newton_step(gauss_newton_step, hidden=False):
-    """Exercise 08: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``.
+    """Exercise 14: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``.
 
     For 2 cases (5 points and a pose error of size 0.2, 12 points and 0.8; hidden: 4 cases
     from 3 to 30 points, errors from 0 to 1.5) with 1 cm noise on ``q_world``; compares with

@@ -69,7 +69,7 @@ class FilterConfig:
     bar) is not a setting: those are arguments of :func:`visla_edu.run.run_filter`.
 
     The defaults are one setting for every drive: what can be measured is measured from each
-    drive's own data (``"auto"``), the rest rests on evidence that notebooks 00 and 07 and
+    drive's own data (``"auto"``), the rest rests on evidence that notebooks 04 and 11 and
     ``benchmarks/bench_accuracy.py`` recompute (they print the figures; none is typed here):
 
     * Velocity noise (``"auto"``, per body axis): :func:`visla_edu.diagnostics.calibrate`
@@ -89,7 +89,7 @@ class FilterConfig:
       when its next observation is gated before any update used it (it was born from an
       outlier).
     * ``sigma_pixel`` 1.5 px: slightly conservative NIS on the course drives, as it should be
-      with drifting tracks (notebook 07 shows the NIS for other values).
+      with drifting tracks (notebook 11 shows the NIS for other values).
     * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
       far landmark triangulated from a smaller disparity is a poor Gaussian in x, y, z that
       makes joint SLAM overconfident and less accurate.
@@ -104,7 +104,7 @@ class FilterConfig:
       landmarks are few and far (a highway) and matches it elsewhere; 10 and 30 were worse.
     * ``slam_error="invariant"``: the joint filter's error in the world frame, whose
       unobservable directions do not depend on the estimate, so it stays consistent where the
-      right perturbation (notebooks 05-06) becomes overconfident (notebook 07).
+      right perturbation (notebooks 06-08) becomes overconfident (notebook 10).
 
     Each field declares what it accepts next to its default (:func:`visla_edu.settings.setting`:
     kind, plausible range and why the range is what it is, words such as ``"auto"``); the same
@@ -162,15 +162,15 @@ class FilterConfig:
         finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
         of a correction (``"flip_yz"``, ...), see :data:`visla_edu.diagnostics.CORRECTIONS`.
     landmark_cross_covariance : bool
-        Mode: slam (teaching comparison, notebook 06). True: a new landmark enters correlated
+        Mode: slam (teaching comparison, notebook 08). True: a new landmark enters correlated
         with the state (``G_pose Sigma_pose,x``). False is the textbook shortcut (pixel
         covariance only, no correlation), which makes the filter overconfident.
     mapping_motion_noise : bool
-        Mode: mapping (teaching comparison, notebook 04). True: widen each observation's noise
+        Mode: mapping (teaching comparison, notebook 05). True: widen each observation's noise
         by the dead-reckoning motion noise since the landmark's first sighting. False takes
         the dead-reckoned poses as exact.
     vio_refine_landmarks : bool
-        Mode: vio (teaching comparison, notebook 05). True: also update the landmarks with the
+        Mode: vio (teaching comparison, notebook 07). True: also update the landmarks with the
         observations that just corrected the pose, which counts each observation twice; off
         by default.
     skip_repeated_frames : bool
@@ -196,7 +196,7 @@ class FilterConfig:
         wait until its track ends and are then used together in a null-space (MSCKF) update
         that never puts the landmark in the state; a track still seen after this many frames
         enters the state as a landmark (delayed entry, from all its observations). 0: every
-        landmark enters the state at its first observation, the joint EKF of notebook 06.
+        landmark enters the state at its first observation, the joint EKF of notebook 08.
     track_gate_probability : float
         Mode: slam with clones. A track whose null-space residual exceeds the chi-square
         quantile of its ``4 n - 3`` degrees of freedom at this probability is refused whole.
@@ -231,7 +231,7 @@ class FilterConfig:
     skip_repeated_frames: bool = setting(True, bool)
     landmark_stride: int = setting(1, int, 1, 1_000_000, why="1 uses every landmark")
     slam_error: str = setting("invariant", str, words=("invariant", "right"),
-                              why="the invariant EKF, or the right perturbation notebooks 05-06 derive")
+                              why="the invariant EKF, or the right perturbation notebooks 06-08 derive")
     reinit_gated_landmarks: bool = setting(True, bool)
     pixel_noise_inflation: object = setting(AUTO, float, 1.0, MAX_INFLATION, words=(AUTO,),
                                             why="a factor of at least 1 on sigma_pixel")

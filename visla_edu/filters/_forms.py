@@ -5,7 +5,7 @@ Both run the same EKF on the same state layout (``[pose (6); slot 0 (3); ...]``,
 in four places: the covariance prediction, the pose Jacobian, how a correction is applied,
 and how a new landmark inherits the pose's uncertainty.
 
-* :class:`RightForm`, the form notebooks 05 and 06 derive: ``T = mu exp(hat(delta))`` (body
+* :class:`RightForm`, the form notebooks 06-08 derive: ``T = mu exp(hat(delta))`` (body
   frame), ``m = mu_m + delta_m``. Its unobservable directions (moving the whole world) depend
   on the estimate, so each update, linearised at a slightly different estimate, gains
   information the data never gave: the classic overconfidence of EKF-SLAM (Huang, Mourikis
@@ -28,7 +28,7 @@ __all__ = ["RightForm", "InvariantForm", "ERROR_FORMS"]
 
 
 class RightForm:
-    """The right perturbation ``T = mu exp(hat(delta))``, ``m = mu_m + delta_m`` (notebooks 05-06).
+    """The right perturbation ``T = mu exp(hat(delta))``, ``m = mu_m + delta_m`` (notebooks 06-08).
 
     A namespace of static methods (the class itself is used, never an instance); the joint
     filter calls them on its state ``[pose (6); landmarks (3 each, in slot order)]``.

@@ -29,7 +29,7 @@ copies of the last poses, and a landmark enters it only when its track outlives 
 far landmark (a disparity of a pixel or less, which a single stereo pair cannot place) is then
 triangulated from its whole track, a track wrong as a whole is gated as a whole, and only the
 long tracks cost state. ``msckf_window=0`` is the joint EKF above, every landmark entering at its
-first observation (notebook 06).
+first observation (notebook 08).
 """
 
 import numpy as np

@@ -22,7 +22,7 @@ also gives the marginal covariances.
 Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
 history, rejection counts, per-observation status, timing); :class:`SmootherConfig` holds
 every setting and validates it. :func:`normal_equations` gives the full sparse Gauss-Newton
-system of the batch problem at a state (for teaching: notebook 08's spy plot and Schur
+system of the batch problem at a state (for teaching: notebook 13's spy plot and Schur
 complement; the smoothers never form it).
 
     >>> from visla_edu import data, run, smoother
@@ -39,7 +39,7 @@ selected inverse), ``_normal`` (linearisation, the Schur step, marginals), ``_re
 (:class:`SmootherResult`), ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window``
 (:func:`smooth_window`). The reprojection factor and its Jacobians are the camera's
 (:func:`visla_edu.camera.stereo_projection`, re-exported here as ``reprojection``), the SE(3)
-right Jacobians lie's (re-exported for notebook 08).
+right Jacobians lie's (re-exported for notebooks 13-14).
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth, start_cost

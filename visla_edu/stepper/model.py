@@ -27,7 +27,7 @@ be scripted and tested on its own::
 The filter need not be the library's: ``Stepper(dataset, mode, config, filter_factory=f)``
 steps ``f(dataset, config)`` instead (``config`` with its ``"auto"`` settings measured), any
 object with the small interface :class:`SteppableFilter` describes -- a student's own filter,
-for instance (notebook 09).
+for instance (notebook 12).
 """
 
 import time
