@@ -34,7 +34,24 @@ wall time (interpreter start, imports, loading, EKF, smoother) are its own. Case
                default ``max_iterations`` and issue 9's open target on ``0020``);
 ``sim``        simulated drives (preset "small", 5% outlier tracks, seeds 0-4): ATE of dead
                reckoning, EKF, batch, window "fix" and window "marginalize" (the evidence for
-               the window's default) and the window's time per frame.
+               the window's default) and the window's time per frame;
+``solver-03``  the solver of the reduced pose system (the smoother's Schur complement at the EKF's
+``solver-10``  estimate, undamped) on 03 and on the dataset-10 stand-in, median of 5 repeats with one
+               BLAS thread: the hand-written envelope Cholesky (``smoother._envelope``: factor, solve,
+               diagonal blocks of the inverse by the Takahashi recursion) against scipy's banded
+               Cholesky (``scipy.linalg.cholesky_banded`` / ``cho_solve_banded`` on the band the
+               longest track sets; the marginals by the same Takahashi recursion on the band, or by
+               one banded triangular solve per block column) and scipy's sparse LU (``splu``, minimum
+               degree on A^T + A; marginals by block-column solves). The scipy paths include the
+               assembly of the sparse matrix (the envelope assembles inside its factorisation).
+               Block-column marginals are timed on 40 block columns and extrapolated. ``step`` is what
+               each Levenberg-Marquardt iteration pays (assembly, factor, solve), ``total`` a step plus
+               the fastest marginals, ``run_projection`` the solver's share of the whole smoother run
+               (``smoother_steps`` steps, then one factor and the marginals), each also as a ratio to
+               the envelope's (``total`` also without the assembly); the band widths, and each
+               result's largest relative difference to the envelope's (the systems' condition numbers
+               reach 1e12, so about 1e-7 is rounding). Issue 23's rule: scipy replaces the envelope
+               unless the envelope is at least twice as fast on both drives.
 
 ``--tracemalloc`` also reports the peak of Python-tracked allocations during the smoother
 call (slower). Course-data cases are skipped, with a note, when the files are missing.
@@ -49,7 +66,8 @@ import sys
 import time
 from pathlib import Path
 
-CASES = ("03", "03-window", "0020", "0020-noisy", "objective", "10", "10-outliers", "sim")
+CASES = ("03", "03-window", "0020", "0020-noisy", "objective", "10", "10-outliers", "sim", "solver-03",
+         "solver-10")
 #: Final-round iteration budgets of the ``objective`` case.
 BUDGETS = (5, 10, 20, 40)
 #: Velocity noise settings compared on 0020: measured from the drive ("auto", what --mode smooth uses) and
@@ -251,12 +269,239 @@ def case_sim(_trace, seeds=(0, 1, 2, 3, 4)):
     return {"rows": rows}
 
 
+# --- the reduced pose system's solver: the hand-written envelope Cholesky against scipy ---------------
+
+#: Block columns of the inverse solved one by one (the rest extrapolated) by the "block columns" marginals.
+SAMPLED_COLUMNS = 40
+
+
+def _reduced_system(name):
+    """The batch smoother's reduced pose system at the EKF's estimate of drive ``name``, undamped.
+
+    The system :func:`visla_edu.smoother.smooth` factorises first (the same tracks, hence the
+    same envelope, as every later step and the marginals), with the smoother's step count on
+    the drive to project the solver's share of a whole run.
+    """
+    from visla_edu import data, run, smoother
+    from visla_edu.smoother import _batch, _normal, _problem
+
+    dataset = data.load(name)
+    ekf = run.run_filter(dataset, "slam", progress=False)
+    config = smoother.SmootherConfig()
+    problem, m, _, _ = _batch._setup(dataset, ekf.world_T_imu, ekf.landmarks,
+                                     _problem.rig_camera(dataset, ekf.imu_T_cam), config)
+    _batch.drop_landmarks(problem, ekf.world_T_imu, m, config.min_observations)
+    lin = _normal.linearize(problem, ekf.world_T_imu, m)
+    system, rhs, _ = _normal._reduced_system(problem, lin, 0.0, _normal._landmark_factors(problem, lin, 0.0))
+    result = smoother.smooth(dataset, ekf.world_T_imu, ekf.landmarks, ekf.imu_T_cam, config)
+    return system, rhs, len(result.history["cost"])
+
+
+def _sparse_system(system):
+    """The system as a scipy.sparse CSC matrix: ``tridiag - V V^T`` with ``V`` a BSR matrix of 6x3 blocks."""
+    import numpy as np
+    from scipy import sparse
+
+    n, b = system.num_blocks, system.diag.shape[1]
+    i = np.arange(n)
+    rows = b * np.r_[i, i[1:], i[:-1]][:, None, None] + np.arange(b)[:, None]
+    cols = b * np.r_[i, i[:-1], i[1:]][:, None, None] + np.arange(b)
+    blocks = np.concatenate([system.diag, system.sub, np.swapaxes(system.sub, 1, 2)])
+    T = sparse.csr_matrix((blocks.ravel(), (np.broadcast_to(rows, blocks.shape).ravel(),
+                                            np.broadcast_to(cols, blocks.shape).ravel())), shape=(n * b,) * 2)
+    count = system.hi - system.lo + 1
+    owner = np.repeat(np.arange(len(count)), count)
+    within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    row = system.lo[owner] + within
+    order = np.lexsort((owner, row))
+    V = sparse.bsr_matrix((system.rows[system.start[owner] + within][order], owner[order],
+                           np.searchsorted(row[order], np.arange(n + 1))), shape=(n * b, 3 * len(count)))
+    return (T - V @ V.T.tobsr(blocksize=(3, b))).tocsc()
+
+
+def _band(S):
+    """Lower band storage ``ab[i - j, j] = S[i, j]`` (scipy.linalg.cholesky_banded's, lower=True)."""
+    import numpy as np
+    from scipy import sparse
+
+    L = sparse.tril(S).tocoo()
+    ab = np.zeros((int((L.row - L.col).max()) + 1, S.shape[0]))
+    ab[L.row - L.col, L.col] = L.data
+    return ab
+
+
+def _band_blocks(cb, n, b):
+    """The banded factor as an EnvelopeFactor (constant reach: the band), for the Takahashi recursion."""
+    import numpy as np
+    from scipy import linalg
+
+    from visla_edu.smoother import _envelope
+
+    u = cb.shape[0] - 1
+    lo = np.arange(0, n, _envelope.GROUP)
+    hi = np.minimum(lo + _envelope.GROUP, n) - 1
+    reach = np.minimum(hi + -(-u // b), n - 1)
+    diag_inv, below = [], []
+    for s, e, c in zip(lo, hi, reach):
+        cols, rows = np.arange(b * s, b * (e + 1)), np.arange(b * s, b * (c + 1))
+        d = rows[:, None] - cols
+        L = np.where((d >= 0) & (d <= u), cb[np.clip(d, 0, u), cols], 0.0)
+        k = len(cols)
+        diag_inv.append(linalg.solve_triangular(L[:k], np.eye(k), lower=True))
+        below.append(L[k:])
+    return _envelope.EnvelopeFactor(lo, hi, reach, diag_inv, below, b)
+
+
+def _block_columns(solve, n):
+    """Diagonal blocks of ``A^{-1}`` at SAMPLED_COLUMNS block columns, and the seconds for all ``n`` extrapolated.
+
+    ``solve(i)`` returns ``A^{-1}[i, i]`` from a solve for block column ``i`` (or its lower part).
+    """
+    import numpy as np
+
+    sample = np.linspace(0, n - 1, SAMPLED_COLUMNS).astype(int)
+    start = time.perf_counter()
+    blocks = np.array([solve(i) for i in sample])
+    return (sample, blocks), (time.perf_counter() - start) * n / len(sample)
+
+
+def _banded_column(cb, b, i):
+    """``A^{-1}[i, i] = |L^{-1} E_i|^2``: one forward banded triangular solve from row ``b i`` (LAPACK tbtrs)."""
+    import numpy as np
+    from scipy.linalg import lapack
+
+    rhs = np.zeros((cb.shape[1] - b * i, b))
+    rhs[:b] = np.eye(b)
+    x, _ = lapack.dtbtrs(cb[:, b * i:], rhs, uplo="L")
+    return x.T @ x
+
+
+def _lu_column(lu, n, b, i):
+    """``A^{-1}[i, i]`` from SuperLU's solve for the block column ``E_i``."""
+    import numpy as np
+
+    rhs = np.zeros((n * b, b))
+    rhs[b * i:b * (i + 1)] = np.eye(b)
+    return lu.solve(rhs)[b * i:b * (i + 1)]
+
+
+def _seconds(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` and its wall time."""
+    start = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - start
+
+
+def _pass_envelope(system, rhs):
+    """One factor, solve and diagonal of the inverse by the hand-written envelope solver: seconds, outputs."""
+    from visla_edu.smoother import _envelope
+
+    t = {}
+    factor, t["factor"] = _seconds(_envelope.cholesky, system)
+    x, t["solve"] = _seconds(_envelope.solve, factor, rhs)
+    cov, t["marginals"] = _seconds(_envelope.inverse_diagonal, factor)
+    return t, {"x": x.ravel(), "cov": cov}
+
+
+def _pass_banded(system, rhs):
+    """The same by scipy.linalg's banded Cholesky (marginals: Takahashi on the band, or block columns)."""
+    from scipy import linalg
+
+    from visla_edu.smoother import _envelope
+
+    n, b = system.num_blocks, system.diag.shape[1]
+    t = {}
+    ab, t["assemble"] = _seconds(lambda: _band(_sparse_system(system)))
+    cb, t["factor"] = _seconds(linalg.cholesky_banded, ab, lower=True)
+    x, t["solve"] = _seconds(linalg.cho_solve_banded, (cb, True), rhs.ravel())
+    cov, t["marginals_takahashi"] = _seconds(lambda: _envelope.inverse_diagonal(_band_blocks(cb, n, b)))
+    columns, t["marginals_block_columns"] = _block_columns(lambda i: _banded_column(cb, b, i), n)
+    return t, {"x": x, "cov": cov, "columns": columns, "bandwidth": ab.shape[0] - 1}
+
+
+def _pass_splu(system, rhs):
+    """The same by scipy.sparse's SuperLU (minimum degree on A^T + A; marginals by block columns)."""
+    from scipy.sparse import linalg as sparse_linalg
+
+    n, b = system.num_blocks, system.diag.shape[1]
+    t = {}
+    S, t["assemble"] = _seconds(_sparse_system, system)
+    lu, t["factor"] = _seconds(sparse_linalg.splu, S, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                               options={"SymmetricMode": True})
+    x, t["solve"] = _seconds(lu.solve, rhs.ravel())
+    columns, t["marginals_block_columns"] = _block_columns(lambda i: _lu_column(lu, n, b, i), n)
+    return t, {"x": x, "columns": columns, "nnz": lu.L.nnz + lu.U.nnz}
+
+
+def _relative(a, b):
+    import numpy as np
+
+    return float(f"{np.abs(a - b).max() / np.abs(b).max():.1e}")
+
+
+def _summary(seconds, steps, reference=None):
+    """Median seconds of each stage, ``step`` (assembly + factor + solve, what each Levenberg-Marquardt iteration
+    pays), ``total`` (a step plus the fastest marginals), ``run_projection`` (``steps`` steps, then a factor and the
+    marginals) and, given the envelope's summary, each of the three as a ratio to it (and ``total`` less the
+    assembly, which no faster assembly of the sparse matrix could beat)."""
+    import numpy as np
+
+    t = {key: round(float(np.median([s[key] for s in seconds])), 3) for key in seconds[0]}
+    marginals = min(v for k, v in t.items() if k.startswith("marginals"))
+    t["step"] = round(t.get("assemble", 0) + t["factor"] + t["solve"], 3)
+    t["total"] = round(t["step"] + marginals, 3)
+    t["run_projection"] = round(steps * t["step"] + t.get("assemble", 0) + t["factor"] + marginals, 2)
+    for key in ("step", "total", "run_projection") if reference else ():
+        t[f"{key}_over_envelope"] = round(t[key] / reference[key], 2)
+    if reference:  # a bound for any faster assembly of the sparse matrix
+        t["total_without_assembly_over_envelope"] = round((t["total"] - t["assemble"]) / reference["total"], 2)
+    return t
+
+
+def case_solver(name, repeats=5):
+    """The envelope Cholesky against scipy's banded Cholesky and sparse LU on one drive's reduced system.
+
+    The repeats are interleaved (envelope, banded, LU, envelope, ...) so that a change of the
+    machine's load falls on all three alike.
+    """
+    import numpy as np
+
+    from visla_edu._blas import limit_blas_threads
+    from visla_edu.smoother import _envelope
+
+    system, rhs, steps = _reduced_system(name)
+    band = _envelope.envelope_reach(system) - np.arange(system.num_blocks)
+    out = {"pose_blocks": system.num_blocks, "landmark_terms": len(system.lo),
+           "longest_track_frames": int((system.hi - system.lo).max() + 1), "band_blocks_max": int(band.max()),
+           "band_blocks_median": float(np.median(band)), "smoother_steps": steps, "repeats": repeats}
+    passes = {"envelope": _pass_envelope, "scipy_banded": _pass_banded, "scipy_splu": _pass_splu}
+    seconds, last = {key: [] for key in passes}, {}
+    with limit_blas_threads(1):  # as the smoother runs
+        for _ in range(repeats):
+            for key, one_pass in passes.items():
+                t, last[key] = one_pass(system, rhs)
+                seconds[key].append(t)
+    env, banded, lu = last["envelope"], last["scipy_banded"], last["scipy_splu"]
+    out["bandwidth_scalars"], out["splu_nnz"] = banded["bandwidth"], lu["nnz"]
+    out["envelope"] = _summary(seconds["envelope"], steps)
+    out["scipy_banded"] = {**_summary(seconds["scipy_banded"], steps, out["envelope"]),
+                           "solve_vs_envelope": _relative(banded["x"], env["x"]),
+                           "takahashi_vs_envelope": _relative(banded["cov"], env["cov"]),
+                           "block_columns_vs_envelope": _relative(banded["columns"][1], env["cov"][banded["columns"][0]])}
+    out["scipy_splu"] = {**_summary(seconds["scipy_splu"], steps, out["envelope"]),
+                         "solve_vs_envelope": _relative(lu["x"], env["x"]),
+                         "block_columns_vs_envelope": _relative(lu["columns"][1], env["cov"][lu["columns"][0]])}
+    return out
+
+
 RUNNERS = {"03": case_03, "03-window": case_03_window, "0020": case_0020,
            "0020-noisy": lambda trace: case_0020(trace, noisy=True), "objective": case_objective, "10": case_10,
-           "10-outliers": case_10_outliers, "sim": case_sim}
+           "10-outliers": case_10_outliers, "sim": case_sim, "solver-03": lambda _trace: case_solver("03"),
+           "solver-10": lambda _trace: case_solver("10")}
 NEEDS = {"03": "03.npz", "03-window": "03.npz", "0020": "kitti_odometry_06_poses.txt",
          "0020-noisy": "kitti_odometry_06_poses.txt", "objective": "kitti_odometry_06_poses.txt",
-         "10": "10_imu_only.npz", "10-outliers": "10_imu_only.npz", "sim": None}
+         "10": "10_imu_only.npz", "10-outliers": "10_imu_only.npz", "sim": None, "solver-03": "03.npz",
+         "solver-10": "10_imu_only.npz"}
 
 
 def _available(case):

@@ -14,7 +14,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -423,23 +422,108 @@ def test_subprocess_errors_are_one_line(case, tmp_path):
     assert len(done.stderr.strip().splitlines()) == 1 and re.search(pattern, done.stderr), done.stderr
 
 
-def test_ctrl_c_in_a_subprocess_keeps_the_previous_result(tmp_path):
-    """1-results-lost: a real SIGINT while the filter runs: exit 130, one line, the old result intact."""
+#: A child process that runs ``python -m visla_edu`` (its ``__main__``, through runpy) on ``sys.argv[2:]`` and
+#: blocks at one moment, ``sys.argv[1]``, after printing ``@@ blocked at MOMENT``: there the test sends a real
+#: SIGINT. A blocked child reads its stdin until the test closes it, so no moment depends on the machine's speed.
+_INTERRUPTED_CHILD = """
+import atexit, importlib.abc, os, runpy, sys
+import numpy as np
+from visla_edu import run
+
+moment, argv = sys.argv[1], sys.argv[2:]
+
+def block(where=moment):
+    print(f"@@ blocked at {where}", flush=True)
+    sys.stdin.read()
+
+class BlockImport(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name == "visla_edu.cli":
+            block()
+
+def make_filter(*args, real=run.make_filter, **kwargs):
+    flt = real(*args, **kwargs)
+    step = flt.step
+    flt.step = lambda: (block() if flt.t == 5 else None, step())[1]
+    return flt
+
+def savez(file, *args, **kwargs):
+    file.write(b"half a result")
+    block()
+
+def replace(src, dst, real=os.replace):
+    real(src, dst)
+    if os.path.basename(dst) == "r.npz":  # the result (not, e.g., a file of the user cache)
+        block()
+
+if moment == "import":
+    assert "visla_edu.cli" not in sys.modules
+    sys.meta_path.insert(0, BlockImport())
+elif moment == "parse":
+    from visla_edu import cli
+    cli.build_parser = lambda real=cli.build_parser: (block(), real())[1]
+elif moment == "run":
+    run.make_filter = make_filter
+elif moment == "save":
+    np.savez_compressed = savez
+elif moment == "renamed":
+    os.replace = replace
+elif moment == "exit":
+    atexit.register(block)
+sys.argv = ["visla-edu", *argv]
+runpy.run_module("visla_edu", run_name="__main__", alter_sys=True)
+"""
+
+_INTERRUPTED = "interrupted (Ctrl-C); files being written were left as they were"
+#: moment -> (exit status, the one line on stderr or None for none, whether --out keeps the previous bytes)
+INTERRUPT_MOMENTS = {
+    "import": (130, "visla-edu: interrupted (Ctrl-C) while starting; nothing was run", True),
+    "parse": (130, f"visla-edu: {_INTERRUPTED}", True),
+    "run": (130, f"visla-edu run: {_INTERRUPTED}", True),
+    "save": (130, f"visla-edu run: {_INTERRUPTED}", True),
+    "renamed": (130, f"visla-edu run: {_INTERRUPTED}", False),  # written whole before the Ctrl-C
+    "exit": (0, None, False),  # the command was complete: the Ctrl-C changes nothing
+}
+
+
+def _blocked_child(moment, argv, tmp_path):
+    """Start the child blocked at ``moment``; return it once it says so (the lines it printed until then)."""
+    tests = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([_ROOT, tests, os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.Popen([sys.executable, "-u", "-c", _INTERRUPTED_CHILD, moment, *map(str, argv)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=tmp_path)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("@@ blocked at"):
+            break
+    return proc, lines
+
+
+@pytest.mark.parametrize("moment", INTERRUPT_MOMENTS)
+def test_ctrl_c_in_a_subprocess_keeps_the_previous_result(moment, tmp_path):
+    """1-results-lost: a real SIGINT at each moment of `python -m visla_edu run`: exit 130 and one line, the
+    previous result intact (or, once written whole, the new one), no temporary file, never a death by SIGINT."""
+    status, line, kept = INTERRUPT_MOMENTS[moment]
     out = tmp_path / "r.npz"
     out.write_bytes(b"the previous result")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([_ROOT, os.environ.get("PYTHONPATH", "")]))
-    argv = [sys.executable, "-u", "-m", "visla_edu", "run", "sim-small", "--mode", "slam", "--quiet", "--out", out]
-    proc = subprocess.Popen([str(a) for a in argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, cwd=tmp_path)
-    first = proc.stdout.readline()  # the dataset's label: printed once loaded, before the run
-    time.sleep(0.5)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
-    assert "simulated drive" in first
-    assert proc.returncode == 130 and "Traceback" not in err, err
-    assert err.strip().splitlines() == ["visla-edu run: interrupted (Ctrl-C); files being written were left as they "
-                                        "were"]
-    assert out.read_bytes() == b"the previous result" and [p.name for p in tmp_path.iterdir()] == ["r.npz"]
+    proc, lines = _blocked_child(moment, ["run", "sim-tiny", "--mode", "slam", "--quiet", "--out", out], tmp_path)
+    try:
+        assert lines and lines[-1] == f"@@ blocked at {moment}\n", (lines, proc.stderr.read())
+        proc.send_signal(signal.SIGINT)
+        if moment == "exit":  # SIGINT is ignored by now: let the blocked exit handler go on
+            proc.stdin.close()
+        proc.wait(timeout=60)
+        err = proc.stderr.read()
+    finally:
+        proc.kill()
+    assert proc.returncode == status and "Traceback" not in err, (proc.returncode, err)
+    assert err.strip().splitlines() == ([line] if line else []), err
+    assert (out.read_bytes() == b"the previous result") == kept
+    if not kept:
+        assert run.load_result(out).mode == "slam"
+    assert [p.name for p in tmp_path.iterdir()] == ["r.npz"]
 
 
 _DIVERGE = """

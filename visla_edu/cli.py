@@ -12,7 +12,7 @@ never a traceback. Exit status:
 * 2 - bad input: a command-line error, a bad ``--set`` value, a missing, unreadable or
   invalid file, an output path that cannot or must not be written (checked before any work);
 * 3 - an internal error (a bug): one line asking to report it;
-* 130 - interrupted (Ctrl-C).
+* 130 - interrupted (Ctrl-C), at any moment after the process starts (``visla_edu.__main__``).
 
 ``--debug`` (or the environment variable ``VISLA_EDU_DEBUG=1``) adds the traceback.
 Every file is written atomically, so an error or Ctrl-C never leaves a half-written file
@@ -475,7 +475,7 @@ _HANDLERS["project"] = _project_commands.run
 
 
 def main(argv=None):
-    """Entry point of the ``visla-edu`` console script: the one error boundary of the commands.
+    """The one error boundary of the commands: parse ``argv``, run the command, return its exit status.
 
     Parameters
     ----------
@@ -485,7 +485,10 @@ def main(argv=None):
     Returns
     -------
     int
-        The exit status of a command that ran: 0, 1 (a failure on valid input) or 2 (bad input).
+        The exit status of a command that ran: 0, 1 (a failure on valid input), 2 (bad input)
+        or 130 (:data:`EXIT_INTERRUPTED`: Ctrl-C, i.e. ``KeyboardInterrupt``, at any moment from
+        parsing to the last line printed; files being written are left as they were, see
+        :func:`visla_edu._files.atomic_write`).
 
     Raises
     ------
@@ -496,17 +499,27 @@ def main(argv=None):
     Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected,
     not printed: a failure is reported by its one line (the filter detects a non-finite state
     itself), a success by one line counting them. ``--debug`` prints them as they happen.
+    The process's entry point (the console script, ``python -m visla_edu``) is
+    ``visla_edu.__main__.console_main``: it also covers loading this module and the moments
+    after this function returns.
     """
-    args = build_parser().parse_args(argv)
-    debug = getattr(args, "debug", False) or os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
+    command, debug = None, os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
+    try:
+        args = build_parser().parse_args(argv)
+        command, debug = args.command, debug or getattr(args, "debug", False)
+        return _run_command(args, debug)
+    except KeyboardInterrupt:
+        _report(command, "interrupted (Ctrl-C); files being written were left as they were", debug)
+        return EXIT_INTERRUPTED
+
+
+def _run_command(args, debug):
+    """Run the command of ``args`` inside :func:`main`'s boundary: its exit status (a KeyboardInterrupt propagates)."""
     with warnings.catch_warnings(record=not debug) as caught:
         if not debug:
             warnings.simplefilter("default", RuntimeWarning)  # once per place: bounded
         try:
             _HANDLERS[args.command](args)
-        except KeyboardInterrupt:
-            _report(args.command, "interrupted (Ctrl-C); files being written were left as they were", debug)
-            return EXIT_INTERRUPTED
         except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): stop quietly
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return EXIT_FAILED
@@ -531,7 +544,8 @@ def _note_warnings(command, caught):
 
 
 def _report(command, message, debug):
-    print(_one_line(f"visla-edu {command}: {message}"), file=sys.stderr)
+    """``message`` as one line on stderr, after ``visla-edu COMMAND:`` (``visla-edu:`` before parsing)."""
+    print(_one_line(f"visla-edu{' ' + command if command else ''}: {message}"), file=sys.stderr)
     if debug:
         traceback.print_exc()
 
