@@ -651,7 +651,7 @@ def test_time_stamps_in_other_units_are_named(tmp_path, scale, unit):
 
 @pytest.mark.parametrize("key, value", [("b", 0.005), ("b", 5.0), ("K00", 4.0), ("t", 20.0)])
 def test_calibration_at_the_edges_of_the_plausible_ranges_loads(tmp_path, key, value):
-    from visla_edu.data import _plausible
+    from visla_edu import validation
 
     arrays = course_dict()
     if key == "b":
@@ -661,7 +661,7 @@ def test_calibration_at_the_edges_of_the_plausible_ranges_loads(tmp_path, key, v
     if key == "K00":
         K = arrays["K"].copy()
         K[0, 0] = K[1, 1] = value
-        _plausible.check_calibration(K, 0.6, "x")
+        validation.check_plausible_calibration(K, 0.6, "x")
         return
     arrays["imu_T_cam"][:3, 3] = [value, 0.0, 0.0]
     data.load(write(tmp_path, arrays))
@@ -669,15 +669,15 @@ def test_calibration_at_the_edges_of_the_plausible_ranges_loads(tmp_path, key, v
 
 @pytest.mark.parametrize("index", [(0, 2), (1, 2)])
 def test_principal_point_at_zero_is_refused_and_at_the_upper_edge_accepted(index):
-    from visla_edu.data import _plausible
+    from visla_edu import validation
 
     K = course_dict()["K"].copy()
     K[index] = 0.0
     with pytest.raises(ValueError, match=r"= 0 px is outside any image \(it lies near the image centre, above 0 "
                                          r"and at most 20000 px\)"):
-        _plausible.check_calibration(K, 0.6, "x")
-    K[index] = _plausible.PRINCIPAL_POINT_RANGE[1]
-    _plausible.check_calibration(K, 0.6, "x")
+        validation.check_plausible_calibration(K, 0.6, "x")
+    K[index] = validation.PRINCIPAL_POINT_RANGE[1]
+    validation.check_plausible_calibration(K, 0.6, "x")
 
 
 def test_swapped_left_and_right_columns_are_named(tmp_path):

@@ -12,7 +12,7 @@ import pytest
 from scipy.sparse import linalg as sparse_linalg
 
 from fdiff import fd_jacobian  # tests/fdiff.py
-from visla_edu import lie, metrics, motion, run, settings, simulate, smoother
+from visla_edu import codes, lie, metrics, motion, run, settings, simulate, smoother
 from visla_edu.camera import StereoCamera
 from visla_edu.filters import FilterConfig
 from visla_edu.smoother import _batch, _envelope, _normal, _problem
@@ -304,8 +304,8 @@ def test_batch_result_shapes_history_and_counts(tiny):
     accepted_costs = h["cost"][h["accepted"] & (h["round"] == h["round"][-1])]
     assert np.all(np.diff(accepted_costs) < 0)
     totals = result.status_totals()
-    assert totals["rejected"] == result.rejected["outliers"] > 0
-    assert totals["nonpositive_disparity"] == result.rejected["nonpositive_disparity"] > 0
+    assert totals["gated"] == result.rejected["outliers"] > 0
+    assert totals["no depth"] == result.rejected["nonpositive_disparity"] > 0
     assert "landmarks estimated" in result.summary()
 
 
@@ -452,15 +452,15 @@ def test_window_keeps_the_status_of_unusable_observations_of_a_landmark_it_drops
 
     reference = smoother.smooth_window(tiny, config=smoother.SmootherConfig(window_size=8))
     assert reference.rejected["landmarks_behind_camera"] > 0
-    j = tiny.obs_ids[np.flatnonzero(reference.obs_status == _problem.DROPPED)[0]]
+    j = tiny.obs_ids[np.flatnonzero(reference.obs_status == codes.OBS_DROPPED)[0]]
     i = np.flatnonzero(tiny.obs_ids == j)[-1]
     z = tiny.obs_z.copy()
     z[i, 2] = z[i, 0] + 1.0  # no depth: never usable
     ds = dataclasses.replace(tiny, obs_z=z, extra={})
     result = smoother.smooth_window(ds, config=smoother.SmootherConfig(window_size=8))
     nonpositive = int(np.sum(z[:, 0] - z[:, 2] <= 0))
-    assert result.obs_status[i] == _problem.NONPOSITIVE
-    assert result.rejected["nonpositive_disparity"] == result.status_totals()["nonpositive_disparity"] == nonpositive
+    assert result.obs_status[i] == codes.OBS_NO_DEPTH
+    assert result.rejected["nonpositive_disparity"] == result.status_totals()["no depth"] == nonpositive
 
 
 @pytest.mark.parametrize("min_disparity,rejection_probability", [(8.0, 0.999), (3.0, 0.05)])
@@ -474,8 +474,8 @@ def test_window_counts_every_landmark_it_did_not_estimate_as_the_batch_does(tiny
     batch = smoother.smooth(tiny, tiny.ground_truth.world_T_imu, config=config)
     assert set(result.rejected) == set(batch.rejected)
     estimated = np.isfinite(result.landmarks[:, 0])
-    assert not np.any((result.obs_status == _problem.USED) & ~estimated[tiny.obs_ids])
-    usable = np.bincount(tiny.obs_ids, np.isin(result.obs_status, [_problem.USED, _problem.DROPPED, _problem.REJECTED]),
+    assert not np.any((result.obs_status == codes.OBS_USED) & ~estimated[tiny.obs_ids])
+    usable = np.bincount(tiny.obs_ids, np.isin(result.obs_status, [codes.OBS_USED, codes.OBS_DROPPED, codes.OBS_GATED]),
                          tiny.num_landmarks) > 0
     left_out = {k: v for k, v in result.rejected.items() if k.startswith("landmarks_")}
     assert sum(left_out.values()) == usable.sum() - estimated.sum() > 0

@@ -33,7 +33,7 @@ class RunResult:
     dead_reckoning : ndarray, shape (T, 4, 4)
         The IMU-only trajectory, for comparison.
     nis, nis_dof : ndarray, shape (T,)
-    status_counts : ndarray of int, shape (T, 6)
+    status_counts : ndarray of int, shape (T, len(STATUS_NAMES))
         Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
     step_seconds : ndarray, shape (T,)
     config : dict
@@ -131,7 +131,7 @@ class RunArrays:
     nis : ndarray, shape (T,)
         NaN where there was no update.
     nis_dof : ndarray of int, shape (T,)
-    status_counts : ndarray of int, shape (T, 6)
+    status_counts : ndarray of int, shape (T, len(STATUS_NAMES))
         Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
     step_seconds : ndarray, shape (T,)
         Wall time of each filter step.
@@ -170,6 +170,8 @@ def save_result(result, path):
     Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
     initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
     ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
+    ``status_names`` (the name of each column of ``status_counts``, so that a later version with
+    more codes reads them),
     ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
     so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
     ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`),
@@ -197,6 +199,7 @@ def save_result(result, path):
     arrays.update({f"config_{k}": np.zeros(0) if v is None else v for k, v in result.config.items()})
     arrays.update({f"track_{k}": v for k, v in result.track_counts.items()})
     arrays.update({f"eval_{k}": v for k, v in result.evaluation.items()})
+    arrays["status_names"] = np.array(STATUS_NAMES)
     with atomic_write(path, "wb") as f:
         np.savez_compressed(f, **arrays)
     return path.resolve()
@@ -221,11 +224,15 @@ def load_result(path):
     -------
     RunResult
 
+    A file of an earlier version has fewer ``status_counts`` columns (codes are only appended):
+    the missing ones load as zeros. Its smoother runs counted the observations of dropped
+    landmarks as ``ignored`` (they stay there: the file cannot tell them apart).
+
     Raises
     ------
     FileNotFoundError, ValueError, KeyError
         As :func:`numpy.load` for a missing or broken file, or a file without the keys a
-        result has.
+        result has; a ValueError for statuses this version does not know (a newer file).
     """
     with np.load(path, allow_pickle=False) as f:
         config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}
@@ -233,8 +240,26 @@ def load_result(path):
         track_counts = {k[len("track_"):]: int(f[k]) for k in f.files if k.startswith("track_")}
         fields = {k: f[k] for k in f.files if not k.startswith(("config_", "eval_", "track_"))}
     fields["track_counts"] = track_counts
+    fields["status_counts"] = _status_columns(fields["status_counts"], fields.pop("status_names", None), path)
     for key in ("name", "mode", "notes", "start_mode"):
         if key in fields:
             fields[key] = str(fields[key])
     fields["dense"] = bool(fields["dense"])
     return RunResult(config=config, evaluation=evaluation, **fields)
+
+
+def _status_columns(counts, names, path):
+    """A saved ``status_counts`` (T, k) in the columns of :data:`~visla_edu.codes.STATUS_NAMES`.
+
+    ``names`` (the file's ``status_names``) names the columns; a file without them (written
+    before they were saved) holds the first ``k`` codes.
+    """
+    named = names is not None
+    names = tuple(names.tolist()) if named else STATUS_NAMES[:counts.shape[1]]
+    if len(names) != counts.shape[1] or not set(names) <= set(STATUS_NAMES):
+        what = f"the statuses {', '.join(names)}" if named else f"{counts.shape[1]} status columns"
+        raise ValueError(f"{path}: status_counts holds {what}, but this visla-edu knows only "
+                         f"{', '.join(STATUS_NAMES)}; was it written by a newer visla-edu? Upgrade to read it")
+    out = np.zeros((len(counts), len(STATUS_NAMES)), dtype=np.int64)
+    out[:, [STATUS_NAMES.index(name) for name in names]] = counts
+    return out

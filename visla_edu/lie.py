@@ -66,7 +66,6 @@ __all__ = [
     "adjoint",
     "curly_hat",
     "odot",
-    "nonrigid_frames",
     "SMALL_ANGLE",
 ]
 
@@ -459,31 +458,6 @@ def se3_right_jacobian_inv(x):
     J[..., :3, :3] = J[..., 3:, 3:] = A_inv
     J[..., :3, 3:] = -A_inv @ _q_right(x) @ A_inv
     return J
-
-
-def nonrigid_frames(poses, tolerance):
-    """Which poses of a batch are not in SE(3), and how far their rotations are from orthonormal.
-
-    A pose ``[[R, p], [a, b]]`` is rigid when every entry of ``|R^T R - I|`` and of
-    ``|[a, b] - [0, 0, 0, 1]|`` is at most ``tolerance`` and ``det R > 0``.
-
-    Parameters
-    ----------
-    poses : ndarray, shape (n, 4, 4)
-        Finite.
-    tolerance : float
-
-    Returns
-    -------
-    bad : ndarray of bool, shape (n,)
-        True for a pose that is not rigid.
-    orthogonality : ndarray, shape (n,)
-        ``max |R^T R - I|`` of each pose (for the message).
-    """
-    R = poses[:, :3, :3]
-    orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2), initial=0.0)
-    bottom = np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1, initial=0.0)
-    return (orthogonality > tolerance) | (bottom > tolerance) | (np.linalg.det(R) < 0), orthogonality
 
 
 def se3_inv(T):

@@ -11,16 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from visla_edu import lie
+from visla_edu.validation import POSE_RIGID_TOL, check_rigid_poses
 
 __all__ = ["align_se3", "ate", "rpe", "pose_errors", "nees", "chi2_bounds", "nis_band", "average_nees_bounds",
            "DRIFT_LENGTHS", "DRIFT_STEP", "path_distances", "kitti_drift", "TrajectoryEvaluation", "evaluate",
            "gated_share"]
-
-
-#: Largest ``|R^T R - I|`` entry (and last-row deviation) a pose may have: what the trajectory
-#: readers accept (``visla_edu.trajectory.ORTHONORMAL_TOL``); KITTI's 0020 poses reach 2e-7, the
-#: filters and smoothers 1e-14.
-RIGID_TOLERANCE = 1e-3
 
 
 def _check_trajectories(est, gt, caller="metrics"):
@@ -37,16 +32,14 @@ def _check_trajectories(est, gt, caller="metrics"):
 
 
 def _check_poses(poses, name, caller):
-    """Raise a ValueError naming the first frame whose pose is not finite or not a rigid transform."""
+    """Raise a ValueError naming the first frame whose pose is not finite or not a rigid transform.
+
+    Rigid to :data:`visla_edu.validation.POSE_RIGID_TOL` (:func:`visla_edu.validation.check_rigid_poses`).
+    """
     bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
     if len(bad):
         raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not finite")
-    nonrigid, orthogonality = lie.nonrigid_frames(poses, RIGID_TOLERANCE)
-    bad = np.flatnonzero(nonrigid)
-    if len(bad):
-        raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not a rigid transform "
-                         f"(max |R^T R - I| = {orthogonality[bad[0]]:.2g}, last row {poses[bad[0], 3].tolist()}); "
-                         "poses are 4x4 [[R, p], [0, 0, 0, 1]] with R a rotation")
+    check_rigid_poses(poses, f"{caller}: the {name}'s pose", POSE_RIGID_TOL)
 
 
 def align_se3(p_est, p_gt):

@@ -27,8 +27,7 @@ from visla_edu import data, diagnostics, filters, metrics, motion
 from visla_edu._blas import check_blas_threads as _check_blas_threads
 from visla_edu._blas import limit_blas_threads
 from visla_edu._results import RunArrays, RunResult, load_result, save_result
-from visla_edu.codes import (DEADRECKON, MAPPING, MODES, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED, SLAM, SMOOTH,
-                             SMOOTHER_MODES, STATUS_NAMES, VIO)
+from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, SMOOTH, SMOOTHER_MODES, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
 __all__ = ["MODES", "RunArrays", "RunResult", "limit_blas_threads", "make_filter", "resolve_config", "iterate_filter",
@@ -256,7 +255,8 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     RunResult
         ``nis`` is NaN (a smoother has no innovations); ``status_counts`` count per frame the
         observations the smoother used (``used``), rejected as outliers (``gated``), could not
-        use (``no depth``) or left out (``ignored``: landmarks dropped, repeated frames).
+        use (``no depth``) or left out (``ignored``: repeated frames; ``dropped``: their
+        landmark was left out of the estimate).
     """
     from visla_edu import smoother
 
@@ -335,19 +335,11 @@ def _smoother_settings(config, mode, own=None):
     return replace(model, **(own or {}))
 
 
-#: Smoother observation status (:data:`visla_edu.smoother.STATUS_NAMES`) -> the filters' codes.
-_SMOOTHER_STATUS = {"used": OBS_USED, "rejected": OBS_GATED, "nonpositive_disparity": OBS_NO_DEPTH,
-                    "repeated_frame": OBS_IGNORED, "landmark_dropped": OBS_IGNORED}
-
-
 def _smoother_run_result(dataset, config, solved, start):
     """A :class:`RunResult` from a :class:`~visla_edu.smoother.SmootherResult`."""
-    from visla_edu import smoother
-
     T = dataset.num_frames
-    codes = np.array([_SMOOTHER_STATUS[name] for name in smoother.STATUS_NAMES])[solved.obs_status]
     counts = np.zeros((T, len(STATUS_NAMES)), dtype=np.int64)
-    np.add.at(counts, (dataset.observation_frames(), codes), 1)
+    np.add.at(counts, (dataset.observation_frames(), solved.obs_status), 1)
     seconds = solved.frame_seconds if len(solved.frame_seconds) else np.full(T, solved.timing["total"] / T)
     settings = {**config.to_dict(), **{f"smoother_{k}": v for k, v in solved.config.items()}}
     return RunResult(

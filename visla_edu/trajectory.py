@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from visla_edu._files import atomic_write, expand_user, file_kind, format_bytes
+from visla_edu.validation import POSE_RIGID_TOL, nonrigid_frames
 
 __all__ = ["FORMATS", "ORTHONORMAL_TOL", "trajectory_format", "read_table", "read_kitti", "write_kitti", "read_tum",
            "write_tum", "read_trajectory", "write_trajectory"]
@@ -35,8 +36,9 @@ __all__ = ["FORMATS", "ORTHONORMAL_TOL", "trajectory_format", "read_table", "rea
 FORMATS = {".kitti": "kitti", ".txt": "kitti", ".tum": "tum"}
 #: Largest trajectory or times file read (a million frames of TUM rows take about 200 MB).
 MAX_TEXT_BYTES = 512 * 2**20
-#: Largest ``|R^T R - I|`` entry (and ``| |q| - 1 |`` of a TUM quaternion) a read pose may have.
-ORTHONORMAL_TOL = 1e-3
+#: Largest ``|R^T R - I|`` entry (and ``| |q| - 1 |`` of a TUM quaternion) a read pose may have:
+#: :data:`visla_edu.validation.POSE_RIGID_TOL`.
+ORTHONORMAL_TOL = POSE_RIGID_TOL
 
 
 def trajectory_format(path):
@@ -150,18 +152,19 @@ def _parse_numbers(path, numbered):
     return table
 
 
-def _check_rotations(path, R, line_numbers):
-    """Each ``R`` (n, 3, 3) orthonormal to :data:`ORTHONORMAL_TOL` with determinant +1."""
-    deviation = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
-    bad = np.flatnonzero(deviation > ORTHONORMAL_TOL)
-    if len(bad):
-        i = bad[0]
+def _check_rotations(path, poses, line_numbers):
+    """Each pose's rotation (poses (n, 4, 4)) orthonormal to :data:`ORTHONORMAL_TOL` with determinant +1.
+
+    :func:`visla_edu.validation.nonrigid_frames`; the message names the line of the first that is not.
+    """
+    bad, deviation = nonrigid_frames(poses, ORTHONORMAL_TOL)
+    if not bad.any():
+        return
+    i = int(np.argmax(bad))
+    if deviation[i] > ORTHONORMAL_TOL:
         raise ValueError(f"{path}: line {line_numbers[i]}: rotation is not orthonormal (largest |R^T R - I| entry "
                          f"{deviation[i]:.3g} > {ORTHONORMAL_TOL:g}); is this a 3x4 pose, row-major?")
-    flipped = np.flatnonzero(np.linalg.det(R) < 0)
-    if len(flipped):
-        raise ValueError(f"{path}: line {line_numbers[flipped[0]]}: rotation has determinant -1 (a reflection, "
-                         "not a rotation)")
+    raise ValueError(f"{path}: line {line_numbers[i]}: rotation has determinant -1 (a reflection, not a rotation)")
 
 
 def _check_increasing(path, times, line_numbers):
@@ -208,10 +211,11 @@ def read_kitti(path):
     table, line_numbers = read_table(path, (12, 13), "KITTI poses: 12 numbers per row, row-major 3x4 [R | t]")
     times = table[:, 0].copy() if table.shape[1] == 13 else None
     blocks = table[:, -12:].reshape(-1, 3, 4)
-    _check_rotations(path, blocks[:, :, :3], line_numbers)
+    poses = _poses(blocks[:, :, :3], blocks[:, :, 3])
+    _check_rotations(path, poses, line_numbers)
     if times is not None:
         _check_increasing(path, times, line_numbers)
-    return _poses(blocks[:, :, :3], blocks[:, :, 3]), times
+    return poses, times
 
 
 def read_tum(path):

@@ -1,4 +1,4 @@
-"""The intrinsics of a rectified stereo pair: their checks, the stereo matrix ``Ks``, its pixel geometry.
+"""The intrinsics of a rectified stereo pair: the stereo matrix ``Ks``, its pixel geometry.
 
 A rectified pair may have two intrinsics: the left ``K`` and the right ``K_right``, the right
 camera being the left one translated by ``b`` along the left camera's x axis (same orientation).
@@ -18,41 +18,14 @@ None) everything here is the single-intrinsics rig, bit for bit.
 
 import numpy as np
 
-__all__ = ["STEREO_ROWS", "check_calibration", "check_intrinsics", "same_intrinsics", "single_intrinsics",
-           "stereo_matrix", "stereo_rows",
+from visla_edu.validation import check_intrinsics, check_stereo_calibration
+
+__all__ = ["STEREO_ROWS", "same_intrinsics", "single_intrinsics", "stereo_matrix", "stereo_rows",
            "right_in_left_pixels", "left_in_right_u", "disparity"]
 
 #: Stereo rows ``[uL, vL, uR, vR]`` -> ``[uL, (vL + vR)/sqrt(2), uR]``, the exact reduction of
 #: :func:`stereo_rows` when rows 2 and 4 of ``Ks`` are equal (one intrinsics).
 STEREO_ROWS = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)], [0.0, 0.0, 1.0, 0.0]])
-
-
-def check_intrinsics(K, name, key="K"):
-    """Return ``K`` as a (3, 3) float array, or raise ValueError naming ``name`` and ``key``.
-
-    ``K`` must be ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with finite entries and positive
-    focal lengths: the stereo model has no skew, so a skew ``K[0, 1]`` is refused, not ignored.
-    """
-    K = np.asarray(K, dtype=float)
-    if K.shape != (3, 3):
-        raise ValueError(f"{name}: {key} must have shape (3, 3), got {K.shape}")
-    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"{name}: {key} needs finite entries and positive focal lengths, got {K.tolist()}")
-    if K[0, 1] != 0:
-        raise ValueError(f"{name}: {key}[0, 1] = {float(K[0, 1])!r} is a skew, but the stereo model has none "
-                         "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]], rectified images); rectify or set it to 0")
-    if K[1, 0] != 0 or np.any(K[2] != [0.0, 0.0, 1.0]):
-        raise ValueError(f"{name}: {key} must be [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]], got {K.tolist()}")
-    return K
-
-
-def check_calibration(K, b, name):
-    """``K`` as a (3, 3) float array (:func:`check_intrinsics`) and ``b`` as a positive float, or a ValueError."""
-    K = check_intrinsics(K, name)
-    b = float(b)
-    if not np.isfinite(b) or b <= 0:
-        raise ValueError(f"{name}: baseline b must be a positive number, got {b}")
-    return K, b
 
 
 def same_intrinsics(K, K_right):
@@ -92,8 +65,8 @@ def stereo_matrix(K, b, K_right=None):
     ndarray, shape (4, 4)
         See the module docstring.
     """
-    K, b = check_calibration(K, b, "stereo_matrix")
-    R = K if K_right is None else check_intrinsics(K_right, "stereo_matrix", "K_right")
+    K, b = check_stereo_calibration(K, b, "stereo_matrix")
+    R = K if K_right is None else check_intrinsics(K_right, "stereo_matrix: K_right", "K_right")
     fsu, fsv, cu, cv = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     fsu_r, fsv_r, cu_r, cv_r = R[0, 0], R[1, 1], R[0, 2], R[1, 2]
     return np.array(

@@ -7,7 +7,8 @@ pixels are first mapped into the left camera's intrinsics
 
 import numpy as np
 
-from visla_edu.camera._intrinsics import check_calibration, check_intrinsics, right_in_left_pixels, same_intrinsics
+from visla_edu.camera._intrinsics import right_in_left_pixels, same_intrinsics
+from visla_edu.validation import check_intrinsics, check_stereo_calibration
 
 __all__ = ["triangulate_disparity", "triangulate_bearing", "triangulation_jacobian"]
 
@@ -40,7 +41,7 @@ def triangulate_disparity(z, K, b, K_right=None):
     ndarray, shape (..., 3)
     """
     z = _check_pixels(z, "triangulate_disparity")
-    K, b = check_calibration(K, b, "triangulate_disparity")
+    K, b = check_stereo_calibration(K, b, "triangulate_disparity")
     z = _in_left_pixels(z, K, K_right, "triangulate_disparity")
     fsu, fsv, cu, cv = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     disparity = z[..., 0] - z[..., 2]
@@ -75,10 +76,10 @@ def triangulate_bearing(z, K, b, K_right=None):
     ndarray, shape (..., 3)
     """
     z = _check_pixels(z, "triangulate_bearing")
-    K, b = check_calibration(K, b, "triangulate_bearing")
+    K, b = check_stereo_calibration(K, b, "triangulate_bearing")
     K_inv = np.linalg.inv(K)
     K_right_inv = K_inv if same_intrinsics(K, K_right) else np.linalg.inv(
-        check_intrinsics(K_right, "triangulate_bearing", "K_right"))
+        check_intrinsics(K_right, "triangulate_bearing: K_right", "K_right"))
     ones = np.ones(z.shape[:-1] + (1,))
     z1 = np.concatenate([z[..., 0:2], ones], axis=-1) @ K_inv.T
     z2 = np.concatenate([z[..., 2:4], ones], axis=-1) @ K_right_inv.T
@@ -143,4 +144,4 @@ def _in_left_pixels(z, K, K_right, name):
     """``z`` with the right pixels in ``K``'s intrinsics (``z`` itself for one intrinsics)."""
     if same_intrinsics(K, K_right):
         return z
-    return right_in_left_pixels(z, K, check_intrinsics(K_right, name, "K_right"))
+    return right_in_left_pixels(z, K, check_intrinsics(K_right, f"{name}: K_right", "K_right"))

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from visla_edu import data, lie, metrics
+from visla_edu import data, validation
 from visla_edu.course import _sandbox
 from visla_edu.filters import FilterConfig, StepRecord
 
@@ -160,7 +160,7 @@ def check_record(rec, t):
     _Failure
         ``wrong-type`` (not a StepRecord, another frame, wrong shapes, not numbers),
         ``non-finite`` (NaN or inf in the pose or its covariance) or ``not-se3`` (the pose is
-        not rigid to :data:`visla_edu.metrics.RIGID_TOLERANCE`).
+        not rigid to :data:`visla_edu.validation.POSE_RIGID_TOL`).
     """
     if not isinstance(rec, StepRecord):
         raise _Failure("wrong-type", f"step() returned a {type(rec).__name__} at frame {t}, not a "
@@ -180,11 +180,9 @@ def check_record(rec, t):
     for what, value in (("pose world_T_imu", pose), ("pose covariance pose_cov", cov)):
         if not np.isfinite(value).all():
             raise _Failure("non-finite", f"returned a non-finite {what} at frame {t} (NaN or inf)")
-    bad, orthogonality = lie.nonrigid_frames(pose[None], metrics.RIGID_TOLERANCE)
-    if bad[0]:
-        raise _Failure("not-se3", f"returned a pose that is not in SE(3) at frame {t} (max |R^T R - I| = "
-                                  f"{orthogonality[0]:.2g}, det R = {np.linalg.det(pose[:3, :3]):.3g}, last row "
-                                  f"{pose[3].tolist()})")
+    if validation.nonrigid_frames(pose[None], validation.POSE_RIGID_TOL)[0][0]:
+        raise _Failure("not-se3", f"returned a pose that is not in SE(3) at frame {t} "
+                                  f"({validation.rigid_detail(pose, validation.POSE_RIGID_TOL)})")
     return pose, cov, (nis if dof > 0 else np.nan), max(dof, 0)
 
 

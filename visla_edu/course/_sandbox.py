@@ -2,7 +2,8 @@
 
 The project (``PROJECT.md``) asks for a whole filter, so while the grader runs a submission
 only the geometry and the interface stay usable (:data:`ALLOWED_MODULES`, :data:`ALLOWED_NAMES`):
-``lie``, ``camera``, ``dataset``, ``codes``, ``metrics``, ``numdiff``, ``kalman``, and from
+``lie``, ``camera``, ``dataset``, ``codes``, ``metrics``, ``numdiff``, ``kalman``, ``validation`` (the
+checks the camera and the metrics make of their inputs), and from
 ``filters`` the types of the interface (``FilterConfig``, ``StepRecord``,
 ``FilterDivergedError``). Everything else of visla_edu is **hidden**: the filters and their
 steps (``filters``, ``motion``, ``ekf``, ``capstone``, ``run``, ``smoother``, ``stepper``...),
@@ -39,7 +40,7 @@ __all__ = ["ALLOWED_MODULES", "ALLOWED_PACKAGES", "ALLOWED_NAMES", "HIDDEN_CALLS
 #: visla_edu modules a submission may use while it is graded.
 ALLOWED_MODULES = ("visla_edu", "visla_edu.lie", "visla_edu.camera", "visla_edu.dataset", "visla_edu.codes",
                    "visla_edu.metrics", "visla_edu.numdiff", "visla_edu.kalman", "visla_edu.filters",
-                   "visla_edu.filters._config", "visla_edu.settings")
+                   "visla_edu.filters._config", "visla_edu.settings", "visla_edu.validation")
 #: Packages whose every submodule a submission may use (the camera model is a package).
 ALLOWED_PACKAGES = ("visla_edu.camera",)
 #: Names a submission may use from otherwise hidden modules (the interface's types).

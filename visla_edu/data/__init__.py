@@ -49,8 +49,8 @@ Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError
 for a folder or an unreadable file, ``IsADirectoryError`` or ``PermissionError``) whose
 message names the file, the key, and the expected and actual shape or value. Besides the
 format, a file must be plausible: calibration, time stamps and velocities within the ranges
-of :mod:`~visla_edu.data._plausible` (each with its reason), and the declared array sizes
-bounded, checked from the headers before any data is read.
+of :mod:`visla_edu.validation` and :mod:`~visla_edu.data._plausible` (each with its reason),
+and the declared array sizes bounded, checked from the headers before any data is read.
 
 Modules (private; everything public is re-exported here): ``_registry`` (data directory,
 names, known files), ``_format`` (the keys of the course formats and the checks of the small
@@ -58,19 +58,12 @@ arrays), ``_features`` (the dense features streamed into the sparse layout), ``_
 one ``.npz`` reader: course files to Datasets, named arrays of any archive), ``_standin``
 (the dataset-10 stand-in), ``_load`` (:func:`load`), ``_save`` (:func:`save`), ``_summary``
 (:func:`summarize`, :func:`format_summary`), ``_groundtruth`` (KITTI ground truth), ``_zip`` (zip
-members and ``.npy`` headers, read before any data), ``_plausible`` (plausible ranges,
-:func:`dataset_problems`), ``_pickle`` (the restricted unpickler of the 2025+ files),
-``_format2025`` (:func:`load_course2025`), ``_save2025`` (:func:`save_course2025`).
+members and ``.npy`` headers, read before any data), ``_plausible`` (plausible time stamps,
+velocities and pixels, :func:`dataset_problems`), ``_pickle`` (the restricted unpickler of the
+2025+ files), ``_format2025`` (:func:`load_course2025`), ``_save2025`` (:func:`save_course2025`).
 """
 
-from visla_edu.data._format import (
-    FORMAT_2019,
-    FORMAT_2021,
-    FORMAT_KEYS,
-    GROUND_TRUTH_KEYS,
-    RIGID_TOL,
-    TEXT_KEYS,
-)
+from visla_edu.data._format import FORMAT_2019, FORMAT_2021, FORMAT_KEYS, GROUND_TRUTH_KEYS, TEXT_KEYS
 from visla_edu.data._format2025 import FORMAT_2025, KEYS_2025, NO_FEATURES, READING_ORDER, load_course2025
 from visla_edu.data._groundtruth import (
     TIME_TOLERANCE,
@@ -83,13 +76,14 @@ from visla_edu.data._groundtruth import (
     read_kitti_times,
 )
 from visla_edu.data._load import input_files, load
-from visla_edu.data._plausible import calibration_problems, dataset_problems, magnitude
+from visla_edu.data._plausible import calibration_problems, dataset_problems
 from visla_edu.data._registry import ENV_VAR, REGISTRY, SIMULATED, available, data_dir, ground_truth_files
 from visla_edu.data._save import save
 from visla_edu.data._save2025 import VELOCITY_LAYOUTS, save_course2025
 from visla_edu.data._standin import STANDIN_LABEL, STANDIN_NUM_LANDMARKS, course_standin10, standin_dataset10
 from visla_edu.data._summary import format_summary, summarize
 from visla_edu.dataset import repeated_frames
+from visla_edu.validation import RIGID_TOL, magnitude
 
 __all__ = [
     "ENV_VAR",

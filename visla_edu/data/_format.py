@@ -10,19 +10,16 @@ The checks come in two passes. :func:`check_course_headers` runs on the ``.npy``
 alone (:class:`~visla_edu.data._zip.NpyHeader`: dtype and shape, before any data is read) and
 bounds what reading the file will cost: at most :data:`MAX_FRAMES` frames and
 :data:`MAX_FEATURES_BYTES` of dense features. :func:`check_course_arrays` then checks the values
-of the small arrays, including their plausibility (:mod:`visla_edu.data._plausible`).
+of the small arrays, including their plausibility (:mod:`visla_edu.data._plausible`; the
+calibration's validity and plausibility are :mod:`visla_edu.validation`'s).
 """
 
 import numpy as np
 
-from visla_edu import lie
 from visla_edu._files import format_bytes
-from visla_edu.data._plausible import (
-    check_calibration,
-    check_ground_truth_reach,
-    check_time_stamps,
-    check_velocities,
-)
+from visla_edu.data._plausible import check_ground_truth_reach, check_time_stamps, check_velocities
+from visla_edu.validation import (check_baseline, check_intrinsics, check_plausible_calibration, check_rigid,
+                                  check_rigid_poses)
 
 __all__ = [
     "FORMAT_2021",
@@ -31,7 +28,6 @@ __all__ = [
     "FORMAT_SPECIFIC_KEYS",
     "GROUND_TRUTH_KEYS",
     "TEXT_KEYS",
-    "RIGID_TOL",
     "MAX_FRAMES",
     "MAX_FEATURES_BYTES",
     "check_course_headers",
@@ -41,10 +37,7 @@ __all__ = [
     "check_shape",
     "check_finite",
     "check_increasing",
-    "check_intrinsics",
-    "check_baseline",
-    "check_rigid",
-    "check_rigid_poses",
+    "check_calibration_keys",
     "check_extras",
 ]
 
@@ -71,11 +64,6 @@ GROUND_TRUTH_KEYS = (
 )
 #: Extra string keys written by :func:`~visla_edu.data.save`.
 TEXT_KEYS = ("name", "label")
-#: Tolerance on ``R^T R = I`` for the camera extrinsics.
-RIGID_TOL = 1e-6
-#: Tolerance on ``R^T R = I`` and the last row for ground-truth poses (what the KITTI reader and
-#: the ATE accept: ``visla_edu.trajectory.ORTHONORMAL_TOL``, ``visla_edu.metrics.RIGID_TOLERANCE``).
-GROUND_TRUTH_RIGID_TOL = 1e-3
 #: Most frames a course file may have: 28 hours at 10 Hz. Every per-frame array (and the
 #: filter's per-frame results, about 400 bytes a frame) is bounded by it before it is read.
 MAX_FRAMES = 1_000_000
@@ -124,8 +112,7 @@ def check_course_arrays(arrays, fmt, path):
     (:func:`check_finite`); the time stamps must increase (:func:`check_increasing`) at a
     camera's rate (:func:`~._plausible.check_time_stamps`), the velocities be plausible
     (:func:`~._plausible.check_velocities`), and ``K``, ``b`` and the extrinsics be valid
-    (:func:`check_intrinsics`, :func:`check_baseline`, :func:`check_rigid`) and plausible
-    (:func:`~._plausible.check_calibration`).
+    and plausible (:func:`check_calibration_keys`).
 
     Parameters
     ----------
@@ -160,11 +147,36 @@ def check_course_arrays(arrays, fmt, path):
     check_increasing(arrays["time_stamps"][0], path)
     check_time_stamps(arrays["time_stamps"][0], path)
     check_velocities(arrays["linear_velocity"], arrays[velocity_key], ("linear_velocity", velocity_key), path)
-    check_intrinsics(arrays["K"], path)
-    check_baseline(arrays["b"], path)
-    check_rigid(arrays[pose_key], pose_key, path)
-    check_calibration(arrays["K"], float(arrays["b"]), path, arrays[pose_key], pose_key)
+    check_calibration_keys(arrays, path, pose_key)
     return T
+
+
+def check_calibration_keys(arrays, path, pose_key=None):
+    """``K``, ``b`` and (with ``pose_key``) the extrinsics of a file: valid, then plausible.
+
+    :func:`~visla_edu.validation.check_intrinsics`, :func:`~visla_edu.validation.check_baseline`,
+    :func:`~visla_edu.validation.check_rigid`, then
+    :func:`~visla_edu.validation.check_plausible_calibration`.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        ``K`` (3, 3), ``b`` () and ``pose_key`` (4, 4), finite (checked before).
+    path : pathlib.Path or str
+    pose_key : str, optional
+        The extrinsics' key; None leaves them out.
+
+    Raises
+    ------
+    ValueError
+        The first check that fails, naming the file and the key.
+    """
+    check_intrinsics(arrays["K"], f"{path}: key 'K'")
+    check_baseline(arrays["b"], f"{path}: key 'b'")
+    pose = None if pose_key is None else arrays[pose_key]
+    if pose is not None:
+        check_rigid(pose, f"{path}: key '{pose_key}'")
+    check_plausible_calibration(arrays["K"], float(arrays["b"]), path, pose, pose_key or "imu_T_cam")
 
 
 def check_features_header(header, T, path, stamps_key="time_stamps"):
@@ -320,92 +332,6 @@ def check_increasing(stamps, path, key="time_stamps", index="[0, {}]"):
         )
 
 
-def check_intrinsics(K, path, key="K"):
-    """``K`` (3, 3) is ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths.
-
-    A skew ``K[0, 1] != 0`` is refused: the stereo model (:func:`visla_edu.camera.stereo_matrix`)
-    has none (rectified images have none), so it would be silently ignored.
-
-    Parameters
-    ----------
-    K : ndarray, shape (3, 3)
-    path : pathlib.Path or str
-    key : str
-        Its key in the file, for the message.
-
-    Raises
-    ------
-    ValueError
-        An entry below the diagonal is not 0 or ``K[2, 2] != 1``, ``fsu`` or ``fsv`` is not
-        positive, or the skew is not 0 (checked in this order).
-    """
-    lower = K[np.tril_indices(3, -1)]
-    if np.any(lower != 0) or K[2, 2] != 1:
-        raise ValueError(
-            f"{path}: key '{key}' must be upper triangular with K[2, 2] = 1 "
-            f"([[fsu, s, cu], [0, fsv, cv], [0, 0, 1]]), got {K.tolist()}"
-        )
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"{path}: key '{key}' needs positive focal lengths, got fsu = {K[0, 0]}, fsv = {K[1, 1]}")
-    if K[0, 1] != 0:
-        raise ValueError(
-            f"{path}: key '{key}' has a skew {key}[0, 1] = {float(K[0, 1])!r}, but the stereo camera model has none "
-            "(K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]; rectified stereo images have zero skew), so it would "
-            f"be ignored. Rectify the images, or set {key}[0, 1] = 0 if the skew is a rounding artefact")
-
-
-def check_baseline(b, path):
-    """The stereo baseline ``b`` (a 0-d array, metres) is positive.
-
-    Parameters
-    ----------
-    b : ndarray, shape ()
-    path : pathlib.Path or str
-
-    Raises
-    ------
-    ValueError
-        ``b`` is not greater than 0 (NaN included).
-    """
-    if not b > 0:
-        raise ValueError(f"{path}: key 'b' (stereo baseline, metres) must be positive, got {b.item()!r}")
-
-
-def check_rigid(T, key, path):
-    """``T`` (4, 4) is in SE(3): ``R^T R = I`` within :data:`RIGID_TOL`, ``det R = +1``, last row ``[0, 0, 0, 1]``.
-
-    Parameters
-    ----------
-    T : ndarray, shape (4, 4)
-    key : str
-        Its key in the file, for the message.
-    path : pathlib.Path or str
-
-    Raises
-    ------
-    ValueError
-        An entry of ``R^T R - I`` exceeds :data:`RIGID_TOL` in size, ``det R`` differs from 1 by
-        more than ``10 RIGID_TOL``, or the last row is not exactly ``[0, 0, 0, 1]``.
-    """
-    R = T[:3, :3]
-    orth = float(np.abs(R.T @ R - np.eye(3)).max())
-    if orth > RIGID_TOL:
-        raise ValueError(
-            f"{path}: key '{key}' is not a rigid transform: max |R^T R - I| = {orth:.3g} > {RIGID_TOL:g}"
-            + ("; rounded entries? store full precision, or re-orthonormalise R (e.g. U @ Vt of its SVD)"
-               if orth < 1e-2 else "")
-        )
-    det = float(np.linalg.det(R))
-    if abs(det - 1) > 10 * RIGID_TOL:
-        raise ValueError(
-            f"{path}: key '{key}' is not a rigid transform: det(R) = {det:.6g}, expected +1 (a reflection?)"
-        )
-    if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError(
-            f"{path}: key '{key}' is not a rigid transform: last row is {T[3].tolist()}, expected [0, 0, 0, 1]"
-        )
-
-
 def check_extras(arrays, T, M, path):
     """Check the ground-truth keys (all or none; shapes from T and M, finite) and the text keys.
 
@@ -426,7 +352,7 @@ def check_extras(arrays, T, M, path):
         Some ground-truth keys are present but not all; one is not numeric (boolean for
         ``ground_truth_outlier``), has the wrong shape (``(T, 4, 4)``, ``(M, 3)``, ``(T, 3)``,
         ``(T, 3)``, ``(M,)``) or a non-finite entry; a ground-truth pose is not rigid
-        (:func:`check_rigid_poses`) or lies farther from the first than the drive can go
+        (:func:`~visla_edu.validation.check_rigid_poses`) or lies farther from the first than the drive can go
         (:func:`~._plausible.check_ground_truth_reach`, which needs ``arrays["time_stamps"]``);
         or ``name`` or ``label`` is not a single string of at most 10,000 characters.
     """
@@ -436,36 +362,8 @@ def check_extras(arrays, T, M, path):
             check_finite(arrays[key], key, path)
     poses_key = GROUND_TRUTH_KEYS[0]
     if poses_key in arrays:
-        check_rigid_poses(arrays[poses_key], poses_key, path)
+        check_rigid_poses(arrays[poses_key], f"{path}: key '{poses_key}': the pose")
         check_ground_truth_reach(arrays[poses_key], arrays["time_stamps"][0], f"key '{poses_key}'", path)
-
-
-def check_rigid_poses(poses, key, path, tolerance=GROUND_TRUTH_RIGID_TOL):
-    """Every pose of ``poses`` (n, 4, 4) in SE(3) to ``tolerance``; the message names the first frame that is not.
-
-    Parameters
-    ----------
-    poses : ndarray, shape (n, 4, 4)
-        Finite (checked before).
-    key : str
-        Their key in the file, for the message.
-    path : pathlib.Path or str
-    tolerance : float
-        Largest entry of ``|R^T R - I|`` and of the last row's difference from ``[0, 0, 0, 1]``.
-
-    Raises
-    ------
-    ValueError
-        A pose's rotation is not orthonormal, has determinant -1, or its last row is not
-        ``[0, 0, 0, 1]`` (names the frame and the value).
-    """
-    nonrigid, orthogonality = lie.nonrigid_frames(poses, tolerance)
-    bad = np.flatnonzero(nonrigid)
-    if bad.size:
-        t = int(bad[0])
-        raise ValueError(f"{path}: key '{key}': the pose of frame {t} is not a rigid transform (max |R^T R - I| = "
-                         f"{orthogonality[t]:.3g}, det R = {np.linalg.det(poses[t, :3, :3]):.3g}, last row {poses[t, 3].tolist()}; "
-                         f"expected [[R, p], [0, 0, 0, 1]] with R a rotation, to {tolerance:g})")
 
 
 def _check_extras_layout(items, T, M, path):

@@ -35,13 +35,13 @@ import numpy as np
 
 from visla_edu.camera import extrinsic_readings
 from visla_edu.data._features import features_in_memory
-from visla_edu.data._format import (MAX_FRAMES, check_features_header, check_finite, check_increasing,
-                                    check_intrinsics, check_numeric, check_rigid, check_shape)
+from visla_edu.data._format import (MAX_FRAMES, check_features_header, check_finite, check_increasing, check_numeric,
+                                    check_shape)
 from visla_edu.data._npz import file_sha256
 from visla_edu.data._pickle import read_pickled_dict
-from visla_edu.data._plausible import check_calibration, check_observations, check_time_stamps, check_track_layout
-from visla_edu.data._plausible import check_velocities
+from visla_edu.data._plausible import check_observations, check_time_stamps, check_track_layout, check_velocities
 from visla_edu.dataset import Dataset
+from visla_edu.validation import check_intrinsics, check_plausible_calibration, check_rigid
 
 __all__ = ["FORMAT_2025", "KEYS_2025", "READING_ORDER", "NO_FEATURES", "load_course2025"]
 
@@ -90,8 +90,8 @@ def load_course2025(path):
     K_left, K_right = (_intrinsics(contents[key], key, path) for key in ("K_l", "K_r"))
     readings, chosen = _readings(contents, path)
     b = float(np.linalg.norm(chosen.offset))
-    check_calibration(K_left, b, path, chosen.imu_T_left, "extL_T_imu", K_key="K_l", b_key=_BASELINE_KEY)
-    check_calibration(K_right, b, path, K_key="K_r", b_key=_BASELINE_KEY)
+    check_plausible_calibration(K_left, b, path, chosen.imu_T_left, "extL_T_imu", K_key="K_l", b_key=_BASELINE_KEY)
+    check_plausible_calibration(K_right, b, path, K_key="K_r", b_key=_BASELINE_KEY)
     sparse, missing = _features(contents.get("features"), T, K_left, K_right, path)
     frame_ptr, obs_ids, obs_z, M = sparse
     extra = {"sha256": file_sha256(path), "format": FORMAT_2025, "known_file": None, "extrinsic_reading": chosen.name,
@@ -148,7 +148,7 @@ def _intrinsics(value, key, path):
     check_shape(value, (3, 3), key, path)
     check_finite(value, key, path)
     K = np.array(value, dtype=float)
-    check_intrinsics(K, path, key)
+    check_intrinsics(K, f"{path}: key '{key}'", key)
     return K
 
 
@@ -157,7 +157,7 @@ def _readings(contents, path):
     for key in ("extL_T_imu", "extR_T_imu"):
         check_shape(contents[key], (4, 4), key, path)
         check_finite(contents[key], key, path)
-        check_rigid(np.asarray(contents[key], dtype=float), key, path)
+        check_rigid(np.asarray(contents[key], dtype=float), f"{path}: key '{key}'")
     readings = extrinsic_readings(np.asarray(contents["extL_T_imu"], float), np.asarray(contents["extR_T_imu"], float))
     by_name = {r.name: r for r in readings}
     rectified = [by_name[name] for name in READING_ORDER if by_name[name].rectified]

@@ -1,25 +1,21 @@
-"""Plausible ranges of a drive's calibration, time stamps and velocities, and why.
+"""Plausible time stamps, velocities and observed pixels of a drive, and why.
 
-A course file can be well formed (right keys, shapes, finite numbers) and still wrong: a
-focal length of 1e300 px, a baseline of 600 m (millimetres stored as metres), time stamps in
-nanoseconds, a gap of 1e6 s. The filter would run on it and produce inf/NaN covariances or a
-garbage map. These checks refuse such files at load time; each range is wide enough for any
-real rig and its message says what is plausible and what was probably meant.
+A course file can be well formed (right keys, shapes, finite numbers) and still wrong: time
+stamps in nanoseconds, a gap of 1e6 s, velocities in km/h, a 'missing' marker other than -1.
+The filter would run on it and produce inf/NaN covariances or a garbage map. These checks
+refuse such files at load time; each range is wide enough for any real rig and its message
+says what is plausible and what was probably meant. The calibration's plausible ranges (focal
+lengths, aspect, principal point, baseline, extrinsic translation) are
+:mod:`visla_edu.validation`'s.
 
 ========================  ====================  ============================================
 quantity                  plausible             why
 ========================  ====================  ============================================
-focal lengths fsu, fsv    4 .. 250,000 px       ``f = (W/2) / tan(FOV/2)`` for images 100 to
-                                                20,000 px wide and fields of view 5 to 170 deg
-fsv / fsu                 0.2 .. 5              pixels are close to square (1 on course rigs)
-principal point cu, cv    > 0 .. 20,000 px      inside an image at most 20,000 px wide, and
-                                                inside the region where features are seen;
-                                                exactly 0 (the image's corner) is refused
+principal point cu, cv    among the observed    it lies near the image centre, inside the
+                          pixels                region where features are seen
 off-axis angle of pixels  < 85 deg              a pinhole camera sees less than 170 deg
 observed pixels           >= -10 px             inside the image, give or take a tracker's
                                                 sub-pixel slack; not a 'missing' marker
-baseline b                0.005 .. 5 m          a phone's stereo pair to a rig across a truck
-extrinsic translation     <= 20 m               camera and IMU ride the same vehicle
 median frame step         2 ms .. 10 s          cameras run at 0.1 to 500 frames per second
 largest frame step        <= max(10 s, 100      dead reckoning carries one velocity sample
                           median steps)         across a gap: 1e6 s at 10 m/s is 10,000 km
@@ -38,23 +34,17 @@ silently turn into a garbage map, and names the others when a run diverges).
 import numpy as np
 
 from visla_edu.camera import right_in_left_pixels
+from visla_edu.validation import MAX_EXTRINSIC_TRANSLATION, check_plausible_calibration, magnitude
 
 __all__ = [
-    "FOCAL_RANGE",
-    "ASPECT_RANGE",
-    "PRINCIPAL_POINT_RANGE",
     "MAX_OFF_AXIS_DEG",
-    "BASELINE_RANGE",
-    "MAX_EXTRINSIC_TRANSLATION",
     "FRAME_STEP_RANGE",
     "MAX_GAP_SECONDS",
     "MAX_GAP_STEPS",
     "MAX_SPEED",
     "MAX_ANGULAR_RATE",
-    "magnitude",
     "check_time_stamps",
     "check_velocities",
-    "check_calibration",
     "check_ground_truth_reach",
     "check_observations",
     "check_track_layout",
@@ -62,12 +52,7 @@ __all__ = [
     "dataset_problems",
 ]
 
-FOCAL_RANGE = (4.0, 2.5e5)  # px
-ASPECT_RANGE = (0.2, 5.0)  # fsv / fsu
-PRINCIPAL_POINT_RANGE = (0.0, 2e4)  # px, 0 excluded
 MAX_OFF_AXIS_DEG = 85.0
-BASELINE_RANGE = (0.005, 5.0)  # m
-MAX_EXTRINSIC_TRANSLATION = 20.0  # m
 FRAME_STEP_RANGE = (2e-3, 10.0)  # s, the median step
 MAX_GAP_SECONDS = 10.0
 MAX_GAP_STEPS = 100
@@ -151,7 +136,7 @@ def check_velocities(linear, angular, keys, path):
     Raises
     ------
     ValueError
-        The norm (:func:`magnitude`) of a column exceeds its limit; names the first such frame.
+        The norm (:func:`~visla_edu.validation.magnitude`) of a column exceeds its limit; names the first such frame.
     """
     for values, key, limit, unit, hint in (
         (linear, keys[0], MAX_SPEED, "m/s", "the speed of sound; are they in km/h, mm/s or another unit?"),
@@ -185,7 +170,7 @@ def check_ground_truth_reach(world_T_imu, time_stamps, what, path):
     ------
     ValueError
         The first frame whose distance from frame 0 exceeds ``MAX_SPEED * (t_i - t_0) +``
-        :data:`MAX_EXTRINSIC_TRANSLATION` (a length that would fit in millimetres says so).
+        :data:`~visla_edu.validation.MAX_EXTRINSIC_TRANSLATION` (a length that would fit in millimetres says so).
     """
     positions = np.asarray(world_T_imu, dtype=float)[:, :3, 3]
     distance = magnitude(positions - positions[:1])
@@ -200,83 +185,6 @@ def check_ground_truth_reach(world_T_imu, time_stamps, what, path):
                      f"{elapsed[t]:.6g} s into the drive it can be at most {reach[t]:.6g} m away ({MAX_SPEED:g} m/s, "
                      f"the speed of sound, plus {MAX_EXTRINSIC_TRANSLATION:g} m); is it the ground truth of another "
                      f"drive, or in another unit?{mm}")
-
-
-def magnitude(vectors):
-    """Euclidean norms of ``vectors`` (..., 3) without overflow (1e200 stays 1e200, not inf).
-
-    ``|v| = hypot(hypot(v1, v2), v3)``.
-
-    Parameters
-    ----------
-    vectors : array_like, shape (..., 3)
-
-    Returns
-    -------
-    ndarray, shape (...)
-        The norms (a numpy float for one vector).
-    """
-    v = np.asarray(vectors, dtype=float)
-    return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
-
-
-def check_calibration(K, b, path, pose=None, pose_key="imu_T_cam", K_key="K", b_key="b"):
-    """Focal lengths, aspect, principal point, baseline and extrinsic translation in their plausible ranges.
-
-    ``K`` (3, 3) must already be ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal
-    lengths, ``b`` positive and ``pose`` (4, 4) rigid (see :mod:`visla_edu.data._format`);
-    without ``pose`` its translation is not checked. ``pose_key`` names it in messages.
-
-    Parameters
-    ----------
-    K : ndarray, shape (3, 3)
-    b : float
-        Stereo baseline (m).
-    path : pathlib.Path or str
-    pose : ndarray, shape (4, 4), optional
-        The extrinsics (``imu_T_cam`` or ``cam_T_imu``).
-    pose_key, K_key, b_key : str
-        The keys of the extrinsics, the intrinsics and the baseline in the file, for messages.
-
-    Raises
-    ------
-    ValueError
-        ``fsu`` or ``fsv`` outside :data:`FOCAL_RANGE`, ``fsv / fsu`` outside
-        :data:`ASPECT_RANGE`, ``cu`` or ``cv`` not in ``(0, 20000]`` px
-        (:data:`PRINCIPAL_POINT_RANGE` without 0), ``b`` outside :data:`BASELINE_RANGE`, or the
-        extrinsic translation longer than :data:`MAX_EXTRINSIC_TRANSLATION` (checked in this
-        order; a length that would fit in millimetres says so).
-    """
-    fsu, fsv, cu, cv = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
-    for name, value in (("fsu = K[0, 0]", fsu), ("fsv = K[1, 1]", fsv)):
-        if not FOCAL_RANGE[0] <= value <= FOCAL_RANGE[1]:
-            raise ValueError(f"{path}: key '{K_key}': focal length {name} = {value:.6g} px is implausible; a camera's "
-                             f"focal length is {FOCAL_RANGE[0]:g} to {FOCAL_RANGE[1]:g} px ((W/2) / tan(FOV/2) for "
-                             "images 100 to 20,000 px wide and fields of view 5 to 170 deg). Is it in mm or "
-                             "metres instead of pixels?")
-    if not ASPECT_RANGE[0] <= fsv / fsu <= ASPECT_RANGE[1]:
-        raise ValueError(f"{path}: key '{K_key}': fsv / fsu = {fsv / fsu:.4g} is implausible (pixels are close to "
-                         f"square: {ASPECT_RANGE[0]:g} to {ASPECT_RANGE[1]:g}); are two entries of K swapped?")
-    for name, value in (("cu = K[0, 2]", cu), ("cv = K[1, 2]", cv)):
-        if not PRINCIPAL_POINT_RANGE[0] < value <= PRINCIPAL_POINT_RANGE[1]:
-            raise ValueError(f"{path}: key '{K_key}': principal point {name} = {value:.6g} px is outside any image (it "
-                             f"lies near the image centre, above 0 and at most {PRINCIPAL_POINT_RANGE[1]:g} px)")
-    _check_length(b, BASELINE_RANGE, b_key, "the stereo baseline", "(from a phone's stereo pair to a rig across a "
-                  "truck)", path)
-    if pose is None:
-        return
-    translation = float(magnitude(pose[:3, 3]))
-    _check_length(translation, (0.0, MAX_EXTRINSIC_TRANSLATION), pose_key, "the camera-IMU translation |t|",
-                  "(the camera and the IMU ride the same vehicle)", path)
-
-
-def _check_length(value, plausible, key, what, why, path):
-    low, high = plausible
-    if low <= value <= high:
-        return
-    mm = " It looks like millimetres: divide by 1000." if low <= value / 1000 <= high else ""
-    raise ValueError(f"{path}: key '{key}': {what} is {value:.6g} m, outside the plausible {low:g} to {high:g} m "
-                     f"{why}.{mm}")
 
 
 def check_observations(K, obs_z, path, K_right=None, K_key="K"):
@@ -401,7 +309,7 @@ def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
 
 
 def calibration_problems(dataset):
-    """Messages of the calibration checks (:func:`check_calibration`) an in-memory Dataset fails.
+    """Messages of the calibration checks (:func:`~visla_edu.validation.check_plausible_calibration`) a Dataset fails.
 
     Parameters
     ----------
@@ -412,11 +320,11 @@ def calibration_problems(dataset):
     list of str
         Empty when the calibration is plausible.
     """
-    checks = [lambda: check_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
-                                        np.asarray(dataset.imu_T_cam, dtype=float))]
+    checks = [lambda: check_plausible_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
+                                                  np.asarray(dataset.imu_T_cam, dtype=float))]
     if dataset.K_right is not None:
-        checks.append(lambda: check_calibration(np.asarray(dataset.K_right, dtype=float), float(dataset.b),
-                                                dataset.name, K_key="K_r"))
+        checks.append(lambda: check_plausible_calibration(np.asarray(dataset.K_right, dtype=float), float(dataset.b),
+                                                          dataset.name, K_key="K_r"))
     return _problems(checks)
 
 

@@ -12,17 +12,9 @@ import os
 
 import numpy as np
 
-from visla_edu.data._format import (
-    check_baseline,
-    check_finite,
-    check_increasing,
-    check_intrinsics,
-    check_numeric,
-    check_rigid,
-    check_shape,
-)
+from visla_edu.data._format import check_calibration_keys, check_finite, check_increasing, check_numeric, check_shape
 from visla_edu.data._npz import load_npz, read_arrays, time_major
-from visla_edu.data._plausible import check_calibration, check_time_stamps, check_velocities
+from visla_edu.data._plausible import check_time_stamps, check_velocities
 from visla_edu.data._registry import ENV_VAR, STANDIN_INPUTS, missing_standin_inputs, resolve_dir
 
 __all__ = ["STANDIN_LABEL", "STANDIN_NUM_LANDMARKS", "standin_dataset10", "course_standin10", "load_dataset10"]
@@ -235,11 +227,6 @@ def _read_calibration(path, need_extrinsic):
         check_numeric(arrays[key], key, path)
         check_shape(arrays[key], shape, key, path)
         check_finite(arrays[key], key, path)
-    check_intrinsics(arrays["K"], path)
-    check_baseline(arrays["b"], path)
-    if not need_extrinsic:
-        check_calibration(arrays["K"], float(arrays["b"]), path)
-        return np.array(arrays["K"], dtype=float), float(arrays["b"]), None
-    check_rigid(arrays["imu_T_cam"], "imu_T_cam", path)
-    check_calibration(arrays["K"], float(arrays["b"]), path, arrays["imu_T_cam"])
-    return np.array(arrays["K"], dtype=float), float(arrays["b"]), np.array(arrays["imu_T_cam"], dtype=float)
+    check_calibration_keys(arrays, path, "imu_T_cam" if need_extrinsic else None)
+    imu_T_cam = np.array(arrays["imu_T_cam"], dtype=float) if need_extrinsic else None
+    return np.array(arrays["K"], dtype=float), float(arrays["b"]), imu_T_cam

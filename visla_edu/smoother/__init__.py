@@ -20,8 +20,9 @@ also gives the marginal covariances.
   frame by frame, the real-time middle ground between the filter and the batch.
 
 Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
-history, rejection counts, per-observation status, timing); :class:`SmootherConfig` holds
-every setting and validates it. :func:`normal_equations` gives the full sparse Gauss-Newton
+history, rejection counts, per-observation status in the filters' codes, :mod:`visla_edu.codes`,
+timing); :class:`SmootherConfig` holds every setting and validates it.
+:func:`normal_equations` gives the full sparse Gauss-Newton
 system of the batch problem at a state (for teaching: notebook 13's spy plot and Schur
 complement; the smoothers never form it).
 
@@ -48,7 +49,7 @@ from visla_edu.smoother._config import (BATCH_ONLY, FILTER_SETTINGS, FROM_FILTER
 from visla_edu.camera import stereo_projection as reprojection
 from visla_edu.lie import se3_right_jacobian, se3_right_jacobian_inv
 from visla_edu.smoother._factors import motion_residuals, robust_loss
-from visla_edu.smoother._problem import STATUS_NAMES, triangulate_landmarks
+from visla_edu.smoother._problem import triangulate_landmarks
 from visla_edu.smoother._result import HISTORY_FIELDS, STOP_REASONS, SmootherResult
 from visla_edu.smoother._window import smooth_window
 
@@ -63,7 +64,6 @@ __all__ = [
     "BATCH_ONLY",
     "WINDOW_ONLY",
     "check_own_settings",
-    "STATUS_NAMES",
     "HISTORY_FIELDS",
     "STOP_REASONS",
     "smooth",

@@ -25,11 +25,12 @@ from scipy import sparse
 
 from visla_edu.smoother import _normal
 from visla_edu._blas import limit_blas_threads
+from visla_edu.codes import OBS_DROPPED, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED
 from visla_edu.metrics import chi2_quantile
 from visla_edu.smoother._config import as_smoother_config
 from visla_edu.smoother._factors import motion_steps, robust_loss
-from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, build_problem,
-                                         far_landmarks, observation_status, rig_camera, triangulate_landmarks)
+from visla_edu.smoother._problem import (build_problem, far_landmarks, observation_status, rig_camera,
+                                         triangulate_landmarks)
 from visla_edu.smoother._result import (CONVERGED, ITERATION_CAP, NO_DESCENT, SmootherResult,
                                         check_landmarks, check_trajectory, empty_history, finish_history)
 
@@ -231,16 +232,16 @@ def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
 def _setup(dataset, world_T_imu, landmarks, camera, config):
     """The batch problem, its initial landmarks, the observation status and drop counts."""
     status = observation_status(dataset, config)
-    initial = triangulate_landmarks(dataset, camera, world_T_imu, status == USED, landmarks)
-    far = far_landmarks(dataset, status == USED, config.min_disparity)
+    initial = triangulate_landmarks(dataset, camera, world_T_imu, status == OBS_USED, landmarks)
+    far = far_landmarks(dataset, status == OBS_USED, config.min_disparity)
     known = np.all(np.isfinite(initial), axis=1)
-    use = (status == USED) & (known & ~far)[dataset.obs_ids]
-    rejected = {"nonpositive_disparity": int(np.sum(status == NONPOSITIVE)),
-                "repeated_frame": int(np.sum(status == REPEATED)),
-                "landmarks_no_position": int(np.sum(~known & (np.bincount(dataset.obs_ids, status == USED,
+    use = (status == OBS_USED) & (known & ~far)[dataset.obs_ids]
+    rejected = {"nonpositive_disparity": int(np.sum(status == OBS_NO_DEPTH)),
+                "repeated_frame": int(np.sum(status == OBS_IGNORED)),
+                "landmarks_no_position": int(np.sum(~known & (np.bincount(dataset.obs_ids, status == OBS_USED,
                                                                           dataset.num_landmarks) > 0))),
                 "landmarks_too_far": int(far.sum())}
-    status[(status == USED) & ~use] = DROPPED
+    status[(status == OBS_USED) & ~use] = OBS_DROPPED
     step_inv, tau = motion_steps(dataset.time_stamps, dataset.twists, config.imu_lag)
     idx = np.flatnonzero(use)
     problem = build_problem(dataset.observation_frames()[idx], dataset.obs_ids[idx], dataset.obs_z[idx], idx,
@@ -324,8 +325,8 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
     rejected["outliers"] = int(outlier.sum())
     rejected["landmarks_behind_camera"] += problem.dropped_in_steps
     timing["solve"] = time.perf_counter() - start - timing["setup"]
-    status[problem.obs_source[~problem.active]] = DROPPED
-    status[problem.obs_source[outlier]] = REJECTED
+    status[problem.obs_source[~problem.active]] = OBS_DROPPED
+    status[problem.obs_source[outlier]] = OBS_GATED
     result = _result(dataset, problem, world_T_imu, m, lin, status, rejected, history, timing, camera, config, start)
     result.stop_reasons = stops
     return result
@@ -426,7 +427,7 @@ def start_cost(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None
     problem, m, status, _ = _setup(dataset, world_T_imu, landmarks, rig_camera(dataset, imu_T_cam), config)
     drop_landmarks(problem, world_T_imu, m, config.min_observations)
     cost = _normal.evaluate(problem, world_T_imu, m)
-    usable = int(np.sum(status == USED)) + int(np.sum(status == DROPPED))
+    usable = int(np.sum(status == OBS_USED)) + int(np.sum(status == OBS_DROPPED))
     outlier = robust_loss(np.array([chi2_quantile(config.rejection_probability, 4)]), config.loss,
                           config.loss_scale)[0][0]
     return float(cost + (usable - int(problem.active.sum())) * outlier)

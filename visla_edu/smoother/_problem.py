@@ -18,14 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from visla_edu.codes import OBS_IGNORED, OBS_NO_DEPTH, OBS_USED
 from visla_edu.dataset import repeated_frames
 
-__all__ = ["PosePrior", "Problem", "build_problem", "STATUS_NAMES", "observation_status",
-           "far_landmarks", "triangulate_landmarks", "rig_camera"]
-
-#: Status of each dataset observation in a smoother result (``SmootherResult.obs_status``).
-STATUS_NAMES = ("used", "nonpositive_disparity", "repeated_frame", "landmark_dropped", "rejected")
-USED, NONPOSITIVE, REPEATED, DROPPED, REJECTED = range(len(STATUS_NAMES))
+__all__ = ["PosePrior", "Problem", "build_problem", "observation_status", "far_landmarks", "triangulate_landmarks",
+           "rig_camera"]
 
 
 @dataclass
@@ -219,14 +216,15 @@ def observation_status(dataset, config, frames=None):
     Returns
     -------
     ndarray of int8, shape (N,)
-        :data:`STATUS_NAMES` codes: non-positive disparity (no depth), observations of a
-        repeated frame (``config.skip_repeated_frames``), else ``used``.
+        Observation codes (:mod:`visla_edu.codes`): ``OBS_NO_DEPTH`` for a non-positive
+        disparity, ``OBS_IGNORED`` for the observations of a repeated frame
+        (``config.skip_repeated_frames``), else ``OBS_USED``.
     """
     frames = dataset.observation_frames() if frames is None else frames
-    status = np.full(dataset.num_observations, USED, dtype=np.int8)
-    status[dataset.disparity() <= 0] = NONPOSITIVE
+    status = np.full(dataset.num_observations, OBS_USED, dtype=np.int8)
+    status[dataset.disparity() <= 0] = OBS_NO_DEPTH
     if config.skip_repeated_frames:
-        status[np.isin(frames, repeated_frames(dataset))] = REPEATED
+        status[np.isin(frames, repeated_frames(dataset))] = OBS_IGNORED
     return status
 
 
@@ -240,7 +238,7 @@ def far_landmarks(dataset, usable, min_disparity):
     ----------
     dataset : visla_edu.dataset.Dataset
     usable : ndarray of bool, shape (N,)
-        Observations that may be used (e.g. ``status == USED``), in the dataset's order.
+        Observations that may be used (e.g. ``status == OBS_USED``), in the dataset's order.
     min_disparity : float
         Pixels.
 

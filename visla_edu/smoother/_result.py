@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from visla_edu.smoother._problem import STATUS_NAMES
+from visla_edu.codes import STATUS_NAMES
 
 __all__ = ["SmootherResult", "check_trajectory", "check_landmarks", "HISTORY_FIELDS", "STOP_REASONS"]
 
@@ -46,7 +46,9 @@ class SmootherResult:
         ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far`` (landmarks
         dropped, see :class:`~visla_edu.smoother.SmootherConfig`).
     obs_status : ndarray of int8, shape (N,)
-        Status of each dataset observation, a code of :data:`STATUS_NAMES`.
+        Status of each dataset observation, an ``OBS_*`` code of :mod:`visla_edu.codes`:
+        ``OBS_USED``, ``OBS_GATED`` (rejected as an outlier), ``OBS_NO_DEPTH``, ``OBS_IGNORED``
+        (a repeated frame) or ``OBS_DROPPED`` (its landmark was left out).
     timing : dict of float
         Seconds spent: ``setup``, ``solve``, ``covariance``, ``total``.
     config : dict
@@ -81,7 +83,7 @@ class SmootherResult:
     stop_reasons: list = field(default_factory=list)
 
     def status_totals(self):
-        """Observations by status name, e.g. ``{"used": ..., "rejected": ...}``."""
+        """Observations by status name (:data:`visla_edu.codes.STATUS_NAMES`), e.g. ``{"used": ..., "gated": ...}``."""
         counts = np.bincount(self.obs_status, minlength=len(STATUS_NAMES))
         return dict(zip(STATUS_NAMES, counts.tolist()))
 

@@ -45,11 +45,11 @@ from visla_edu.camera import stereo_projection
 from visla_edu.smoother import _envelope, _normal
 from visla_edu.smoother._batch import levenberg_marquardt, motion_information
 from visla_edu._blas import limit_blas_threads
+from visla_edu.codes import OBS_DROPPED, OBS_GATED, OBS_IGNORED, OBS_NO_DEPTH, OBS_USED
 from visla_edu.metrics import chi2_quantile
 from visla_edu.smoother._config import as_smoother_config
 from visla_edu.smoother._factors import motion_steps, robust_loss
-from visla_edu.smoother._problem import (DROPPED, NONPOSITIVE, REJECTED, REPEATED, USED, PosePrior,
-                                         build_problem, observation_status, rig_camera)
+from visla_edu.smoother._problem import PosePrior, build_problem, observation_status, rig_camera
 from visla_edu.smoother._result import SmootherResult, check_trajectory, empty_history, finish_history
 
 __all__ = ["smooth_window"]
@@ -95,7 +95,7 @@ class _WindowState:
         idx = np.arange(lo, hi)
         ids = self.dataset.obs_ids[idx]
         disparity = self.camera.disparity(self.dataset.obs_z[idx])
-        new = idx[(self.status[idx] == USED) & np.isnan(self.landmarks[ids, 0])
+        new = idx[(self.status[idx] == OBS_USED) & np.isnan(self.landmarks[ids, 0])
                   & (disparity >= self.config.min_disparity)]
         if len(new):
             self.landmarks[self.dataset.obs_ids[new]] = self.camera.triangulate(
@@ -110,13 +110,13 @@ class _WindowState:
         """
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v0], ds.frame_ptr[k + 1])
-        idx = idx[(self.status[idx] == USED) & np.isfinite(self.landmarks[ds.obs_ids[idx], 0])]
+        idx = idx[(self.status[idx] == OBS_USED) & np.isfinite(self.landmarks[ds.obs_ids[idx], 0])]
         lo = self.held_from(v0)
         if lo < v0:
             old = np.arange(ds.frame_ptr[lo], ds.frame_ptr[v0])
             seen = np.zeros(ds.num_landmarks, dtype=bool)
             seen[ds.obs_ids[idx]] = True
-            idx = np.concatenate([old[(self.status[old] == USED) & seen[ds.obs_ids[old]]], idx])
+            idx = np.concatenate([old[(self.status[old] == OBS_USED) & seen[ds.obs_ids[old]]], idx])
         count = np.bincount(ds.obs_ids[idx], minlength=ds.num_landmarks) + self.held_count
         return idx[count[ds.obs_ids[idx]] >= self.config.min_observations]
 
@@ -151,7 +151,7 @@ class _WindowState:
         """
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v], ds.frame_ptr[v + 1])
-        idx = idx[self.status[idx] == USED]
+        idx = idx[self.status[idx] == OBS_USED]
         ids = ds.obs_ids[idx]
         idx, ids = idx[np.isfinite(self.landmarks[ids, 0])], ids[np.isfinite(self.landmarks[ids, 0])]
         if not len(idx):
@@ -172,8 +172,8 @@ class _WindowState:
 def _drop_close(state, problem, m):
     """Drop landmarks predicted closer than ``min_depth`` in the window (for good).
 
-    Their usable observations become ``landmark_dropped``; the others keep their status
-    (non-positive disparity, repeated frame, rejected), so the counts stay those of the batch.
+    Their usable observations become ``OBS_DROPPED``; the others keep their status (no depth,
+    ignored: a repeated frame, gated: rejected), so the counts stay those of the batch.
     """
     _, depth = _normal.observation_errors(problem, state.world_T_imu, m)
     close = np.zeros(problem.num_landmarks, dtype=bool)
@@ -182,7 +182,7 @@ def _drop_close(state, problem, m):
         problem.landmark_active[close] = False
         problem.active &= problem.landmark_active[problem.obs_landmark]
         gone = np.isin(state.dataset.obs_ids, problem.landmark_ids[close])
-        state.status[gone & (state.status == USED)] = DROPPED
+        state.status[gone & (state.status == OBS_USED)] = OBS_DROPPED
         state.dropped["landmarks_behind_camera"] += int(close.sum())
 
 
@@ -190,7 +190,7 @@ def _reject(state, problem, m):
     """Reject the window's observations beyond the chi-square threshold (for good)."""
     s, _ = _normal.observation_errors(problem, state.world_T_imu, m)
     bad = problem.active & (s > state.threshold)
-    state.status[problem.obs_source[bad]] = REJECTED
+    state.status[problem.obs_source[bad]] = OBS_GATED
 
 
 def _next_prior(state, cov, v0):
@@ -217,7 +217,7 @@ def _process_frame(state, k, history):
                                             max_iterations=config.window_iterations, final_linearization=False)
     if problem.dropped_in_steps:
         gone = problem.landmark_ids[~problem.landmark_active]
-        state.status[np.isin(state.dataset.obs_ids, gone) & (state.status == USED)] = DROPPED
+        state.status[np.isin(state.dataset.obs_ids, gone) & (state.status == OBS_USED)] = OBS_DROPPED
         state.dropped["landmarks_behind_camera"] += problem.dropped_in_steps
     state.world_T_imu[v0:k + 1] = T[v0:k + 1]
     state.landmarks[problem.landmark_ids[problem.landmark_active]] = m[problem.landmark_active]
@@ -295,26 +295,26 @@ def _final_landmarks(dataset, state, config):
 
     A landmark whose usable observations all lie below ``min_disparity`` was never
     triangulated (too far); one left with fewer than ``min_observations`` usable observations
-    (e.g. all rejected as outliers) is dropped (too few). The usable observations of both become ``landmark_dropped`` in
-    ``state.status``, as in the batch.
+    (e.g. all rejected as outliers) is dropped (too few). The usable observations of both become ``OBS_DROPPED``
+    in ``state.status``, as in the batch.
     """
     status, M = state.status, dataset.num_landmarks
-    used = np.bincount(dataset.obs_ids, status == USED, M)
+    used = np.bincount(dataset.obs_ids, status == OBS_USED, M)
     too_far = np.isnan(state.landmarks[:, 0]) & (used > 0)
-    dropped = np.bincount(dataset.obs_ids, status == DROPPED, M) > 0  # behind a camera, counted already
+    dropped = np.bincount(dataset.obs_ids, status == OBS_DROPPED, M) > 0  # behind a camera, counted already
     too_few = np.isfinite(state.landmarks[:, 0]) & ~dropped & (used < config.min_observations)
     landmarks = state.landmarks.copy()
     landmarks[used < config.min_observations] = np.nan
-    status[(status == USED) & np.isnan(landmarks[dataset.obs_ids, 0])] = DROPPED
+    status[(status == OBS_USED) & np.isnan(landmarks[dataset.obs_ids, 0])] = OBS_DROPPED
     return landmarks, {"landmarks_too_far": int(too_far.sum()), "landmarks_too_few": int(too_few.sum())}
 
 
 def _window_result(dataset, state, history, frame_seconds, config, total):
     landmarks, dropped = _final_landmarks(dataset, state, config)
     status = state.status
-    rejected = {"nonpositive_disparity": int(np.sum(status == NONPOSITIVE)),
-                "repeated_frame": int(np.sum(status == REPEATED)), "landmarks_no_position": 0, **dropped,
-                **state.dropped, "outliers": int(np.sum(status == REJECTED))}
+    rejected = {"nonpositive_disparity": int(np.sum(status == OBS_NO_DEPTH)),
+                "repeated_frame": int(np.sum(status == OBS_IGNORED)), "landmarks_no_position": 0, **dropped,
+                **state.dropped, "outliers": int(np.sum(status == OBS_GATED))}
     return SmootherResult(
         name=dataset.name, mode="window", time_stamps=dataset.time_stamps.copy(),
         world_T_imu=state.world_T_imu, landmarks=landmarks, pose_cov=state.pose_cov,

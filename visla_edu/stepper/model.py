@@ -406,7 +406,7 @@ class Stepper:
 
     @property
     def status_counts(self):
-        """Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`), (t + 1, 6)."""
+        """Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`), (t + 1, len(STATUS_NAMES))."""
         return self._readonly(self._arrays.status_counts[: self._t + 1])
 
     @property
