@@ -566,7 +566,7 @@ def test_held_frame_landmark_prior_is_the_linearised_observation_cost():
     v = 5
     state.hold(v)
     idx = np.arange(ds.frame_ptr[v], ds.frame_ptr[v + 1])
-    idx = idx[state.status[idx] == _window.USED]
+    idx = idx[state.status[idx] == codes.OBS_USED]
     ids = ds.obs_ids[idx]
     assert len(ids) > 3 and np.all(state.held_count[ids] == 1)
     for i, j in zip(idx[:4], ids[:4]):
