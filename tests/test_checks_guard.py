@@ -50,8 +50,8 @@ def test_hidden_error_message_is_short_and_names_the_function():
     assert len(FIRST_HAT) <= 79
     message = _hiding.hidden_message("average_nees_bounds", metrics.average_nees_bounds)
     assert len(_first_line(message)) <= 79 and _first_line(message).startswith("write your own average_nees_bounds")
-    assert _hiding.label(cam.StereoCamera.predict) == "camera.StereoCamera.predict"
-    assert _hiding.label(checks.reference_numerical_jacobian) == "numdiff.central_jacobian"
+    assert _hiding.function_label(cam.StereoCamera.predict) == "camera.StereoCamera.predict"
+    assert _hiding.function_label(checks.reference_numerical_jacobian) == "numdiff.central_jacobian"
 
 
 def test_hidden_error_message_of_a_long_exercise_name_keeps_the_name():

@@ -298,9 +298,9 @@ def test_blas_thread_limit_holds_while_the_driver_runs(tiny):
 
 
 def test_filter_hooks_are_declared_on_the_base():
-    from visla_edu.filters._base import _Filter
+    from visla_edu.filters._base import FilterBase
 
-    assert _Filter.__abstractmethods__ == {"pose_cov", "_predict_covariance", "_update", "_active",
+    assert FilterBase.__abstractmethods__ == {"pose_cov", "_predict_covariance", "_update", "_active",
                                            "landmark_estimates"}
     for cls in (filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry, filters.JointSlam):
         assert not cls.__abstractmethods__, cls

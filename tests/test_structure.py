@@ -177,3 +177,53 @@ def test_a_filter_run_does_not_import_scipy_stats():
             "print('scipy.stats' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False", "scipy.stats was imported by a filter run; use metrics.chi2_quantile (scipy.special)"
+
+
+def _private_owner(dotted):
+    """The package that owns the first private part of ``dotted`` (``visla_edu.data`` for
+    ``visla_edu.data._groundtruth.MIN_POSES``), or ``None`` when no part is private."""
+    parts = dotted.split(".")
+    for index, part in enumerate(parts):
+        if part.startswith("_") and not part.startswith("__"):
+            return ".".join(parts[:index])
+    return None
+
+
+def _imported_names(node, here, modules):
+    """Dotted names an import statement (anywhere in a module) reaches: modules and their attributes."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    base = node.module or ""
+    if node.level:
+        package = here if modules[here].name == "__init__.py" else here.rpartition(".")[0]
+        for _ in range(node.level - 1):
+            package = package.rpartition(".")[0]
+        base = f"{package}.{base}" if base else package
+    return [base] + [f"{base}.{alias.name}" for alias in node.names]
+
+
+def private_imports_across_packages():
+    """``module -> name`` strings: imports of a private module or name from outside the package that owns it."""
+    modules = _modules()
+    found = []
+    for here, path in modules.items():
+        package = here if path.name == "__init__.py" else here.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if not isinstance(node, (ast.Import, ast.ImportFrom)):
+                continue
+            for name in _imported_names(node, here, modules):
+                owner = _private_owner(name) if name.startswith("visla_edu") else None
+                if owner is not None and not (package == owner or package.startswith(owner + ".")):
+                    found.append(f"{here} -> {name}")
+    return sorted(set(found))
+
+
+def test_private_import_finder_sees_one():
+    assert _private_owner("visla_edu.data._groundtruth.MIN_POSES") == "visla_edu.data"
+    assert _private_owner("visla_edu.filters.FilterBase") is None
+    assert _private_owner("visla_edu._files") == "visla_edu"
+
+
+def test_no_private_module_is_imported_from_another_package():
+    found = private_imports_across_packages()
+    assert not found, "private names imported from outside their package: " + "; ".join(found)

@@ -30,7 +30,7 @@ import numpy as np
 from visla_edu import camera as cam
 from visla_edu import diagnostics, ekf, lie, motion, run
 from visla_edu.codes import OBS_FAR, OBS_GATED, OBS_NEW, OBS_USED
-from visla_edu.filters._base import _Filter
+from visla_edu.filters import FilterBase
 
 __all__ = ["Parts", "Steps", "library_parts", "CapstoneFilter", "run_capstone", "POSE_DIM"]
 
@@ -165,7 +165,7 @@ def library_parts():
 
 
 # ---------------------------------------------------------------- the loop skeleton
-class CapstoneFilter(_Filter):
+class CapstoneFilter(FilterBase):
     """VIO or joint SLAM whose mathematics are the functions passed in; the loop is provided.
 
     Each ``step()`` (inherited, the library's) predicts with ``steps.predict`` and then updates

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from visla_edu import _options
 from visla_edu.codes import RUN_MODES, RUN_MODES_HELP, SLAM, SMOOTHER_MODES
-from visla_edu.course import _commands as _project_commands
+from visla_edu.course import commands as _project_commands
 
 __all__ = ["main", "build_parser", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "DEBUG_ENV"]
 
@@ -207,7 +207,7 @@ def _segment_truth_checked(dataset, segment, start, stop, truth_option):
     """``segment``, refused (``--ground-truth`` given) or without its ground truth when it keeps too few poses."""
     import dataclasses
 
-    from visla_edu.data._groundtruth import MIN_POSES
+    from visla_edu.data import MIN_POSES
 
     if dataset.ground_truth is None:
         return segment

@@ -65,7 +65,7 @@ from visla_edu.checks._diagnostics import check_white_noise  # noqa: E402
 from visla_edu.checks._filters import (check_dense_covariance_bytes, check_landmark_observation_noise,  # noqa: E402
                                        check_landmark_update, check_marginalize, check_pose_update,
                                        check_slam_jacobian, reference_dense_covariance_bytes)
-from visla_edu.checks._hiding import LibraryFunctionHidden  # noqa: E402
+from visla_edu.checks._hiding import LibraryFunctionHidden, function_label  # noqa: E402
 from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
                                          check_pose_jacobian, check_projection_jacobian,
                                          reference_numerical_jacobian)
@@ -91,6 +91,7 @@ __all__ = [
     "reference_left_pose_prediction",
     "reference_slam_null_space",
     "LibraryFunctionHidden",
+    "function_label",
     # 00 know your data
     "check_observations_at",
     "check_track_spans",

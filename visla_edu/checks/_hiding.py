@@ -28,7 +28,7 @@ from contextlib import contextmanager
 import numpy
 import numpy.linalg
 
-__all__ = ["LibraryFunctionHidden", "label", "hidden_message", "hide", "guard", "verify_library",
+__all__ = ["LibraryFunctionHidden", "function_label", "hidden_message", "hide", "guard", "verify_library",
            "verify_foundations"]
 
 #: The ``visla_edu`` package folder: library code must come from files under it.
@@ -51,7 +51,7 @@ class LibraryFunctionHidden(RuntimeError):
     """
 
 
-def label(fn):
+def function_label(fn):
     """Short dotted name of a function: ``lie.hat``, ``camera.StereoCamera.predict``, ``scipy.linalg.expm``.
 
     visla_edu's own functions drop the package name; others (scipy's) keep it. Private module
@@ -81,7 +81,7 @@ def hidden_message(exercise, fn):
     exercise : str
         The student's function the check runs (e.g. ``"hat"``).
     fn : function
-        The hidden library function, named by :func:`label`.
+        The hidden library function, named by :func:`function_label`.
 
     Returns
     -------
@@ -93,7 +93,7 @@ def hidden_message(exercise, fn):
         than :data:`MAX_FIRST_LINE` only if ``exercise`` has more than 64 characters: the name
         is never cut); second line: why the check hides it, naming {label}.
     """
-    name = label(fn)
+    name = function_label(fn)
     first = next((line for line in (
         f"write your own {exercise}; the library's {name} is not available inside this check",
         f"write your own {exercise}: {name} is hidden inside this check",
@@ -110,7 +110,7 @@ def _stub_code(fn, message):
     source = (f"def {fn.__name__}(*args, **kwargs):\n"
               f"    raise __import__('sys').modules[{__name__!r}].LibraryFunctionHidden({message!r})\n")
     namespace = {}
-    exec(compile(source, f"<hidden by visla_edu.checks: {label(fn)}>", "exec"), namespace)  # noqa: S102
+    exec(compile(source, f"<hidden by visla_edu.checks: {function_label(fn)}>", "exec"), namespace)  # noqa: S102
     return namespace[fn.__name__].__code__
 
 
@@ -147,7 +147,7 @@ def _visla_modules(include_checks=True):
 def _functions_of(module):
     """``(short name, function)`` for the functions and methods defined in ``module``'s namespace.
 
-    The short name leaves out ``visla_edu`` and private module names, as :func:`label` does
+    The short name leaves out ``visla_edu`` and private module names, as :func:`function_label` does
     (``camera.StereoCamera.predict``, whether found in ``visla_edu.camera`` or ``visla_edu.camera._rig``).
     """
     short = ".".join(part for part in module.__name__.split(".")[1:] if not part.startswith("_")) or module.__name__

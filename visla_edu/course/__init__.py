@@ -15,7 +15,7 @@
   :func:`~visla_edu.course.project.grade`, what ``visla-edu project grade`` runs; ``_sandbox``
   what a graded submission may use of visla_edu and how the rest is hidden, ``_grader_child``
   the process that runs one submission, ``_runner`` starts it with its limits and reads what it
-  left, ``_report`` the figures, the reports and the summary table, ``_commands`` the
+  left, ``_report`` the figures, the reports and the summary table, ``commands`` the
   ``visla-edu project`` command line.
 * :mod:`visla_edu.course.book`: ``visla-edu book DIR``, the course site (the student edition of
   every notebook, executed, as static HTML that works offline).

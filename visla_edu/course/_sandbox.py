@@ -32,7 +32,7 @@ import ast
 import sys
 import types
 
-from visla_edu.checks._hiding import LibraryFunctionHidden, label
+from visla_edu.checks import LibraryFunctionHidden, function_label
 
 __all__ = ["ALLOWED_MODULES", "ALLOWED_PACKAGES", "ALLOWED_NAMES", "HIDDEN_CALLS", "SubmissionUsedLibrary", "is_hidden", "hide_library",
            "block_imports", "scan_source"]
@@ -64,7 +64,7 @@ class SubmissionUsedLibrary(LibraryFunctionHidden):
     Attributes
     ----------
     hidden : str
-        The function's label (:func:`visla_edu.checks._hiding.label`), e.g. ``"run.make_filter"``.
+        The function's label (:func:`visla_edu.checks.function_label`), e.g. ``"run.make_filter"``.
     """
 
     def __init__(self, hidden):
@@ -112,7 +112,7 @@ def _functions_of(module):
             continue
         value = getattr(value, "__wrapped__", value)  # functools.lru_cache and friends call the wrapped function
         if isinstance(value, types.FunctionType):
-            yield label(value), value
+            yield function_label(value), value
         elif isinstance(value, type):
             yield from _methods_of(value)
 
@@ -128,7 +128,7 @@ def _methods_of(cls):
             parts = (getattr(member, "__func__", getattr(member, "func", member)),)
         for part in parts:
             if isinstance(part, types.FunctionType):
-                yield label(part), part
+                yield function_label(part), part
 
 
 def hide_library():

@@ -66,6 +66,7 @@ velocities and pixels, :func:`dataset_problems`), ``_pickle`` (the restricted un
 from visla_edu.data._format import FORMAT_2019, FORMAT_2021, FORMAT_KEYS, GROUND_TRUTH_KEYS, TEXT_KEYS
 from visla_edu.data._format2025 import FORMAT_2025, KEYS_2025, NO_FEATURES, READING_ORDER, load_course2025
 from visla_edu.data._groundtruth import (
+    MIN_POSES,
     TIME_TOLERANCE,
     attach_ground_truth,
     attach_registered_ground_truth,
@@ -117,6 +118,7 @@ __all__ = [
     "course_standin10",
     "summarize",
     "format_summary",
+    "MIN_POSES",
     "TIME_TOLERANCE",
     "load_ground_truth",
     "attach_ground_truth",

@@ -28,7 +28,7 @@ from visla_edu.codes import (
     OBS_USED,
     STATUS_NAMES,
 )
-from visla_edu.filters._base import MAX_DISTANCE, MIN_DEPTH, FilterDivergedError, StepRecord
+from visla_edu.filters._base import MAX_DISTANCE, MIN_DEPTH, FilterBase, FilterDivergedError, StepRecord
 from visla_edu.filters._config import AUTO, AUTO_FIELDS, MAX_IMU_LAG, FilterConfig
 from visla_edu.filters._maps import DeadReckoning, LandmarkMapping, VisualInertialOdometry
 from visla_edu.filters._slam import DENSE_PLACEHOLDER_VARIANCE, MAX_DENSE_BYTES, JointSlam
@@ -39,6 +39,7 @@ __all__ = [
     "AUTO",
     "AUTO_FIELDS",
     "MAX_IMU_LAG",
+    "FilterBase",
     "FilterDivergedError",
     "StepRecord",
     "OBS_USED",

@@ -1,9 +1,9 @@
 """What every filter mode shares: the step record, the step loop and its declared hooks.
 
-:meth:`_Filter.step` is the same for every mode: predict from the previous frame, update with
+:meth:`FilterBase.step` is the same for every mode: predict from the previous frame, update with
 this frame's observations, check the state, record. A mode fills in the hooks the step calls
-(:attr:`~_Filter.pose_cov`, :meth:`~_Filter._predict_covariance`, :meth:`~_Filter._update`,
-:meth:`~_Filter._active`, :meth:`~_Filter.landmark_estimates`); they are abstract here, each
+(:attr:`~FilterBase.pose_cov`, :meth:`~FilterBase._predict_covariance`, :meth:`~FilterBase._update`,
+:meth:`~FilterBase._active`, :meth:`~FilterBase.landmark_estimates`); they are abstract here, each
 with its contract.
 """
 
@@ -83,7 +83,7 @@ class StepRecord:
     active_covs: np.ndarray
 
 
-class _Filter(abc.ABC):
+class FilterBase(abc.ABC):
     """Shared bookkeeping: time, twists, observations with their status, the landmark means.
 
     Parameters

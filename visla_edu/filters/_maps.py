@@ -18,12 +18,12 @@ import abc
 import numpy as np
 
 from visla_edu import ekf, lie, motion
-from visla_edu.filters._base import _Filter
+from visla_edu.filters._base import FilterBase
 
 __all__ = ["DeadReckoning", "LandmarkMapping", "VisualInertialOdometry"]
 
 
-class DeadReckoning(_Filter):
+class DeadReckoning(FilterBase):
     """IMU prediction only: ``mu <- mu exp(tau u)``, ``Sigma <- F Sigma F^T + W``.
 
     Its pose, with a 6x6 covariance of its own, is also the pose of mapping and VIO.
@@ -45,7 +45,7 @@ class DeadReckoning(_Filter):
         Covariance of the pose's right perturbation ``[v; w]``, ``initial_pose_sigma^2 I`` at
         the start.
     t, world_T_imu, landmarks, landmark_cov, record_landmarks
-        Shared by every mode (see :class:`visla_edu.filters._base._Filter`); no landmarks here.
+        Shared by every mode (see :class:`visla_edu.filters._base.FilterBase`); no landmarks here.
 
     Raises
     ------

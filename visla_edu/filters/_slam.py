@@ -37,7 +37,7 @@ import numpy as np
 from visla_edu import ekf
 from visla_edu.codes import OBS_GATED, OBS_USED
 from visla_edu.filters import _tracks
-from visla_edu.filters._base import _Filter
+from visla_edu.filters._base import FilterBase
 from visla_edu.filters._clones import CloneWindow
 from visla_edu.filters._forms import ERROR_FORMS
 from visla_edu.filters._state import ActiveSet
@@ -52,7 +52,7 @@ DENSE_PLACEHOLDER_VARIANCE = 1e6
 MAX_DENSE_BYTES = 4 * 2**30
 
 
-class JointSlam(CloneWindow, _Filter):
+class JointSlam(CloneWindow, FilterBase):
     """Joint EKF over ``[pose; landmarks]``, active set by default, textbook form if ``dense``.
 
     Parameters
