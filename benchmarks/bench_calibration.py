@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from visla_edu import diagnostics, odometry, simulate
+from visla_edu import diagnostics, simulate
+from visla_edu.diagnostics import odometry
 from visla_edu.diagnostics import CORRECTIONS
 
 NOISY_SEEDS = (0, 1, 2)

@@ -4,7 +4,7 @@ Usage::
 
     VISLA_EDU_DATA=/path/to/course/data python benchmarks/bench_odometry.py [--repeats 5]
 
-Measures :func:`visla_edu.odometry.visual_odometry` (RANSAC + Gauss-Newton on SE(3)), the
+Measures :func:`visla_edu.diagnostics.odometry.visual_odometry` (RANSAC + Gauss-Newton on SE(3)), the
 odometry the diagnostics use, and prints (the Kabsch odometry it replaced is gone; its figures
 are in the history of this file, commit 22f67b5):
 
@@ -36,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from visla_edu import lie, odometry, simulate
+from visla_edu import lie, simulate
+from visla_edu.diagnostics import odometry
 from visla_edu.metrics import chi2_bounds
 
 SEEDS = (0, 1, 2)
@@ -191,7 +192,7 @@ def bench_simulated():
 
 
 def _concatenate(results):
-    """One :class:`~visla_edu.odometry.VisualOdometry` with the pairs of several drives."""
+    """One :class:`~visla_edu.diagnostics.odometry.VisualOdometry` with the pairs of several drives."""
     arrays = {f.name: np.concatenate([getattr(r, f.name) for r in results])
               for f in dataclasses.fields(odometry.VisualOdometry) if f.name != "settings"}
     return odometry.VisualOdometry(**arrays, settings=results[0].settings)

@@ -26,7 +26,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from visla_edu import cli, release
+from visla_edu import cli
+from visla_edu.course import release
 from visla_edu.course import book
 
 ROOT = Path(__file__).resolve().parents[1]

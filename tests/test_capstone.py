@@ -1,4 +1,4 @@
-"""The capstone's loop skeleton (visla_edu.capstone) and its checks (notebook 12)."""
+"""The capstone's loop skeleton (visla_edu.course.capstone) and its checks (notebook 12)."""
 
 from dataclasses import replace
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from fdiff import fd_jacobian  # tests/fdiff.py
-from visla_edu import capstone, checks, data, lie, run, simulate
+from visla_edu import data, lie, run, simulate
+from visla_edu.course import capstone, checks
 from visla_edu.camera import StereoCamera
 from visla_edu.filters import FilterConfig, StepRecord
 from visla_edu.stepper import Stepper
@@ -27,7 +28,7 @@ def tiny():
 def test_the_library_parts_jacobians_match_finite_differences():
     """pose_jacobian (right perturbation mu exp(delta^)), landmark_jacobian, and the new-landmark
     sensitivity G of the reference add_landmarks, at random poses, against finite differences."""
-    from visla_edu.checks import _capstone
+    from visla_edu.course.checks import _capstone
 
     parts = capstone.library_parts()
     camera = StereoCamera(*simulate.default_rig())
@@ -57,7 +58,7 @@ def test_the_pose_updates_written_out_equal_the_library_update():
     -Ks dpi/dq o_T_i (mu^-1 m)^odot; their updates equal ekf.pose_update, whose Jacobians are
     checked against finite differences (tests/test_camera.py)."""
     from visla_edu import ekf
-    from visla_edu.checks import _filters
+    from visla_edu.course.checks import _filters
 
     parts = capstone.library_parts()
     camera = StereoCamera(*simulate.default_rig())

@@ -1,4 +1,4 @@
-"""Tests for visla_edu.checks: each check passes a correct answer and names each typical mistake.
+"""Tests for visla_edu.course.checks: each check passes a correct answer and names each typical mistake.
 
 For every exercise there is a correct implementation (tests/answers.py, written without the
 library function the check hides) and a list of deliberately wrong ones; each wrong one must
@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 
 import answers as A  # tests/answers.py
 from visla_edu import camera as cam
-from visla_edu import checks, lie
+from visla_edu import lie
+from visla_edu.course import checks
 
 
 def _passes(check, fn, capsys):
@@ -565,7 +566,7 @@ def test_invariant_pose_jacobian_check(capsys):
            "shares the pose's rotation")
     _fails(checks.check_invariant_pose_jacobian, lambda *a: A.landmark_jacobian(*a), "4x3")
     with pytest.raises(AssertionError, match="notebook's rig"):
-        from visla_edu.checks import _inputs
+        from visla_edu.course.checks import _inputs
         notebook = _inputs.stereo_camera()
         checks.check_invariant_pose_jacobian(
             lambda Ks, C, T, m: A.invariant_pose_jacobian(notebook.Ks, notebook.cam_T_imu, T, m), hidden=True)
@@ -691,7 +692,7 @@ def test_single_precision_and_complex_results_are_named(capsys):
 
 
 def _landmark_update_by_kalman(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var):
-    from visla_edu import kalman
+    from visla_edu.course import kalman
 
     H = A.landmark_jacobian(Ks, cam_T_imu, world_T_imu, m)
     z_pred = Ks @ A.projection(cam_T_imu @ np.linalg.inv(world_T_imu) @ np.r_[m, 1.0])
@@ -708,7 +709,7 @@ def _se3_exp_from_the_smoothers_jacobian(u):
 
 
 def _motion_residual_by_finite_differences(T_prev, T_next, step_inv):
-    from visla_edu import numdiff
+    from visla_edu.course import numdiff
 
     def e(T0, T1):
         return lie.se3_log(step_inv @ np.linalg.inv(T0) @ T1)
@@ -872,7 +873,7 @@ def test_checks_are_deterministic(capsys):
 
 
 def test_long_first_lines_are_wrapped():
-    from visla_edu.checks._core import fail
+    from visla_edu.course.checks._core import fail
 
     err = fail("average_nees_bounds", "a hint that is much too long for one line " * 3 + "\nthe details")
     first, rest = str(err).split("\n", 1)
@@ -882,7 +883,7 @@ def test_long_first_lines_are_wrapped():
 
 def test_compare_names_the_closest_mistake_not_the_first_that_matches_loosely():
     """Where mistakes nearly coincide (tiny angles), the first loose match is not the mistake."""
-    from visla_edu.checks._core import compare
+    from visla_edu.course.checks._core import compare
 
     expected = np.array([1.0, 2.0])
     got = expected + [3e-7, 0.0]  # wrong (beyond 1e-7 relative) but within the loose match of all below
@@ -941,7 +942,7 @@ def test_the_reference_fallbacks_agree_with_independent_answers():
 def test_among_mistakes_that_match_the_closest_one_is_named():
     """At an input too small to tell two mistakes apart within the tolerance, the one the answer
     equals is named, not the first in the list (se3_exp at 1e-6 rad: V = I and a swapped V)."""
-    from visla_edu.checks import _core
+    from visla_edu.course.checks import _core
 
     expected = np.array([1.0, 2.0, 3.0])
     got = expected + 4e-7
@@ -954,7 +955,7 @@ def test_among_mistakes_that_match_the_closest_one_is_named():
 def test_the_reference_gauss_newton_jacobian_matches_finite_differences():
     """J_i = R [I, -p_i^] of reference_gauss_newton_step is d r / d delta for T <- T exp(delta^)."""
     from fdiff import fd_jacobian  # tests/fdiff.py
-    from visla_edu.checks import _smoothing
+    from visla_edu.course.checks import _smoothing
 
     rng = np.random.default_rng(6)
     for n in (1, 4):

@@ -3,7 +3,7 @@
 * While a check runs the student's function, the library's version of the exercise raises
   "write your own ..." under every name (module attribute, ``from ... import`` alias, a library
   function that calls it) and comes back afterwards, even when the student's code raises.
-* A graded cell reloads ``visla_edu.checks``: nothing an answer cell assigned to the checks
+* A graded cell reloads ``visla_edu.course.checks``: nothing an answer cell assigned to the checks
   (or their submodules) survives.
 * A library function replaced by notebook code, or a module attribute reassigned while the
   check runs, fails the check (and the attribute is put back).
@@ -17,10 +17,11 @@ import pytest
 import scipy.linalg
 
 import answers as A  # tests/answers.py
-import visla_edu.checks
+import visla_edu.course.checks
 from visla_edu import camera as cam
-from visla_edu import checks, diagnostics, ekf, kalman, lie, metrics, motion
-from visla_edu.checks import _hiding
+from visla_edu import diagnostics, ekf, lie, metrics, motion
+from visla_edu.course import checks, kalman
+from visla_edu.course.checks import _hiding
 from visla_edu.simulate import default_rig
 
 FIRST_HAT = "write your own hat; the library's lie.hat is not available inside this check"
@@ -133,7 +134,7 @@ def test_library_versions_are_hidden(check, answer, hidden_name):
 
 def _library_copies():
     """Answers that take a whole exercise from the capstone's parts or the camera's batched projection."""
-    from visla_edu import capstone
+    from visla_edu.course import capstone
 
     parts = capstone.library_parts()  # bound in an answer cell, before the check
 
@@ -174,7 +175,7 @@ def test_kalman_predict_cannot_take_its_covariance_from_the_pose_prediction():
 
 def test_reference_jacobian_bound_before_a_reload_is_still_hidden():
     reference = checks.reference_numerical_jacobian  # bound in an answer cell
-    fresh = importlib.reload(visla_edu.checks)
+    fresh = importlib.reload(visla_edu.course.checks)
     err = _failure(fresh.check_numerical_jacobian, lambda f, x: reference(f, x))
     assert "numdiff.central_jacobian" in _first_line(err)
 
@@ -221,23 +222,23 @@ def test_allowed_library_functions_stay_available(capsys):
 
 def _fresh_checks():
     """What a graded cell does: reload the checks and use the result through a local name."""
-    return importlib.reload(visla_edu.checks)
+    return importlib.reload(visla_edu.course.checks)
 
 
 @pytest.fixture
 def reloaded_checks():
     """Reload the checks after the test, whatever it assigned."""
     yield
-    importlib.reload(visla_edu.checks)
+    importlib.reload(visla_edu.course.checks)
 
 
 def test_overwritten_check_does_not_survive_the_graded_cell(reloaded_checks):
     checks.check_hat = lambda f, hidden=False: None  # an answer cell tampering with the check
-    import visla_edu.checks as c
+    import visla_edu.course.checks as c
 
     c.check_so3_exp = lambda f, hidden=False: print("\u2713 so3_exp")
-    visla_edu.checks._kinematics.check_se3_exp = lambda f, hidden=False: None
-    visla_edu.checks._core.compare = lambda *args, **kwargs: None
+    visla_edu.course.checks._kinematics.check_se3_exp = lambda f, hidden=False: None
+    visla_edu.course.checks._core.compare = lambda *args, **kwargs: None
     fresh = _fresh_checks()
     wrong = lambda w: np.zeros((3, 3))  # noqa: E731
     assert "hat" in _first_line(_failure(fresh.check_hat, wrong))
@@ -268,7 +269,7 @@ def test_replaced_method_fails_the_check(monkeypatch):
 
 
 def test_changing_the_checks_while_they_run_fails_and_is_undone(reloaded_checks):
-    from visla_edu.checks import _core
+    from visla_edu.course.checks import _core
 
     compare = _core.compare
 
@@ -379,7 +380,7 @@ def test_a_table_of_the_visible_answers_fails_the_hidden_cases(capsys):
                                    checks.check_dense_covariance_bytes], ids=lambda c: c.__name__)
 def test_checks_with_fixed_cases_draw_more_hidden_cases_from_the_teachers_seed(check, monkeypatch, capsys):
     """A table of every case the source shows (visible and default hidden) fails under a teacher's seed."""
-    from visla_edu.checks import _core
+    from visla_edu.course.checks import _core
 
     answer, table = ANSWERS[check], {}
 
@@ -427,7 +428,7 @@ def test_the_hidden_cases_use_another_rig(name, capsys):
 
 
 def test_hidden_seed_comes_from_the_environment(monkeypatch, capsys):
-    from visla_edu.checks import _core
+    from visla_edu.course.checks import _core
 
     monkeypatch.delenv(_core.HIDDEN_SEED_VARIABLE, raising=False)
     default = _core.rng(hidden=True).normal(size=3)

@@ -9,7 +9,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from visla_edu import release
+from visla_edu.course import release
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTIONS = ROOT / "solutions"

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from visla_edu import cli, data, diagnostics, lie, metrics, run, simulate
-from visla_edu.capstone import CapstoneFilter, Steps, library_parts
+from visla_edu.course.capstone import CapstoneFilter, Steps, library_parts
 from visla_edu.filters import FilterConfig
 
 MODES = ("deadreckon", "mapping", "vio", "slam", "smooth", "window")

@@ -1,9 +1,9 @@
-"""The primer's linear Kalman filter (visla_edu.kalman) against independent formulas."""
+"""The primer's linear Kalman filter (visla_edu.course.kalman) against independent formulas."""
 
 import numpy as np
 import pytest
 
-from visla_edu import kalman
+from visla_edu.course import kalman
 
 
 def _random_covariance(rng, n):

@@ -33,7 +33,7 @@ pytest.importorskip("nbgrader", reason="nbgrader is in the dev extra: pip instal
 
 from nbgrader.api import Gradebook  # noqa: E402
 
-from visla_edu import release  # noqa: E402
+from visla_edu.course import release  # noqa: E402
 from visla_edu.course import STUDENT_NOTEBOOKS  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -56,10 +56,10 @@ GAMED = {
     }),
     "tampers": ("01_se3_kinematics", {
         "hat": "def hat(w):\n    return np.zeros((3, 3))\n\n\nchecks.check_hat = lambda f, hidden=False: None",
-        "so3_exp": ("import visla_edu.checks as c\n\n\ndef so3_exp(w):\n    return np.eye(3)\n\n\n"
+        "so3_exp": ("import visla_edu.course.checks as c\n\n\ndef so3_exp(w):\n    return np.eye(3)\n\n\n"
                     "c.check_so3_exp = lambda f, hidden=False: print('\u2713 so3_exp')"),
-        "se3_exp": ("import visla_edu.checks._core\n\n\ndef se3_exp(u):\n    return np.eye(4)\n\n\n"
-                    "visla_edu.checks._core.compare = lambda *args, **kwargs: None"),
+        "se3_exp": ("import visla_edu.course.checks._core\n\n\ndef se3_exp(u):\n    return np.eye(4)\n\n\n"
+                    "visla_edu.course.checks._core.compare = lambda *args, **kwargs: None"),
         "so3_log": "def so3_log(R):\n    return np.zeros(3)\n\n\nlie.so3_log = so3_log",
     }),
     "calls_method": ("02_stereo_camera", {

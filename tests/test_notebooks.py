@@ -5,7 +5,7 @@
   it byte for byte, with its release manifest.
 * Both are stored without outputs, each file under 1 MB.
 * The solutions are well formed for nbgrader (unique grade ids, balanced markers, a graded
-  check after every exercise, every check exists in ``visla_edu.checks`` and is called through a
+  check after every exercise, every check exists in ``visla_edu.course.checks`` and is called through a
   fresh copy of the checks, hidden tests in every notebook).
 * Every student notebook runs top to bottom with errors only where an exercise is still a
   stub: in the stub cell itself or in the graded check right after it.
@@ -21,7 +21,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from visla_edu import checks, release
+from visla_edu.course import checks, release
 from visla_edu.course import STUDENT_NOTEBOOKS, manifest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -94,7 +94,7 @@ def test_stored_without_outputs_and_small(folder, name):
     nbformat.validate(nb)
     for index, cell in enumerate(nb.cells):
         if cell.cell_type == "code":
-            assert cell.outputs == [], f"{path} cell {index} has outputs: run `python -m visla_edu.release --clean-sources`"
+            assert cell.outputs == [], f"{path} cell {index} has outputs: run `python -m visla_edu.course.release --clean-sources`"
             assert cell.execution_count is None, f"{path} cell {index} has an execution count"
     assert nb.metadata["kernelspec"]["name"] == "python3"
 
@@ -141,13 +141,13 @@ def test_solution_notebook_structure(name):
 def _check_graded_cell(source, where):
     """A graded cell loads the checks fresh and calls them only through that fresh copy."""
     lines = [line for line in source.split("\n") if line.strip() and not line.startswith("###")]
-    assert lines[0].startswith("import importlib, visla_edu.checks"), f"{where}: starts with {lines[0]!r}"
-    assert lines[1] == "_checks = importlib.reload(visla_edu.checks)", f"{where}: no fresh checks: {lines[1]!r}"
+    assert lines[0].startswith("import importlib, visla_edu.course.checks"), f"{where}: starts with {lines[0]!r}"
+    assert lines[1] == "_checks = importlib.reload(visla_edu.course.checks)", f"{where}: no fresh checks: {lines[1]!r}"
     for line in lines[2:]:
         assert re.fullmatch(r"_checks\.check_\w+\(\w+(, hidden=True)?\)", line), (
             f"{where}: a graded cell only calls the fresh checks: {line!r}")
     called = re.findall(r"_checks\.(check_\w+)\(", source)
-    assert called, f"{where}: a graded cell calls a visla_edu.checks function"
+    assert called, f"{where}: a graded cell calls a visla_edu.course.checks function"
     for fn in called:
         assert fn in checks.__all__, f"{where}: checks.{fn} does not exist"
 

@@ -1,4 +1,4 @@
-"""Tests of visla_edu.odometry: the robust stereo visual odometry (RANSAC + Gauss-Newton on SE(3)).
+"""Tests of visla_edu.diagnostics.odometry: the robust stereo visual odometry (RANSAC + Gauss-Newton on SE(3)).
 
 Synthetic pairs and simulated drives carry their own truth; the course drive 0020 is checked
 against its KITTI ground truth when VISLA_EDU_DATA is set (skipped otherwise). Accuracy
@@ -10,7 +10,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from visla_edu import camera, lie, odometry, simulate
+from visla_edu import camera, lie, simulate
+from visla_edu.diagnostics import odometry
 from visla_edu.dataset import Dataset
 from fdiff import fd_jacobian  # tests/fdiff.py
 

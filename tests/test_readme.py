@@ -26,7 +26,7 @@ def test_ci_runs_the_readme_test_command_verbatim():
 
 def test_the_readme_notebook_table_lists_every_notebook_with_its_points():
     """The README's hand-written table follows the notebooks' nbgrader metadata (as TEACHING.md's generated one)."""
-    from visla_edu import release
+    from visla_edu.course import release
 
     rows = re.findall(r"^\| `(\w+)` \| .* \| (\d+) \|$", (ROOT / "README.md").read_text(), flags=re.M)
     expected = [(path.stem, str(round(sum(points for _, points in release._graded_cells(release._read(path))))))

@@ -12,7 +12,7 @@ import nbformat
 import pytest
 
 import fuzzgen as fz  # tests/fuzzgen.py
-from visla_edu import release
+from visla_edu.course import release
 from visla_edu.course import STUDENT_NOTEBOOKS, manifest
 
 SOLUTIONS = STUDENT_NOTEBOOKS.parents[2] / "solutions"

@@ -12,7 +12,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from visla_edu import release
+from visla_edu.course import release
 from visla_edu.course import STUDENT_NOTEBOOKS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,9 +81,9 @@ GAMED_SOURCES = [
     "import importlib, types\nimportlib.reload = lambda m: types.SimpleNamespace(check_hat=print)",
     "get_ipython().input_transformers_post.append(lambda lines: [])",
     "lie.hat.__code__ = fake.__code__",
-    "sys.modules['visla_edu.checks'] = fake",
+    "sys.modules['visla_edu.course.checks'] = fake",
     "checks.check_hat = lambda f, hidden=False: None",
-    "visla_edu.checks._core.compare = lambda *args, **kwargs: None",
+    "visla_edu.course.checks._core.compare = lambda *args, **kwargs: None",
     "motion.dead_reckon = dead_reckon",
     "setattr(lie, 'hat', fake)",
 ]

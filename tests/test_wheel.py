@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from visla_edu import release
+from visla_edu.course import release
 from visla_edu.course import STUDENT_NOTEBOOKS
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -432,7 +432,7 @@ def _cmd_stepper(args):
 
 
 def _cmd_release(args):
-    from visla_edu import release
+    from visla_edu.course import release
     from visla_edu.course import STUDENT_NOTEBOOKS
 
     root = Path(__file__).resolve().parent.parent

@@ -2,7 +2,7 @@
 
 * ``notebooks/`` (:data:`STUDENT_NOTEBOOKS`), package data: the student edition of the course,
   generated from the repository's ``solutions/`` by ``visla-edu release``
-  (:mod:`visla_edu.release`) and checked in. It is the only copy: the wheel carries it (and
+  (:mod:`visla_edu.course.release`) and checked in. It is the only copy: the wheel carries it (and
   nothing of the solutions), so a student who ``pip install``-ed the package has it.
 * :mod:`visla_edu.course.manifest`: what ``release`` last wrote into a folder (sha256 digests in
   ``.release.json`` beside the notebooks), so that a release never overwrites a notebook edited

@@ -15,7 +15,7 @@ which exits afterwards, so nothing is put back):
 1. :func:`hide_library` swaps the code of every function and method defined in a loaded
    hidden module for a stub that records the call (:data:`HIDDEN_CALLS`) and raises
    :class:`SubmissionUsedLibrary`, so every alias fails alike (as
-   :func:`visla_edu.checks._hiding.hide` does for the exercise checks); a call the submission
+   :func:`visla_edu.course.checks._hiding.hide` does for the exercise checks); a call the submission
    catches is still recorded;
 2. :func:`block_imports` refuses to load a hidden module that is not loaded yet, and to
    reload one that is (``importlib.reload`` would rebuild it with its real code);
@@ -32,14 +32,14 @@ import ast
 import sys
 import types
 
-from visla_edu.checks import LibraryFunctionHidden, function_label
+from visla_edu.course.checks import LibraryFunctionHidden, function_label
 
 __all__ = ["ALLOWED_MODULES", "ALLOWED_PACKAGES", "ALLOWED_NAMES", "HIDDEN_CALLS", "SubmissionUsedLibrary", "is_hidden", "hide_library",
            "block_imports", "scan_source"]
 
 #: visla_edu modules a submission may use while it is graded.
 ALLOWED_MODULES = ("visla_edu", "visla_edu.lie", "visla_edu.camera", "visla_edu.dataset", "visla_edu.codes",
-                   "visla_edu.metrics", "visla_edu.numdiff", "visla_edu.kalman", "visla_edu.filters",
+                   "visla_edu.metrics", "visla_edu.course.numdiff", "visla_edu.course.kalman", "visla_edu.filters",
                    "visla_edu.filters._config", "visla_edu.settings", "visla_edu.validation")
 #: Packages whose every submodule a submission may use (the camera model is a package).
 ALLOWED_PACKAGES = ("visla_edu.camera",)
@@ -64,7 +64,7 @@ class SubmissionUsedLibrary(LibraryFunctionHidden):
     Attributes
     ----------
     hidden : str
-        The function's label (:func:`visla_edu.checks.function_label`), e.g. ``"run.make_filter"``.
+        The function's label (:func:`visla_edu.course.checks.function_label`), e.g. ``"run.make_filter"``.
     """
 
     def __init__(self, hidden):

@@ -2,7 +2,7 @@
 
 **Pages.** One per notebook of ``solutions/`` (every ``*.ipynb`` there, in file-name order, found
 when the book is built), each the **student edition** of the notebook
-(:func:`visla_edu.release.student_notebook`: solutions replaced by stubs, hidden tests removed,
+(:func:`visla_edu.course.release.student_notebook`: solutions replaced by stubs, hidden tests removed,
 answers to the questions replaced by ``YOUR ANSWER HERE``) with its outputs and figures, and an
 index page: the table of contents and how to run the notebooks (a clone, Binder, Colab). A
 notebook without code (a page of notation, say) is a page like the others, without execution.
@@ -44,7 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from visla_edu import release
+from visla_edu.course import release
 
 __all__ = ["BookError", "BOOK_PACKAGES", "STUDENT_FOLDER", "CELL_TIMEOUT", "require_book_tools", "notebook_paths",
            "check_site_folder", "student_page", "build_book", "default_solutions"]
@@ -264,7 +264,7 @@ def student_page(path, work_dir, course_data=True):
     BookError
         A cell outside the exercises raised an error.
     ValueError
-        Unbalanced solution, hidden-test or answer markers (:func:`visla_edu.release.student_notebook`).
+        Unbalanced solution, hidden-test or answer markers (:func:`visla_edu.course.release.student_notebook`).
     """
     import nbformat
 

@@ -1,6 +1,6 @@
 """What ``visla-edu release`` last wrote into a folder: ``.release.json``, one sha256 per file.
 
-``release`` (:func:`visla_edu.release.make_student_notebooks`) writes the student notebooks and
+``release`` (:func:`visla_edu.course.release.make_student_notebooks`) writes the student notebooks and
 then this manifest beside them, and the manifest is committed with them. Before it replaces a
 notebook, release compares the file's digest with the recorded one:
 
@@ -21,7 +21,7 @@ notebooks, so the test that the folder is in sync checks it too)::
     }
 
 A digest is that of the file's bytes, which are the notebook's text in UTF-8
-(:func:`visla_edu.release.notebook_text`).
+(:func:`visla_edu.course.release.notebook_text`).
 """
 
 import hashlib

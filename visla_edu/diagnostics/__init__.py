@@ -11,7 +11,7 @@ frames. Two kinds of evidence measure them:
   candidate, and a bootstrap over landmarks says whether the best one is better than every
   other with 95% confidence. It works on sparse drives too.
 * **visual odometry** (:mod:`._vo`, :mod:`._motion`): the robust RANSAC stereo odometry
-  (:func:`visla_edu.odometry.visual_odometry`) against the IMU: slopes of the extrinsic check,
+  (:func:`visla_edu.diagnostics.odometry.visual_odometry`) against the IMU: slopes of the extrinsic check,
   rotation residual per lag, gyro bias and velocity scale, each with a standard error and a
   verdict.
 
@@ -57,7 +57,7 @@ from visla_edu.diagnostics._vo import (
     ExtrinsicCheck,
     check_extrinsics,
 )
-from visla_edu.odometry import VisualOdometry, visual_odometry
+from visla_edu.diagnostics.odometry import VisualOdometry, visual_odometry
 
 __all__ = [
     "CORRECTIONS",

@@ -306,7 +306,7 @@ def _vo_evidence(dataset, check, slope_lag, imu_T_cam, lag):
 def _check_inputs(dataset):
     """TypeError for a non-dataset, ValueError naming the first bad time stamp or velocity sample.
 
-    Pixels are checked by the odometry (:func:`visla_edu.odometry.visual_odometry`).
+    Pixels are checked by the odometry (:func:`visla_edu.diagnostics.odometry.visual_odometry`).
     """
     if not isinstance(dataset, Dataset):
         raise TypeError(f"calibrate: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")

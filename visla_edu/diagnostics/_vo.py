@@ -1,6 +1,6 @@
 """Visual-odometry evidence: the extrinsic axes check and the time alignment.
 
-The robust stereo odometry (:func:`visla_edu.odometry.visual_odometry`) gives the left
+The robust stereo odometry (:func:`visla_edu.diagnostics.odometry.visual_odometry`) gives the left
 camera's motion ``cam_T_next`` between consecutive frames. Mapped into the IMU frame through
 a candidate ``imu_T_cam`` (``imu_T_cam cam_T_next cam_T_imu``) it must agree with the IMU's own
 motion ``exp(tau_t u[t + lag])``: a calibration whose axes disagree turns the slope of one on
@@ -18,7 +18,7 @@ import numpy as np
 
 from visla_edu import lie
 from visla_edu.motion import select_twists
-from visla_edu.odometry import visual_odometry
+from visla_edu.diagnostics.odometry import visual_odometry
 
 __all__ = [
     "CORRECTIONS",
@@ -71,7 +71,7 @@ def odometry_of(dataset):
 
     Returns
     -------
-    visla_edu.odometry.VisualOdometry
+    visla_edu.diagnostics.odometry.VisualOdometry
     """
     if "visual_odometry" not in dataset.extra:
         dataset.extra["visual_odometry"] = visual_odometry(dataset)
@@ -83,7 +83,7 @@ def vo_pairs(vo):
 
     Parameters
     ----------
-    vo : visla_edu.odometry.VisualOdometry
+    vo : visla_edu.diagnostics.odometry.VisualOdometry
 
     Returns
     -------
@@ -98,7 +98,7 @@ def vo_motion_in_imu_frame(vo, imu_T_cam):
 
     Parameters
     ----------
-    vo : visla_edu.odometry.VisualOdometry
+    vo : visla_edu.diagnostics.odometry.VisualOdometry
         Its ``cam_T_next`` (T - 1, 4, 4): the left camera at ``t + 1`` in the one at ``t``.
     imu_T_cam : ndarray, shape (4, 4)
         The calibration (or a candidate correction of it).
@@ -117,7 +117,7 @@ def vo_in_imu_frame(vo, imu_T_cam):
 
     Parameters
     ----------
-    vo : visla_edu.odometry.VisualOdometry
+    vo : visla_edu.diagnostics.odometry.VisualOdometry
     imu_T_cam : ndarray, shape (4, 4)
 
     Returns

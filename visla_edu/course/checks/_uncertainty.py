@@ -3,8 +3,8 @@
 import numpy as np
 
 from visla_edu import lie, motion
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import NEAR_ZERO_HINT, random_covariance, random_pose, swap_twist, twists
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
+from visla_edu.course.checks._inputs import NEAR_ZERO_HINT, random_covariance, random_pose, swap_twist, twists
 
 __all__ = ["check_curly_hat", "check_pose_transition", "check_left_pose_prediction",
            "reference_left_pose_prediction"]
@@ -16,7 +16,7 @@ def check_curly_hat(curly_hat, hidden=False):
 
     On ``[1, 2, 3, 4, 5, 6]`` and 4 random twists (hidden: the zero twist, a tiny rotation
     ``[0, 0, 0, 1e-9, 0, 0]`` and 4 random ones); compares with :func:`visla_edu.lie.curly_hat`
-    (default tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the twist
+    (default tolerances of :func:`~visla_edu.course.checks._core.compare`). Recognises the twist
     order, ``hat(v)`` in the lower-left block, ``curly_hat(-u)`` and the transpose. Hides
     ``lie.curly_hat``.
 
@@ -65,7 +65,7 @@ def check_curly_hat(curly_hat, hidden=False):
 def check_pose_transition(pose_transition, hidden=False):
     """Exercise 06: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
 
-    On every other twist of :func:`~visla_edu.checks._inputs.twists` (10 visible, 8 hidden),
+    On every other twist of :func:`~visla_edu.course.checks._inputs.twists` (10 visible, 8 hidden),
     each with a step ``tau`` uniform in 0.05 to 0.2 s; a 4x4 result fails at once. Compares
     with :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Recognises a
     missing minus sign, the transpose, the twist order and the first-order ``I - tau
@@ -122,7 +122,7 @@ def reference_left_pose_prediction(mu, Sigma, u, tau, W):
 
     The pose part of :func:`visla_edu.motion.predict_invariant_covariance` (the invariant
     filter's error is the left perturbation); notebook cells fall back on it
-    (:func:`~visla_edu.checks._core.student_or_reference`).
+    (:func:`~visla_edu.course.checks._core.student_or_reference`).
 
     Parameters
     ----------
@@ -189,7 +189,7 @@ def check_left_pose_prediction(left_pose_prediction, hidden=False):
     transition is the identity; the step's body-frame noise enters rotated into the world frame;
     ``J_r(tau u)`` is dropped as in the right form): the pose part of
     :func:`visla_edu.motion.predict_invariant_covariance`. On every third twist of
-    :func:`~visla_edu.checks._inputs.twists` (tiny angles and rest among them), the last from
+    :func:`~visla_edu.course.checks._inputs.twists` (tiny angles and rest among them), the last from
     the identity pose, with random covariances and per-axis motion noise (hidden: other draws);
     compares the mean (``atol=1e-9``) and the covariance (``rtol=1e-7``, ``atol=1e-12``).
     Recognises the right perturbation's ``F Sigma F^T + W``, ``F`` applied as well, the noise

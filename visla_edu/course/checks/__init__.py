@@ -17,12 +17,12 @@ library version and
 
 While the student's function runs, the library's own version of the exercise is hidden
 (calling it, under any name, raises "write your own ...") and the library must stay as
-installed; see :mod:`visla_edu.checks._hiding`.
+installed; see :mod:`visla_edu.course.checks._hiding`.
 
 Graded cells load a fresh copy, so that nothing an answer cell assigned to the checks counts::
 
-    import importlib, visla_edu.checks
-    _checks = importlib.reload(visla_edu.checks)
+    import importlib, visla_edu.course.checks
+    _checks = importlib.reload(visla_edu.course.checks)
     _checks.check_hat(hat)
 
 Re-executing this file (``importlib.reload``) reloads each submodule below, in order.
@@ -53,30 +53,30 @@ def _load_submodules():
 
 _load_submodules()
 
-from visla_edu.checks._camera import (check_init_landmark, check_project, check_stereo_matrix,  # noqa: E402
+from visla_edu.course.checks._camera import (check_init_landmark, check_project, check_stereo_matrix,  # noqa: E402
                                       check_triangulate)
-from visla_edu.checks._capstone import (capstone_steps, check_capstone_landmarks,  # noqa: E402
+from visla_edu.course.checks._capstone import (capstone_steps, check_capstone_landmarks,  # noqa: E402
                                         check_capstone_predict, check_capstone_slam, reference_capstone_steps)
-from visla_edu.checks._consistency import (check_align_rigid, check_average_nees_bounds, check_gate,  # noqa: E402
+from visla_edu.course.checks._consistency import (check_align_rigid, check_average_nees_bounds, check_gate,  # noqa: E402
                                            check_motion_noise, check_nees)
-from visla_edu.checks._core import student_or_reference  # noqa: E402
-from visla_edu.checks._data import check_observations_at, check_track_spans  # noqa: E402
-from visla_edu.checks._diagnostics import check_white_noise  # noqa: E402
-from visla_edu.checks._filters import (check_dense_covariance_bytes, check_landmark_observation_noise,  # noqa: E402
+from visla_edu.course.checks._core import student_or_reference  # noqa: E402
+from visla_edu.course.checks._data import check_observations_at, check_track_spans  # noqa: E402
+from visla_edu.course.checks._diagnostics import check_white_noise  # noqa: E402
+from visla_edu.course.checks._filters import (check_dense_covariance_bytes, check_landmark_observation_noise,  # noqa: E402
                                        check_landmark_update, check_marginalize, check_pose_update,
                                        check_slam_jacobian, reference_dense_covariance_bytes)
-from visla_edu.checks._hiding import LibraryFunctionHidden, function_label  # noqa: E402
-from visla_edu.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
+from visla_edu.course.checks._hiding import LibraryFunctionHidden, function_label  # noqa: E402
+from visla_edu.course.checks._jacobians import (check_landmark_jacobian, check_numerical_jacobian, check_odot,  # noqa: E402
                                          check_pose_jacobian, check_projection_jacobian,
                                          reference_numerical_jacobian)
-from visla_edu.checks._kinematics import (check_dead_reckon, check_hat, check_se3_exp, check_so3_exp,  # noqa: E402
+from visla_edu.course.checks._kinematics import (check_dead_reckon, check_hat, check_se3_exp, check_so3_exp,  # noqa: E402
                                           check_so3_log)
-from visla_edu.checks._observability import (check_invariant_pose_jacobian, check_slam_null_space,  # noqa: E402
+from visla_edu.course.checks._observability import (check_invariant_pose_jacobian, check_slam_null_space,  # noqa: E402
                                              reference_slam_null_space)
-from visla_edu.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
-from visla_edu.checks._uncertainty import (check_curly_hat, check_left_pose_prediction,  # noqa: E402
+from visla_edu.course.checks._primer import check_kalman_predict, check_kalman_update_1d  # noqa: E402
+from visla_edu.course.checks._uncertainty import (check_curly_hat, check_left_pose_prediction,  # noqa: E402
                                            check_pose_transition, reference_left_pose_prediction)
-from visla_edu.checks._smoothing import (check_gauss_newton_step, check_motion_residual,  # noqa: E402
+from visla_edu.course.checks._smoothing import (check_gauss_newton_step, check_motion_residual,  # noqa: E402
                                          check_pose_marginal_covariance, check_schur_reduce,
                                          reference_gauss_newton_step, reference_pose_marginal_covariance,
                                          reference_schur_reduce)

@@ -3,7 +3,7 @@
 import numpy as np
 
 from visla_edu import diagnostics
-from visla_edu.checks._core import as_array, compare, exercise_check, ok, rng, student
+from visla_edu.course.checks._core import as_array, compare, exercise_check, ok, rng, student
 
 __all__ = ["check_white_noise"]
 

@@ -3,9 +3,10 @@
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import capstone, ekf, lie
-from visla_edu.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, project_with,
+from visla_edu import ekf, lie
+from visla_edu.course import capstone
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
+from visla_edu.course.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, project_with,
                                       random_pose, rig, rotation_transposed, stereo_camera, wrong_inverses)
 
 __all__ = ["check_stereo_matrix", "check_project", "check_triangulate", "check_init_landmark"]
@@ -27,7 +28,7 @@ def check_stereo_matrix(stereo_matrix, hidden=False):
     """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``.
 
     Compares with :func:`visla_edu.camera.stereo_matrix` (default tolerances of
-    :func:`~visla_edu.checks._core.compare`) for 4 calibrations: the simulator's rig, a
+    :func:`~visla_edu.course.checks._core.compare`) for 4 calibrations: the simulator's rig, a
     KITTI-like one and 2 random ones (hidden: 4 random ones). Recognises a flipped or
     unscaled baseline term and a transposed ``Ks``. Hides ``camera.stereo_matrix``.
 

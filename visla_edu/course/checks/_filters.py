@@ -4,9 +4,10 @@ marginals."""
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import capstone, ekf, kalman, lie
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, not_se3, notebook_rig_variant, points_in_view,
+from visla_edu import ekf, lie
+from visla_edu.course import capstone, kalman
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.course.checks._inputs import (TRANSPOSED_R_HINT, not_se3, notebook_rig_variant, points_in_view,
                                       random_covariance, random_pose, rotation_transposed, stereo_camera,
                                       wrong_inverses)
 
@@ -493,7 +494,7 @@ def check_marginalize(marginalize, hidden=False):
 
     For 3 random covariances and index sets (hidden: 4); compares with
     ``Sigma[np.ix_(keep, keep)]`` (default tolerances of
-    :func:`~visla_edu.checks._core.compare`). Recognises the Schur complement (the conditional,
+    :func:`~visla_edu.course.checks._core.compare`). Recognises the Schur complement (the conditional,
     not the marginal) and a detour through the information matrix. Hides the ``marginalize`` of
     ``capstone.library_parts()``.
 

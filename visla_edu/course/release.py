@@ -28,10 +28,10 @@ notebooks can be checked in and a test can prove they are in sync. Beside them r
 the digests of what it wrote (:mod:`visla_edu.course.manifest`), and it refuses to replace a
 notebook that no longer has its digest (someone edited it) unless forced::
 
-    python -m visla_edu.release                 # solutions/ -> visla_edu/course/notebooks/
-    python -m visla_edu.release --force         # also replace notebooks edited by hand
-    python -m visla_edu.release --check         # exit 1 and list the drifted files
-    python -m visla_edu.release --clean-sources # also strip outputs from solutions/
+    python -m visla_edu.course.release                 # solutions/ -> visla_edu/course/notebooks/
+    python -m visla_edu.course.release --force         # also replace notebooks edited by hand
+    python -m visla_edu.course.release --check         # exit 1 and list the drifted files
+    python -m visla_edu.course.release --clean-sources # also strip outputs from solutions/
 
 Nothing here shells out to nbgrader; only :mod:`nbformat` is used.
 """
@@ -503,7 +503,7 @@ def _teaching_next_to(src_dir):
 
 
 def main(argv=None):
-    """Command line: ``python -m visla_edu.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
+    """Command line: ``python -m visla_edu.course.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
 
     Without ``--check``: writes the student notebooks (:func:`make_student_notebooks`; one
     edited by hand stops everything unless ``--force``), then with ``--clean-sources`` strips
@@ -533,7 +533,7 @@ def main(argv=None):
         ``--help``.
     """
     parser = argparse.ArgumentParser(
-        prog="python -m visla_edu.release",
+        prog="python -m visla_edu.course.release",
         description="Generate the student notebooks (stubs, no hidden tests, no outputs) from the solutions.",
     )
     parser.add_argument("--src", default=_DEFAULT_SRC, help="solution notebooks folder (default: the project's "
@@ -558,7 +558,7 @@ def main(argv=None):
                 drifted.append(teaching.name)
             if drifted:
                 print(f"out of date in {args.dst}: {', '.join(drifted)}\n"
-                      f"run: python -m visla_edu.release --src {args.src} --dst {args.dst}")
+                      f"run: python -m visla_edu.course.release --src {args.src} --dst {args.dst}")
                 return 1
             print(f"{args.dst} is in sync with {args.src}")
             return 0

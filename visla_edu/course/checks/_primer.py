@@ -2,9 +2,10 @@
 
 import numpy as np
 
-from visla_edu import ekf, kalman, motion
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.checks._inputs import random_covariance
+from visla_edu import ekf, motion
+from visla_edu.course import kalman
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.course.checks._inputs import random_covariance
 
 __all__ = ["check_kalman_update_1d", "check_kalman_predict"]
 
@@ -59,7 +60,7 @@ def check_kalman_update_1d(kalman_update_1d, hidden=False):
     """Exercise 00b: ``kalman_update_1d(mean, variance, z, noise_variance) -> (mean, variance)``.
 
     ``L = variance / (variance + V)`` (``V`` the noise variance), ``(mean + L (z - mean), (1 - L) variance)``: compares
-    with :func:`visla_edu.kalman.update_1d` (``rtol=1e-9``, ``atol=1e-12``) on 4 fixed cases
+    with :func:`visla_edu.course.kalman.update_1d` (``rtol=1e-9``, ``atol=1e-12``) on 4 fixed cases
     (hidden: 4 random ones, a certain prior with variance 0 and a perfect sensor with noise
     variance 0). The result must be a pair of single numbers. Recognises a variance that does
     not shrink, a swapped gain, standard deviations in the gain, a flipped innovation,
@@ -119,7 +120,7 @@ def check_kalman_predict(kalman_predict, hidden=False):
 
     On a position-velocity model (step 0.1 s; hidden: 0.25 s) and random models with 3 and 4
     states (hidden: 1, 3 and 5), ``F`` not symmetric; compares mean and covariance with
-    :func:`visla_edu.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Recognises a mean that
+    :func:`visla_edu.course.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Recognises a mean that
     does not move, ``F.T @ x``, a missing ``W``, ``F.T Sigma F``, a missing or untransposed right
     factor, and ``F (Sigma + W) F^T``. Hides ``kalman.predict`` and ``motion.predict_pose_covariance``
     (``F P F^T + W`` for any size).

@@ -4,7 +4,7 @@
 error of about ``1e-16 |f| / eps``). Notebook 03 builds its own and compares; the course's
 exercise checks use this one (as ``checks.reference_numerical_jacobian``).
 
-It lives outside :mod:`visla_edu.checks` so that the function object stays the same when a
+It lives outside :mod:`visla_edu.course.checks` so that the function object stays the same when a
 graded cell reloads the checks: a check can then hide it from the student's code, whatever
 name the student bound it to.
 """

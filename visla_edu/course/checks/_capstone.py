@@ -2,7 +2,7 @@
 
 Each check first tests the student's function on random states (naming the usual mistakes),
 with spy parts that record which of the notebooks' functions it calls (the assembly must go
-through ``parts``), then runs :class:`visla_edu.capstone.CapstoneFilter` on a fixed
+through ``parts``), then runs :class:`visla_edu.course.capstone.CapstoneFilter` on a fixed
 simulated drive (the hidden cases: another seed) with the student's function in place and
 compares the trajectory with the reference (for SLAM: the library's ``slam_error="right"``
 joint filter, which a correct assembly reproduces to rounding error).
@@ -13,9 +13,10 @@ from dataclasses import fields, replace
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import capstone, ekf, lie, metrics, motion, run
-from visla_edu.checks._core import _hidden_seed, as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.checks._inputs import points_in_view, random_covariance, random_pose, stereo_camera
+from visla_edu import ekf, lie, metrics, motion, run
+from visla_edu.course import capstone
+from visla_edu.course.checks._core import _hidden_seed, as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.course.checks._inputs import points_in_view, random_covariance, random_pose, stereo_camera
 from visla_edu.filters import FilterConfig
 
 __all__ = ["check_capstone_predict", "check_capstone_landmarks", "check_capstone_slam", "capstone_steps",
@@ -88,14 +89,14 @@ REFERENCE = capstone.Steps(_reference_predict, _reference_add_landmarks, _refere
 
 
 def reference_capstone_steps():
-    """The checks' reference assembly as :class:`visla_edu.capstone.Steps` (nothing printed).
+    """The checks' reference assembly as :class:`visla_edu.course.capstone.Steps` (nothing printed).
 
     Notebook 07 runs the capstone's VIO loop with the student's ``pose_update`` before the
     capstone's own exercises exist; the loop's prediction is this reference.
 
     Returns
     -------
-    visla_edu.capstone.Steps
+    visla_edu.course.capstone.Steps
     """
     return REFERENCE
 
@@ -193,7 +194,7 @@ def check_capstone_predict(predict, hidden=False):
     block (``rtol=1e-9``; ``atol=1e-9`` for the pose, 1e-12 for the covariance). Recognises the
     step on the left, a twist not scaled by ``tau``, a missing ``W``, the cross-covariance left
     alone and ``F`` on the wrong side. The function must call ``parts.pose_transition`` and
-    ``parts.se3_exp``. Then :func:`visla_edu.capstone.run_capstone` (VIO) on ``sim-tiny``
+    ``parts.se3_exp``. Then :func:`visla_edu.course.capstone.run_capstone` (VIO) on ``sim-tiny``
     (hidden: a ``"tiny"`` drive simulated with another seed) with the student's ``predict``:
     every position must stay within :data:`LOOP_TOLERANCE` of the same loop with the
     reference assembly. Hides the library's ``motion.predict_pose``,
@@ -382,7 +383,7 @@ def check_capstone_slam(slam_update, hidden=False):
     landmarks ``rtol=1e-7``, ``atol=1e-8``. Recognises the correction on the left, its sign, a
     covariance that does not change, and the landmarks left in place. The function must call
     ``parts.project``, ``parts.pose_jacobian``, ``parts.landmark_jacobian``,
-    ``parts.slam_jacobian`` and ``parts.se3_exp``. Then :func:`visla_edu.capstone.run_capstone`
+    ``parts.slam_jacobian`` and ``parts.se3_exp``. Then :func:`visla_edu.course.capstone.run_capstone`
     (joint SLAM) on the drive of :func:`check_capstone_predict` must stay within
     :data:`LOOP_TOLERANCE` of ``run.run_filter(ds, "slam", config)`` with
     ``slam_error="right"``. Hides the library's joint and pose updates, the camera's Jacobians
@@ -456,7 +457,7 @@ def _check_slam_loop(name, call, hidden):
 
 # ---------------------------------------------------------------- for the notebook's later cells
 def capstone_steps(predict, add_landmarks, slam_update):
-    """:class:`visla_edu.capstone.Steps` of the student's functions, the reference for any unfinished one.
+    """:class:`visla_edu.course.capstone.Steps` of the student's functions, the reference for any unfinished one.
 
     A function is used if it runs and agrees with the reference on a small case (one line is
     printed per function), so the notebook's later cells run before every exercise is done.
@@ -470,11 +471,11 @@ def capstone_steps(predict, add_landmarks, slam_update):
     ----------
     predict, add_landmarks, slam_update : callable
         The student's assembly functions, with the signatures of
-        :class:`visla_edu.capstone.Steps`.
+        :class:`visla_edu.course.capstone.Steps`.
 
     Returns
     -------
-    visla_edu.capstone.Steps
+    visla_edu.course.capstone.Steps
         Each student function that agrees, else the checks' reference assembly for it.
     """
     generator, library = np.random.default_rng(9), capstone.library_parts()

@@ -32,7 +32,7 @@ __all__ = ["LibraryFunctionHidden", "function_label", "hidden_message", "hide", 
            "verify_foundations"]
 
 #: The ``visla_edu`` package folder: library code must come from files under it.
-PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
 
 #: The builtins the checks' verdicts use (``bool(np.allclose(...))``, ``float(error) <= tol``...).
 TRUSTED_BUILTINS = ("abs", "all", "any", "bool", "float", "int", "isinstance", "len", "list", "max", "min",
@@ -54,8 +54,9 @@ class LibraryFunctionHidden(RuntimeError):
 def function_label(fn):
     """Short dotted name of a function: ``lie.hat``, ``camera.StereoCamera.predict``, ``scipy.linalg.expm``.
 
-    visla_edu's own functions drop the package name; others (scipy's) keep it. Private module
-    names (a leading underscore) are left out.
+    visla_edu's own functions drop the package name, and course scaffolding its ``course``
+    package too (``numdiff.central_jacobian``, as a notebook imports it); others (scipy's) keep
+    it. Private module names (a leading underscore) are left out.
 
     Parameters
     ----------
@@ -65,10 +66,12 @@ def function_label(fn):
     Returns
     -------
     str
-        The module path without ``visla_edu`` and without private parts, then ``fn.__qualname__``,
+        The module path without ``visla_edu`` (and ``course``) and private parts, then ``fn.__qualname__``,
         joined by dots.
     """
     package, *rest = fn.__module__.split(".")
+    if package == "visla_edu" and rest[:1] == ["course"]:
+        rest = rest[1:]
     parts = ([] if package == "visla_edu" else [package]) + [p for p in rest if not p.startswith("_")]
     return ".".join(parts + [fn.__qualname__])
 
@@ -110,7 +113,7 @@ def _stub_code(fn, message):
     source = (f"def {fn.__name__}(*args, **kwargs):\n"
               f"    raise __import__('sys').modules[{__name__!r}].LibraryFunctionHidden({message!r})\n")
     namespace = {}
-    exec(compile(source, f"<hidden by visla_edu.checks: {function_label(fn)}>", "exec"), namespace)  # noqa: S102
+    exec(compile(source, f"<hidden by visla_edu.course.checks: {function_label(fn)}>", "exec"), namespace)  # noqa: S102
     return namespace[fn.__name__].__code__
 
 
@@ -141,7 +144,7 @@ def _visla_modules(include_checks=True):
     """``(name, module)`` of every loaded ``visla_edu`` module."""
     return [(name, module) for name, module in list(sys.modules.items())
             if (name == "visla_edu" or name.startswith("visla_edu.")) and isinstance(module, types.ModuleType)
-            and (include_checks or not name.startswith("visla_edu.checks"))]
+            and (include_checks or not name.startswith("visla_edu.course.checks"))]
 
 
 def _functions_of(module):
@@ -292,7 +295,7 @@ def guard(functions, exercise):
         any exception of the block).
     """
     modules = _visla_modules()
-    library = [module for name, module in modules if not name.startswith("visla_edu.checks")]
+    library = [module for name, module in modules if not name.startswith("visla_edu.course.checks")]
     verify_library(library)
     verify_foundations()
     snapshot = [(name, module, dict(vars(module))) for name, module in modules] + _foundation_snapshot()

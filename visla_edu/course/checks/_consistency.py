@@ -3,8 +3,8 @@
 import numpy as np
 
 from visla_edu import ekf, metrics, motion
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import random_covariance, random_pose
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
+from visla_edu.course.checks._inputs import random_covariance, random_pose
 
 __all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds", "check_gate", "check_align_rigid"]
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
 from visla_edu.dataset import Dataset
 
 __all__ = ["check_observations_at", "check_track_spans"]

@@ -4,8 +4,8 @@ import numpy as np
 import scipy.linalg
 
 from visla_edu import lie, motion
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import (NEAR_ZERO_HINT, not_rotation, not_se3, rotation_vectors, swap_twist,
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
+from visla_edu.course.checks._inputs import (NEAR_ZERO_HINT, not_rotation, not_se3, rotation_vectors, swap_twist,
                                       twists, unit)
 
 __all__ = [
@@ -33,7 +33,7 @@ def check_hat(hat, hidden=False):
 
     On ``[1, 2, 3]``, the zero vector and 5 random vectors (hidden: an integer array, a plain
     list, a vector of size 1e8 and 5 random ones); compares with :func:`visla_edu.lie.hat`
-    (default tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the transpose,
+    (default tolerances of :func:`~visla_edu.course.checks._core.compare`). Recognises the transpose,
     entries in the wrong places, and a result that is not skew-symmetric. Hides ``lie.hat``.
 
     Parameters
@@ -122,7 +122,7 @@ def check_so3_exp(so3_exp, hidden=False):
     """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
 
     Compares with :func:`visla_edu.lie.so3_exp` (``atol=1e-9``) on the rotation vectors of
-    :func:`~visla_edu.checks._inputs.rotation_vectors` (angles from 0 to pi), then at 3 tiny
+    :func:`~visla_edu.course.checks._inputs.rotation_vectors` (angles from 0 to pi), then at 3 tiny
     angles (1e-7, 1e-6 and 1e-5 rad; hidden: 3e-7, 3e-6 and 2e-5) to ``atol=1e-15``. The closed
     form guarded at exactly 0 passes: its coefficient ``(1 - cos t)/t^2`` loses relative digits
     near 0, but it multiplies ``hat(w)^2``, of size ``t^2``, so ``R`` keeps full precision (the
@@ -216,7 +216,7 @@ def check_se3_exp(se3_exp, hidden=False):
     """Exercise 01: ``se3_exp(u) -> (4, 4)`` for a twist ``u = [v; w]``, closed form.
 
     Compares with :func:`visla_edu.lie.se3_exp` (``atol=1e-9``) on the twists of
-    :func:`~visla_edu.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
+    :func:`~visla_edu.course.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
     at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``J_l v`` to relative
     accuracy 1e-12 of ``|v|`` (a closed form guarded at exactly 0 is off by about ``eps / t``
     there: the small-angle series is needed) and the rotation to ``atol=1e-15``. Recognises the twist order ``[w; v]``,

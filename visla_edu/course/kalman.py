@@ -14,8 +14,8 @@ For a state ``x ~ N(mean, P)``:
 The extended Kalman filter uses the same update with ``r = z - h(mean)`` and ``H`` the Jacobian
 of ``h`` at the mean (:func:`update` takes the innovation for that reason).
 
-It lives outside :mod:`visla_edu.checks` so that the function objects stay the same when a
-graded cell reloads the checks (see :mod:`visla_edu.numdiff`).
+It lives outside :mod:`visla_edu.course.checks` so that the function objects stay the same when a
+graded cell reloads the checks (see :mod:`visla_edu.course.numdiff`).
 """
 
 import numpy as np

@@ -9,8 +9,8 @@ space ``N`` has ``Ad(inv(mu))`` and ``hat(m_j)`` in it); in the invariant error 
 import numpy as np
 
 from visla_edu import ekf, lie
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.checks._inputs import notebook_rig_variant, points_in_view, random_pose, stereo_camera
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.course.checks._inputs import notebook_rig_variant, points_in_view, random_pose, stereo_camera
 
 __all__ = ["reference_slam_null_space", "check_slam_null_space", "check_invariant_pose_jacobian"]
 

@@ -3,9 +3,10 @@
 import numpy as np
 
 from visla_edu import camera as cam
-from visla_edu import capstone, lie, numdiff
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, random_pose,
+from visla_edu import lie
+from visla_edu.course import capstone, numdiff
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
+from visla_edu.course.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, random_pose,
                                       rotation_transposed, stereo_camera, wrong_inverses)
 
 __all__ = [
@@ -78,7 +79,7 @@ def check_odot(odot, hidden=False):
 
     At 5 random points ``s = [p, 1]`` (``p`` normal with standard deviation 10; hidden: also
     the origin and a point of size about 1e4); compares with :func:`visla_edu.lie.odot` (default
-    tolerances of :func:`~visla_edu.checks._core.compare`). Recognises the sign of the hat
+    tolerances of :func:`~visla_edu.course.checks._core.compare`). Recognises the sign of the hat
     block and the two blocks swapped. Hides ``lie.odot``.
 
     Parameters

@@ -173,7 +173,7 @@ NOTEBOOK_RIG_HINT = (
 
 
 def notebook_rig_variant(hidden, variant):
-    """The mistake "used the notebook's rig" as a list of variants for :func:`~visla_edu.checks._core.compare`.
+    """The mistake "used the notebook's rig" as a list of variants for :func:`~visla_edu.course.checks._core.compare`.
 
     Parameters
     ----------

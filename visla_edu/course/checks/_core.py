@@ -13,7 +13,7 @@ import textwrap
 
 import numpy as np
 
-from visla_edu.checks import _hiding
+from visla_edu.course.checks import _hiding
 
 __all__ = [
     "exercise_check",

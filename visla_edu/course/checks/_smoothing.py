@@ -7,9 +7,10 @@ Conventions: poses ``world_T_imu``, right perturbation ``T <- T exp(delta^)``, t
 
 import numpy as np
 
-from visla_edu import lie, numdiff
-from visla_edu.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.checks._inputs import random_pose, swap_twist
+from visla_edu import lie
+from visla_edu.course import numdiff
+from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
+from visla_edu.course.checks._inputs import random_pose, swap_twist
 from visla_edu.smoother import motion_residuals
 
 __all__ = ["check_motion_residual", "check_schur_reduce", "check_pose_marginal_covariance", "check_gauss_newton_step",
