@@ -4,7 +4,7 @@ Usage::
 
     VISLA_EDU_DATA=/path/to/course/data python benchmarks/bench_work_estimate.py [--frames 60]
 
-For each case, :func:`visla_edu.workload.estimate_work` is computed for the first ``--frames``
+For each case, :func:`visla_edu.run.workload.estimate_work` is computed for the first ``--frames``
 frames of the drive, then the filter runs over those frames in its own process (one BLAS
 thread, as the CLI runs it), and the table prints estimated and measured seconds and the
 estimated peak bytes against the measured growth of the resident memory (ru_maxrss after the
@@ -58,7 +58,8 @@ def _first_frames(ds, frames):
 
 
 def _measure(name, mode, dense, stride, frames):
-    from visla_edu import run, workload
+    from visla_edu import run
+    from visla_edu.run import workload
     from visla_edu.filters import FilterConfig
 
     ds = _dataset(name, frames)

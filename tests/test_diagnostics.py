@@ -232,7 +232,7 @@ def test_an_inverted_extrinsic_is_named_in_a_warning():
 
 
 def test_a_divergence_with_angular_velocity_in_degrees_says_so():
-    from visla_edu import workload
+    from visla_edu.run import workload
 
     ds = simulate.simulate_drive("tiny", seed=0)
     assert "deg/s" not in workload.divergence_hint(ds, FilterConfig(), frame=5)

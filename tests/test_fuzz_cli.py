@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 import fuzzgen as fz  # tests/fuzzgen.py
-from visla_edu import data, ekf, motion, run, workload
+from visla_edu import data, ekf, motion, run
+from visla_edu.run import workload
 from visla_edu.course import release
 from visla_edu.data import _features
 from visla_edu.filters import _state

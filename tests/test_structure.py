@@ -227,3 +227,13 @@ def test_private_import_finder_sees_one():
 def test_no_private_module_is_imported_from_another_package():
     found = private_imports_across_packages()
     assert not found, "private names imported from outside their package: " + "; ".join(found)
+
+
+MAX_TOP_LEVEL_MODULES = 14
+
+
+def test_at_most_14_plain_modules_at_the_top():
+    """Course scaffolding, drivers and the command line live in their subpackages, so the top of
+    ``visla_edu/`` shows the library's concepts (``__init__`` and ``__main__`` not counted)."""
+    plain = sorted(path.stem for path in PACKAGE.glob("*.py") if path.stem not in ("__init__", "__main__"))
+    assert len(plain) <= MAX_TOP_LEVEL_MODULES, f"{len(plain)} plain modules at the top of visla_edu/: {plain}"

@@ -1,5 +1,9 @@
 """Course scaffolding: what the course ships to students and how it gets to them.
 
+* What the notebooks teach with: :mod:`visla_edu.course.checks` (the exercise checks),
+  :mod:`visla_edu.course.capstone` (notebook 12's filter loop over the student's functions),
+  :mod:`visla_edu.course.kalman` (the primer's linear Kalman filter) and
+  :mod:`visla_edu.course.numdiff` (the central differences a gradient check compares with).
 * ``notebooks/`` (:data:`STUDENT_NOTEBOOKS`), package data: the student edition of the course,
   generated from the repository's ``solutions/`` by ``visla-edu release``
   (:mod:`visla_edu.course.release`) and checked in. It is the only copy: the wheel carries it (and

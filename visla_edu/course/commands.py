@@ -7,7 +7,6 @@ error boundary (a bad submission path or folder is one line and exit status 2).
 
 import argparse
 
-from visla_edu import _options
 from visla_edu.course._runner import DEFAULT_MEMORY_LIMIT, DEFAULT_TIME_LIMIT
 
 __all__ = ["add_parser", "run"]
@@ -35,7 +34,7 @@ def _gibibytes(text):
     return int(value * 2**30) or None
 
 
-def add_parser(sub, common, debug):
+def add_parser(sub, common, debug, path):
     """Add ``project`` (with ``show`` and ``grade``) to the ``visla-edu`` subcommands ``sub``.
 
     Parameters
@@ -43,6 +42,9 @@ def add_parser(sub, common, debug):
     sub : argparse subparsers action
     common, debug : argparse.ArgumentParser
         The parents of the other commands (``--data-dir`` and ``--debug``; ``--debug``).
+    path : callable
+        The command line's ``type=`` for a path (:func:`visla_edu.cli.options.path`), so that
+        every command reads paths alike.
     """
     project = sub.add_parser("project", parents=[debug], help="the course project: print the assignment, grade "
                                                               "submissions (see PROJECT.md)")
@@ -50,16 +52,16 @@ def add_parser(sub, common, debug):
     actions.add_parser("show", parents=[debug], help="print the assignment (PROJECT.md); e.g. > PROJECT.md")
     grade = actions.add_parser("grade", parents=[common], help="run students' filters on a drive, with the library "
                                "hidden and a time limit; write a report per submission and a summary")
-    grade.add_argument("submissions", nargs="+", type=_options.path, metavar="SUBMISSION.py",
+    grade.add_argument("submissions", nargs="+", type=path, metavar="SUBMISSION.py",
                        help="the students' files, each defining make_filter(dataset, config)")
     grade.add_argument("--drive", required=True,
                        help="03, 0022, 0020, 0042, 10, sim, sim-small, sim-tiny or a path to an .npz file (e.g. a "
                             "simulated drive the students never had)")
-    grade.add_argument("--ground-truth", default=None, type=_options.path, metavar="FILE",
+    grade.add_argument("--ground-truth", default=None, type=path, metavar="FILE",
                        help="KITTI odometry poses to grade against (automatic for a registered drive such as 0020)")
-    grade.add_argument("--ground-truth-times", default=None, type=_options.path, metavar="FILE",
+    grade.add_argument("--ground-truth-times", default=None, type=path, metavar="FILE",
                        help="KITTI times.txt of the ground truth, checked against the drive's time stamps")
-    grade.add_argument("--out", required=True, type=_options.path, metavar="DIR",
+    grade.add_argument("--out", required=True, type=path, metavar="DIR",
                        help="folder for the reports: new, empty, or an earlier grading's")
     grade.add_argument("--time-limit", type=_seconds, default=DEFAULT_TIME_LIMIT, metavar="SECONDS",
                        help="wall time per submission: import, make_filter and every step (default "

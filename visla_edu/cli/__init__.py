@@ -27,7 +27,7 @@ import traceback
 import warnings
 from pathlib import Path
 
-from visla_edu import _options
+from visla_edu.cli import options as _options
 from visla_edu.codes import RUN_MODES, RUN_MODES_HELP, SLAM, SMOOTHER_MODES
 from visla_edu.course import commands as _project_commands
 
@@ -116,7 +116,7 @@ def build_parser():
     student = sub.add_parser("student", parents=[debug], help="create a student's folder, or add the new notebooks")
     student.add_argument("folder", type=_options.path, help="the student's folder (created if missing; files "
                                                             "already there are never replaced)")
-    _project_commands.add_parser(sub, common, debug)
+    _project_commands.add_parser(sub, common, debug, _options.path)
 
     book = sub.add_parser("book", parents=[debug], help="build the course site (the student edition, executed) in DIR")
     book.add_argument("dir", type=_options.path, metavar="DIR", help="the site's folder: new, empty or a former site")
@@ -250,7 +250,8 @@ def _cmd_info(args):
 def _cmd_run(args):
     import numpy as np
 
-    from visla_edu import run, workload
+    from visla_edu import run
+    from visla_edu.run import workload
     from visla_edu.filters import FilterDivergedError
 
     config = _run_config(args)
@@ -365,7 +366,7 @@ def _check_work(dataset, args, config):
     """Print the estimated cost of a dense (or a heavy) run; refuse one past the limits unless ``--force``."""
     import dataclasses
 
-    from visla_edu import workload
+    from visla_edu.run import workload
 
     estimate = workload.estimate_work(dataset, args.mode, config, args.dense)
     over = estimate.over_limits()

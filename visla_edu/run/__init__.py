@@ -7,7 +7,7 @@
 the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
 (:func:`limit_blas_threads`) and the progress bar. :func:`run_smoother` runs the batch or the
 sliding-window smoother (:mod:`visla_edu.smoother`) into the same :class:`RunResult`.
-:mod:`visla_edu.workload` says what a run will cost before it starts and names the likely cause
+:mod:`visla_edu.run.workload` says what a run will cost before it starts and names the likely cause
 when one fails.
 
 >>> from visla_edu import data, run
@@ -26,7 +26,7 @@ import numpy as np
 from visla_edu import data, diagnostics, filters, metrics, motion
 from visla_edu._blas import check_blas_threads as _check_blas_threads
 from visla_edu._blas import limit_blas_threads
-from visla_edu._results import RunArrays, RunResult, load_result, save_result
+from visla_edu.run._results import RunArrays, RunResult, load_result, save_result
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, SMOOTH, SMOOTHER_MODES, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig
 
@@ -195,7 +195,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
         observations for a mode that needs them), or a bad ``blas_threads``.
     visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError, ArithmeticError, MemoryError
         The filter failed; the exception's ``frame`` attribute is the frame it failed at
-        (see :func:`visla_edu.workload.divergence_hint`).
+        (see :func:`visla_edu.run.workload.divergence_hint`).
     """
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
