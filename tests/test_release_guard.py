@@ -132,3 +132,11 @@ def test_an_answered_course_notebook_survives_release(tmp_path, capsys):
     assert _snapshot(dst) == before
     outcome = fz.cli_run(["release", "--src", SOLUTIONS, "--dst", dst, "--check"], capsys, measure=False)
     assert outcome.code == 1 and f"drifted: {answered.name}" in outcome.out and _snapshot(dst) == before
+
+
+def test_release_reads_the_checkouts_solutions_by_default(capsys):
+    """``visla-edu release --check`` with no ``--src`` finds ``solutions/`` beside the package and
+    the checked-in student edition in sync with it (the defaults of a source checkout)."""
+    assert release.SOLUTIONS == SOLUTIONS and SOLUTIONS.is_dir()
+    outcome = fz.cli_run(["release", "--check"], capsys, measure=False)
+    assert outcome.code == 0, outcome.out + outcome.err

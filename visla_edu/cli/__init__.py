@@ -436,8 +436,7 @@ def _cmd_release(args):
     from visla_edu.course import release
     from visla_edu.course import STUDENT_NOTEBOOKS
 
-    root = Path(__file__).resolve().parent.parent
-    src = Path(args.src) if args.src else root / "solutions"
+    src = Path(args.src) if args.src else release.SOLUTIONS
     dst = Path(args.dst) if args.dst else STUDENT_NOTEBOOKS
     if not src.is_dir():
         raise FileNotFoundError(f"solutions folder {src} not found (run from a source checkout or pass --src)")

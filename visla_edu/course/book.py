@@ -103,7 +103,7 @@ def require_book_tools():
 
 def default_solutions():
     """The repository's ``solutions/`` folder (beside the package in a source checkout)."""
-    return Path(__file__).resolve().parents[2] / "solutions"
+    return release.SOLUTIONS
 
 
 def notebook_paths(src_dir):

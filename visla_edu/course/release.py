@@ -46,6 +46,7 @@ from visla_edu._files import atomic_write
 from visla_edu.course import STUDENT_NOTEBOOKS, manifest
 
 __all__ = [
+    "SOLUTIONS",
     "BEGIN_SOLUTION",
     "END_SOLUTION",
     "BEGIN_HIDDEN",
@@ -83,8 +84,9 @@ _RUN_METADATA = ("execution", "collapsed", "scrolled", "ExecuteTime")
 _CODE_STUB = 'raise NotImplementedError("{what}: write your solution here")'
 _MARKDOWN_STUB = "YOUR ANSWER HERE"
 
-#: The project's solutions (the checkout this package is imported from) and the student edition.
-_DEFAULT_SRC = STUDENT_NOTEBOOKS.parents[2] / "solutions"
+#: The project's solutions: ``solutions/`` beside the package in the source checkout it is
+#: imported from (a wheel has none).
+SOLUTIONS = STUDENT_NOTEBOOKS.parents[2] / "solutions"
 _DEFAULT_DST = STUDENT_NOTEBOOKS
 
 #: Markers of the generated points table in TEACHING.md.
@@ -304,7 +306,7 @@ def _expected(src_dir):
     return {p.name: notebook_text(student_notebook(_read(p), p.name)) for p in _sources(src_dir)}
 
 
-def make_student_notebooks(src_dir=_DEFAULT_SRC, dst_dir=_DEFAULT_DST, force=False):
+def make_student_notebooks(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST, force=False):
     """Write the student version of every ``src_dir/*.ipynb`` to ``dst_dir``, never over someone's edits.
 
     Files are rewritten only when their content changes, each atomically (an interrupted
@@ -365,7 +367,7 @@ def _write_text(path, text):
         f.write(text.encode("utf-8"))
 
 
-def check_in_sync(src_dir=_DEFAULT_SRC, dst_dir=_DEFAULT_DST):
+def check_in_sync(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST):
     """Student notebooks that differ from what :func:`make_student_notebooks` would write.
 
     Parameters
@@ -390,7 +392,7 @@ def check_in_sync(src_dir=_DEFAULT_SRC, dst_dir=_DEFAULT_DST):
     return drifted
 
 
-def clean_sources(src_dir=_DEFAULT_SRC):
+def clean_sources(src_dir=SOLUTIONS):
     """Strip outputs and execution counts from the solution notebooks themselves.
 
     Returns
@@ -439,7 +441,7 @@ def _number(points):
     return f"{points:g}"
 
 
-def points_table(src_dir=_DEFAULT_SRC):
+def points_table(src_dir=SOLUTIONS):
     """The markdown table of the points per notebook, from the graded cells' metadata.
 
     Parameters
@@ -472,7 +474,7 @@ def _with_points(text, table, where):
     return text[:start + len(POINTS_BEGIN)] + "\n" + table + "\n" + text[stop:]
 
 
-def update_points_table(src_dir=_DEFAULT_SRC, teaching="TEACHING.md", check=False):
+def update_points_table(src_dir=SOLUTIONS, teaching="TEACHING.md", check=False):
     """Write the points table of ``src_dir`` into ``teaching`` (only if it changed).
 
     Parameters
@@ -536,7 +538,7 @@ def main(argv=None):
         prog="python -m visla_edu.course.release",
         description="Generate the student notebooks (stubs, no hidden tests, no outputs) from the solutions.",
     )
-    parser.add_argument("--src", default=_DEFAULT_SRC, help="solution notebooks folder (default: the project's "
+    parser.add_argument("--src", default=SOLUTIONS, help="solution notebooks folder (default: the project's "
                                                              "solutions/)")
     parser.add_argument("--dst", default=_DEFAULT_DST, help="student notebooks folder (default: the package's "
                                                              "visla_edu/course/notebooks/)")
