@@ -237,3 +237,42 @@ def test_at_most_14_plain_modules_at_the_top():
     ``visla_edu/`` shows the library's concepts (``__init__`` and ``__main__`` not counted)."""
     plain = sorted(path.stem for path in PACKAGE.glob("*.py") if path.stem not in ("__init__", "__main__"))
     assert len(plain) <= MAX_TOP_LEVEL_MODULES, f"{len(plain)} plain modules at the top of visla_edu/: {plain}"
+
+
+def _is_state_sigma(node, views_only=False):
+    """``node`` is ``<x>.state.Sigma`` or a subscript of it (with ``views_only``: a basic slice,
+    which shares memory; an index array or ``np.ix_`` makes a copy)."""
+    while isinstance(node, ast.Subscript):
+        index = node.slice.elts if isinstance(node.slice, ast.Tuple) else [node.slice]
+        if views_only and not all(isinstance(i, (ast.Slice, ast.Constant)) for i in index):
+            return False
+        node = node.value
+    return (isinstance(node, ast.Attribute) and node.attr == "Sigma" and isinstance(node.value, ast.Attribute)
+            and node.value.attr == "state")
+
+
+def _covariance_writes(tree):
+    """Lines where ``<x>.state.Sigma`` is assigned into, or handed to a call (which may change it in
+    place) whole or as a view."""
+    lines = []
+    for node in ast.walk(tree):
+        targets = (node.targets if isinstance(node, ast.Assign) else [node.target]
+                   if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else [])
+        args = [*node.args, *(k.value for k in node.keywords)] if isinstance(node, ast.Call) else []
+        lines += [node.lineno for target in targets if _is_state_sigma(target)]
+        lines += [node.lineno for arg in args if _is_state_sigma(arg, views_only=True)]
+    return lines
+
+
+def test_the_covariance_finder_sees_writes():
+    tree = ast.parse("self.state.Sigma[0] = 1\nf(self.state.Sigma)\nx = self.state.Sigma[:, 0] @ H\n"
+                     "g(self.state.Sigma[:6])\nh(self.state.Sigma[np.ix_(U, U)])\nself.state.Sigma -= A\n")
+    assert sorted(_covariance_writes(tree)) == [1, 2, 4, 6]
+
+
+def test_only_the_state_helper_changes_the_joint_covariance():
+    """``filters._state.ActiveSet`` owns the covariance: the filters read ``state.Sigma`` and change
+    it only through the helper's methods (propagate, update, correct, augment, retire...)."""
+    found = [f"{name}:{line}" for name, path in _modules().items() if name != "visla_edu.filters._state"
+             for line in _covariance_writes(ast.parse(path.read_text(), filename=str(path)))]
+    assert not found, "the joint covariance changed outside ActiveSet: " + ", ".join(found)

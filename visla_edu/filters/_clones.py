@@ -214,7 +214,7 @@ class CloneWindow:
         Sigma_Ht = self.state.Sigma[:, U] @ H.T
         S = H @ Sigma_Ht[U] + self.noise_var * np.eye(len(r))
         try:
-            delta, nis = ekf.gain_update(self.state.Sigma, Sigma_Ht, S, r)
+            delta, nis = self.state.update(Sigma_Ht, S, r)
         except np.linalg.LinAlgError as err:
             raise self._diverged(err, f" (track update, {len(r)} rows)") from err
         self._retract(delta)

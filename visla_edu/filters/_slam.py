@@ -113,7 +113,7 @@ class JointSlam(CloneWindow, FilterBase):
         return self.form.pose_cov(self.state.pose_cov, self.world_T_imu)
 
     def _predict_covariance(self, F, W):
-        self.form.predict(self.state.Sigma, self.world_T_imu, self.landmarks[self.state.active_ids], F, W)
+        self.state.propagate(self.form, self.world_T_imu, self.landmarks[self.state.active_ids], F, W)
 
     def _update(self, ids, z, status, z_pred):
         if self.window:
@@ -160,7 +160,7 @@ class JointSlam(CloneWindow, FilterBase):
 
     def _landmark_covs(self, lm):
         """Marginal covariances of ``m - mu_m`` of landmarks ``lm`` in the state, (k, 3, 3)."""
-        return self.form.landmark_covs(self.state.Sigma, self.state.columns(lm), self.landmarks[lm])
+        return self.state.landmark_covs(self.form, lm, self.landmarks[lm])
 
     def _gate_known(self, ids, z, status, z_pred, known):
         """Predict and gate the observations of landmarks already in the state (``known`` mask).
@@ -188,8 +188,7 @@ class JointSlam(CloneWindow, FilterBase):
     def _joint_update(self, lm, z, prediction):
         """The joint EKF update with the observations of landmarks ``lm``; returns the NIS."""
         try:
-            delta, nis = ekf.joint_correction(self.state.Sigma, self.state.slot_of[lm], z, self.noise_var, prediction,
-                                              self.camera.stereo_rows)
+            delta, nis = self.state.correct(lm, z, self.noise_var, prediction, self.camera.stereo_rows)
         except np.linalg.LinAlgError as err:
             raise self._diverged(err, f" ({len(lm)} observations)") from err
         self._retract(delta)

@@ -1,10 +1,12 @@
 """The joint state's bookkeeping: one covariance over the pose and the landmarks in the state.
 
-:class:`ActiveSet` owns the covariance surgery of the joint EKF (in the manner of OpenVINS's
-``StateHelper``): which slot holds which landmark, appending slots, filling a new landmark's
-rows, deleting a landmark's rows (marginalising it) and reading marginals. The filter
-(:class:`visla_edu.filters.JointSlam`) only decides *when* to do each; the update itself is
-:func:`visla_edu.ekf.joint_update`, which works on the same layout.
+:class:`ActiveSet` owns the joint EKF's covariance (in the manner of OpenVINS's
+``StateHelper``): it propagates it, updates it, augments it (a new landmark's or a cloned pose's
+rows), marginalises rows out (a landmark that left, an old clone) and reads marginals, and it
+keeps which slot holds which landmark. The filters (:class:`visla_edu.filters.JointSlam` and its
+clone window) build the Jacobians, the innovations and the retraction of the means, and decide
+*when* to do each; the formulas are :mod:`visla_edu.motion`'s and :mod:`visla_edu.ekf`'s, on the
+same layout. ``tests/test_structure.py`` holds that nothing else writes :attr:`ActiveSet.Sigma`.
 
 The state is ``[pose perturbation (6); slot 0 (3); slot 1 (3); ...; clone 0 (6); clone 1 (6);
 ...]``: slot ``s`` occupies the columns :func:`visla_edu.ekf.slot_columns` gives (``6 + 3 s ..
@@ -15,6 +17,7 @@ occupies ``6 + 3 n + 6 k .. 6 + 3 n + 6 k + 5`` (:meth:`ActiveSet.clone_columns`
 
 import numpy as np
 
+from visla_edu import ekf
 from visla_edu.ekf import POSE_DIM, slot_columns
 
 __all__ = ["ActiveSet"]
@@ -33,7 +36,10 @@ class ActiveSet:
     Attributes
     ----------
     Sigma : ndarray, shape (D, D), D = 6 + 3 n
-        The joint covariance; the update and the prediction change it in place.
+        The joint covariance. Read it; only this class's methods change it (prediction:
+        :meth:`propagate`; updates: :meth:`update`, :meth:`correct`; new rows: :meth:`enter`,
+        :meth:`augment`, :meth:`augment_delayed`, :meth:`clone_pose`; removals: :meth:`retire`,
+        :meth:`drop_clone`).
     active_ids : ndarray of int, shape (n,)
         Landmark id in each slot, in slot order.
     slot_of : ndarray of int, shape (M,)
@@ -95,6 +101,58 @@ class ActiveSet:
     def pose_cross(self, ids):
         """Cross-covariances ``Sigma_pose,landmark`` of landmarks ``ids``, shape (k, 6, 3)."""
         return np.swapaxes(self.Sigma[:POSE_DIM][:, self.columns(ids)], 0, 1)
+
+    def propagate(self, form, world_T_imu, p_active, F, W):
+        """The prediction step of the covariance: ``form.predict`` on :attr:`Sigma`, in place.
+
+        Parameters
+        ----------
+        form : class
+            The error form (:class:`visla_edu.filters._forms.RightForm` or ``InvariantForm``),
+            whose ``predict`` holds the formula.
+        world_T_imu : ndarray, shape (4, 4)
+            The pose mean after the step.
+        p_active : ndarray, shape (n, 3)
+            The landmark means in slot order.
+        F, W : ndarray, shape (6, 6)
+            The step's pose transition and motion noise.
+        """
+        form.predict(self.Sigma, world_T_imu, p_active, F, W)
+
+    def update(self, Sigma_Ht, S, innovation):
+        """One EKF gain step on :attr:`Sigma` (:func:`visla_edu.ekf.gain_update`); ``(delta, nis)``.
+
+        Parameters
+        ----------
+        Sigma_Ht : ndarray, shape (D, m)
+            ``Sigma H^T`` of the rows.
+        S : ndarray, shape (m, m)
+            Their innovation covariance.
+        innovation : ndarray, shape (m,)
+
+        Returns
+        -------
+        delta : ndarray, shape (D,)
+        nis : float
+        """
+        return ekf.gain_update(self.Sigma, Sigma_Ht, S, innovation)
+
+    def correct(self, ids, z, noise_var, prediction, rows):
+        """The joint update with stereo observations of landmarks ``ids`` in the state; ``(delta, nis)``.
+
+        :func:`visla_edu.ekf.joint_correction` on :attr:`Sigma` with the slots of ``ids``
+        (its parameters: ``z`` (k, 4), ``prediction`` ``(z_pred, J_landmark, J_pose)``, ``rows``
+        the rig's stereo rows).
+        """
+        return ekf.joint_correction(self.Sigma, self.slot_of[ids], z, noise_var, prediction, rows)
+
+    def landmark_covs(self, form, ids, means):
+        """Marginal covariances of the errors ``m - mu_m`` of landmarks ``ids`` in the state, (k, 3, 3).
+
+        ``form.landmark_covs`` (the error form's map from its state coordinates) on the slots of
+        ``ids``; ``means`` (k, 3) are their means.
+        """
+        return form.landmark_covs(self.Sigma, self.columns(ids), means)
 
     def enter(self, ids):
         """Append one slot per landmark of ``ids`` (zero rows and columns, filled by :meth:`augment`).
