@@ -30,10 +30,9 @@ Graded cells load a fresh copy, so that nothing an answer cell assigned to the c
 
 Re-executing this file (``importlib.reload``) reloads each submodule below, in order.
 
-Conventions (README, "Conventions"): twist ``u = [v; w]``, ``twist_hat(u) = [[hat(w), v], [0, 0]]``,
-pose ``world_T_imu``, motion ``T_{t+1} = T_t exp(tau u^)``, right perturbation
-``T = mu exp(delta^)``. The visible inputs are drawn from a fixed seed, so a check gives the
-same verdict every time.
+Conventions (twists ``[v; w]``, the right perturbation): :mod:`visla_edu.lie`; the motion
+model: :mod:`visla_edu.motion`. The visible inputs are drawn from a fixed seed, so a check
+gives the same verdict every time.
 """
 
 import importlib as _importlib

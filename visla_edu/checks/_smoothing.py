@@ -1,8 +1,7 @@
 """Checks of notebooks 13 and 14 (smoothing): the motion factor, the Schur complement, a Gauss-Newton step
 and the poses' marginal covariance.
 
-Conventions: poses ``world_T_imu``, right perturbation ``T <- T exp(delta^)``, twists
-``[v; w]`` (linear first), the Gauss-Newton system ``H dx = -g``.
+Conventions: :mod:`visla_edu.lie`'s; the Gauss-Newton system is ``H dx = -g``.
 """
 
 import numpy as np
