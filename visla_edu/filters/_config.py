@@ -64,15 +64,13 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
 class FilterConfig:
     """Noise, initialisation and gating parameters of the filter modes.
 
-    Each field's declaration below (:func:`visla_edu.settings.setting`) is the one statement of
-    its default, kind, unit, plausible range and why that range, and of the words it accepts
-    such as ``"auto"``; ``visla-edu run --help`` lists them. The same declaration checks values
-    given in Python and parses ``visla-edu run --set NAME=VALUE`` strictly
-    (:func:`visla_edu.settings.parse_setting`): an out-of-range value is refused with its range,
-    never clipped. The attributes say what each setting means and which modes read it
-    (``deadreckon``, ``mapping``, ``vio``, ``slam``; see :data:`visla_edu.codes.MODES`). How the
-    driver runs (BLAS threads, progress bar) is not a setting: those are arguments of
-    :func:`visla_edu.run.run_filter`.
+    Each field's declaration below is the one statement of its default, kind, unit, plausible
+    range and why that range, and of the words it accepts such as ``"auto"``
+    (:mod:`visla_edu.settings`: how it checks values and parses ``visla-edu run --set``);
+    ``visla-edu run --help`` lists them. The attributes say what each setting means and which
+    modes read it (``deadreckon``, ``mapping``, ``vio``, ``slam``; see
+    :data:`visla_edu.codes.MODES`). How the driver runs (BLAS threads, progress bar) is not a
+    setting: those are arguments of :func:`visla_edu.run.run_filter`.
 
     The defaults are one setting for every drive: what can be measured is measured from each
     drive's own data (``"auto"``), the rest rests on evidence that notebooks 04 and 11 and
