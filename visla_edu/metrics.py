@@ -1,7 +1,7 @@
 """Accuracy and consistency metrics: ATE, RPE, KITTI drift, NEES, NIS, chi-square bounds, the gated share.
 
-Errors of a pose estimate ``mu`` against the truth ``T`` use the filter's own perturbation
-convention: ``T = mu exp(hat(e))``, so ``e = se3_log(inv(mu) @ T)`` (twist ``[v; w]``).
+Errors of a pose estimate ``mu`` against the truth ``T`` are right perturbations
+(:mod:`visla_edu.lie`): ``e = se3_log(inv(mu) @ T)``.
 :func:`evaluate` gathers what a run is judged by against ground truth (ATE raw and aligned,
 KITTI drift) in a :class:`TrajectoryEvaluation`.
 """

@@ -4,7 +4,7 @@ Motion model (twist ``u_t = [v_t; w_t]`` in the body frame, ``tau_t = t_{t+1} - 
 
     world_T_imu[t+1] = world_T_imu[t] @ exp(tau_t * twist_hat(u_t))
 
-With the right perturbation ``T = mu exp(hat(delta))`` the perturbation evolves as
+The right perturbation ``delta`` (:mod:`visla_edu.lie`) evolves as
 ``delta_{t+1} = F_t delta_t + n_t`` with the closed form (no ``expm`` needed)::
 
     F_t = exp(-tau_t curly_hat(u_t)) = adjoint(exp(-tau_t twist_hat(u_t)))
@@ -118,7 +118,7 @@ def motion_noise(tau, sigma_linear, sigma_angular):
 def pose_transition(u, tau):
     """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6).
 
-    For the right perturbation ``T = mu exp(hat(delta))``: ``delta_{t+1} = F delta_t + n_t``.
+    For the right perturbation ``delta`` (:mod:`visla_edu.lie`): ``delta_{t+1} = F delta_t + n_t``.
 
     Parameters
     ----------
@@ -130,7 +130,7 @@ def pose_transition(u, tau):
     Returns
     -------
     ndarray, shape (6, 6)
-        ``F`` acting on perturbations ``[v; w]``, linear first.
+        ``F`` acting on perturbations ``[v; w]``.
 
     Raises
     ------

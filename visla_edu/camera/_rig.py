@@ -183,8 +183,7 @@ class StereoCamera:
         """``J_z_pose`` of :meth:`predict_with_jacobians`, shape (M, 4, 6).
 
         ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``: the derivative of the predicted
-        pixels with respect to the right perturbation ``world_T_imu = mu exp(delta^)``,
-        ``delta = [v; w]`` (linear first).
+        pixels with respect to the right perturbation of ``world_T_imu`` (:mod:`visla_edu.lie`).
 
         Parameters
         ----------

@@ -27,12 +27,11 @@ is 1.3 GB), never held in memory as a whole.
 
 The 2025+ format
 ----------------
-The current edition ships ``datasetNN/datasetNN.npy``: ``np.save`` of a dict with ``timestamps``
-(T,), ``v_t`` and ``w_t`` (T, 3) or (3, T), ``features`` (4, M, T) or None (a dataset of images),
-the two intrinsics ``K_l``, ``K_r`` and the two extrinsics ``extL_T_imu``, ``extR_T_imu``, whose
-direction and camera frame the data decide (:func:`load_course2025`, module ``_format2025``; read
-without unpickling anything but plain arrays, module ``_pickle``). :func:`save_course2025` writes
-a drive in it (module ``_save2025``).
+The current edition ships ``datasetNN/datasetNN.npy``: ``np.save`` of a dict of arrays, two
+intrinsics and two extrinsics whose direction and camera frame the data decide (its keys and
+shapes: module ``_format2025``, :func:`load_course2025`; read without unpickling anything but
+plain arrays, module ``_pickle``). :func:`save_course2025` writes a drive in it (module
+``_save2025``).
 
 When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
 dataset 10's real IMU drive with simulated stereo tracks. :func:`course_standin10` builds

@@ -1,10 +1,8 @@
 """The course file format: its keys, and the checks of every array but the features.
 
-Both course formats store ``time_stamps`` (1, T), ``features`` (4, M, T), ``linear_velocity``
-(3, T), ``K`` (3, 3) and ``b`` (); the 2021+ format adds ``angular_velocity`` (3, T) and
-``imu_T_cam`` (4, 4), the 2019/2020 format ``rotational_velocity`` (3, T) and ``cam_T_imu``
-(4, 4). Files written by :func:`~visla_edu.data.save` may add ground truth and a name and label.
-Every check raises ``ValueError`` naming the file, the key, and the expected and actual value.
+The keys and shapes of both npz course formats: :mod:`visla_edu.data` ("The two npz course
+formats"). Files written by :func:`~visla_edu.data.save` may add ground truth and a name and
+label. Every check raises ``ValueError``, as :mod:`visla_edu.data` says.
 
 The checks come in two passes. :func:`check_course_headers` runs on the ``.npy`` headers
 alone (:class:`~visla_edu.data._zip.NpyHeader`: dtype and shape, before any data is read) and

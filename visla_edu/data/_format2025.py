@@ -27,8 +27,7 @@ Two things the format leaves open are decided from evidence, not assumed:
   with the reason); :func:`visla_edu.diagnostics.calibrate` then decides with the motion the IMU
   and the camera see, and ``visla-edu info`` shows the evidence.
 
-Every check raises a one-line ``ValueError`` naming the file, the key, the shape or value, as
-the other formats' checks (:mod:`visla_edu.data._format`, :mod:`visla_edu.data._plausible`) do.
+Every check raises a one-line ``ValueError``, as :mod:`visla_edu.data` says.
 """
 
 import numpy as np

@@ -1,12 +1,9 @@
 """Plausible time stamps, velocities and observed pixels of a drive, and why.
 
-A course file can be well formed (right keys, shapes, finite numbers) and still wrong: time
-stamps in nanoseconds, a gap of 1e6 s, velocities in km/h, a 'missing' marker other than -1.
-The filter would run on it and produce inf/NaN covariances or a garbage map. These checks
-refuse such files at load time; each range is wide enough for any real rig and its message
-says what is plausible and what was probably meant. The calibration's plausible ranges (focal
-lengths, aspect, principal point, baseline, extrinsic translation) are
-:mod:`visla_edu.validation`'s.
+The drive's counterpart of the calibration's plausible ranges (:mod:`visla_edu.validation`
+says what *plausible* means and why it is checked): a well-formed file with time stamps in
+nanoseconds, a gap of 1e6 s, velocities in km/h or a 'missing' marker other than -1 is refused
+at load time.
 
 ========================  ====================  ============================================
 quantity                  plausible             why

@@ -64,9 +64,13 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
 class FilterConfig:
     """Noise, initialisation and gating parameters of the filter modes.
 
-    Each setting names the modes that read it (``deadreckon``, ``mapping``, ``vio``,
-    ``slam``; see :data:`visla_edu.codes.MODES`). How the driver runs (BLAS threads, progress
-    bar) is not a setting: those are arguments of :func:`visla_edu.run.run_filter`.
+    Each field's declaration below is the one statement of its default, kind, unit, plausible
+    range and why that range, and of the words it accepts such as ``"auto"``
+    (:mod:`visla_edu.settings`: how it checks values and parses ``visla-edu run --set``);
+    ``visla-edu run --help`` lists them. The attributes say what each setting means and which
+    modes read it (``deadreckon``, ``mapping``, ``vio``, ``slam``; see
+    :data:`visla_edu.codes.MODES`). How the driver runs (BLAS threads, progress bar) is not a
+    setting: those are arguments of :func:`visla_edu.run.run_filter`.
 
     The defaults are one setting for every drive: what can be measured is measured from each
     drive's own data (``"auto"``), the rest rests on evidence that notebooks 04 and 11 and
@@ -76,62 +80,50 @@ class FilterConfig:
       measures the samples' white noise (second differences) and how much the velocity changes
       within a step, which the motion model holds constant (first differences), with floors; a
       drive of fewer than 10 samples, too short to measure them, gets the course's 0.5 m/s and
-      0.05 rad/s (:data:`visla_edu.diagnostics.MIN_NOISE_SAMPLES`). A fixed noise fits no drive: the KITTI drives' velocities are nearly clean, the 2020
-      release's carry about 0.5 m/s and 0.05 rad/s, and a filter told the wrong level trusts
-      far landmarks over an accurate IMU, or an IMU over the camera.
-    * ``imu_lag`` (``"auto"``): the velocity sample that moves frame t to t+1, from the
-      track-reprojection evidence; a lag other than 0 is chosen only when it beats lag 0 with
-      95% confidence (a block bootstrap), so a drive without enough evidence keeps ``u[t]``.
+      0.05 rad/s (:data:`visla_edu.diagnostics.MIN_NOISE_SAMPLES`). A fixed noise fits no
+      drive: the KITTI drives' velocities are nearly clean, the 2020 release's carry about
+      0.5 m/s and 0.05 rad/s, and a filter told the wrong level trusts far landmarks over an
+      accurate IMU, or an IMU over the camera.
+    * ``imu_lag`` (``"auto"``): from the track-reprojection evidence; a lag other than 0 is
+      chosen only when it beats lag 0 with 95% confidence (a block bootstrap), so a drive
+      without enough evidence keeps ``u[t]``.
     * ``extrinsic_correction`` (``"auto"``): the same evidence finds dataset 03's flipped
       ``imu_T_cam`` axes, and visual odometry checks the verdict.
-    * Gating stays on: track reprojection errors are heavy-tailed, and the gated share grows
-      with a track's age (tracker drift). ``reinit_gated_landmarks`` places a landmark again
-      when its next observation is gated before any update used it (it was born from an
-      outlier).
+    * Gating stays on (and ``reinit_gated_landmarks``): track reprojection errors are
+      heavy-tailed, and the gated share grows with a track's age (tracker drift).
     * ``sigma_pixel`` 1.5 px: slightly conservative NIS on the course drives, as it should be
       with drifting tracks (notebook 11 shows the NIS for other values).
-    * ``min_init_disparity`` 3 px (depth up to ``fsu b / 3``, 110 m on dataset 03's rig): a
-      far landmark triangulated from a smaller disparity is a poor Gaussian in x, y, z that
-      makes joint SLAM overconfident and less accurate.
-    * ``pixel_noise_inflation`` (``"auto"``): :func:`pixel_noise_inflation`, 1 where one
-      observation resolves angles better than a gyro step (noisy velocities: the camera carries
-      the estimate), ``r^2`` where the gyro is ``r`` times better (GPS-aided velocities: a camera
-      whose track errors persist from frame to frame would pull a good dead reckoning off). The
-      exponent was chosen on the cross-drive benchmark (``benchmarks/bench_accuracy.py``).
-    * ``msckf_window`` 20: the joint filter keeps the last 20 poses as clones; short tracks update
-      it when they end (null space, gated whole) and long ones enter as landmarks from all their
-      observations. On the cross-drive benchmark this beats the filter without clones where the
-      landmarks are few and far (a highway) and matches it elsewhere; 10 and 30 were worse.
-    * ``slam_error="invariant"``: the joint filter's error in the world frame, whose
-      unobservable directions do not depend on the estimate, so it stays consistent where the
-      right perturbation (notebooks 06-08) becomes overconfident (notebook 10).
-
-    Each field declares what it accepts next to its default (:func:`visla_edu.settings.setting`:
-    kind, plausible range and why the range is what it is, words such as ``"auto"``); the same
-    declaration checks values given in Python and parses ``visla-edu run --set NAME=VALUE``
-    strictly (:func:`visla_edu.settings.parse_setting`). An out-of-range value is refused with
-    its range, never clipped. The attributes below say what each setting means.
+    * ``min_init_disparity`` 3 px (110 m deep on dataset 03's rig): a far landmark triangulated
+      from a smaller disparity is a poor Gaussian in x, y, z that makes joint SLAM
+      overconfident and less accurate.
+    * ``pixel_noise_inflation`` (``"auto"``): :func:`pixel_noise_inflation` says why; its
+      exponent was chosen on the cross-drive benchmark.
+    * ``msckf_window`` 20: on the cross-drive benchmark the clones beat the filter without them
+      where the landmarks are few and far (a highway) and match it elsewhere; 10 and 30 were
+      worse.
+    * ``slam_error="invariant"``: the invariant error's unobservable directions do not depend
+      on the estimate, so it stays consistent where the right perturbation (notebooks 06-08)
+      becomes overconfident (notebook 10).
 
     The three switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
     ``vio_refine_landmarks`` are the teaching comparisons of the modes that read them: the
-    default is the consistent filter, the other value the tempting shortcut the notebooks
-    measure against it (04 mapping, 05 VIO, 06 SLAM).
+    default is the consistent filter, the other value the tempting shortcut the notebook named
+    in its attribute measures against it.
 
     Attributes
     ----------
     sigma_pixel : float
-        Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate (px);
+        Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate;
         ``R = (pixel_noise_inflation sigma_pixel)^2 I4``.
     pixel_noise_inflation : float or "auto"
         Modes: mapping, vio, slam. A factor on ``sigma_pixel`` for the filters. ``"auto"``:
-        :func:`pixel_noise_inflation` of the drive (1 where the gyro is noisier than one
-        observation, larger the better the gyro).
+        :func:`pixel_noise_inflation` of the drive.
     sigma_linear_velocity : float, (float, float, float) or "auto"
-        Modes: all. Noise on each linear-velocity sample (m/s), one value for every axis or one
-        per body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
+        Modes: all. Noise on each linear-velocity sample, one value for every axis or one per
+        body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
         axis (the first point above).
     sigma_angular_velocity : float, (float, float, float) or "auto"
-        Modes: all. Noise on each angular-velocity sample (rad/s), as above.
+        Modes: all. Noise on each angular-velocity sample, as above.
     landmark_prior_inflation : float
         Modes: mapping, vio, slam. A landmark enters the state at its first observation (which
         it consumes) with its mean at the stereo triangulation and the covariance
@@ -141,26 +133,25 @@ class FilterConfig:
         and grows with depth squared; the inflation allows for the linearisation error of far
         points.
     landmark_prior_sigma : float
-        Modes: mapping, vio, slam. Isotropic part of a new landmark's covariance (m).
+        Modes: mapping, vio, slam. Isotropic part ``sigma`` of a new landmark's covariance.
     initial_pose_sigma : float
         Modes: all. Standard deviation of the first pose.
     gate_probability : float
         Modes: mapping, vio, slam. Observations whose Mahalanobis distance exceeds the
         chi-square quantile with 4 degrees of freedom at this probability are rejected as
-        outliers (1.0 disables gating).
+        outliers.
     min_init_disparity : float
-        Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` (px) to triangulate a new
-        landmark (a depth up to ``fsu b / min_init_disparity``). Observations with non-positive
+        Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` to triangulate a new landmark
+        (a depth up to ``fsu b / min_init_disparity``). Observations with non-positive
         disparity are never used.
     imu_lag : int or "auto"
         Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
-        the step ``t -> t+1``: ``u[t + imu_lag]``. ``"auto"``: the lag the data support (the
-        second point above).
+        the step ``t -> t+1``: ``u[t + imu_lag]``.
     extrinsic_correction : str
         Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
         ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
         finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
-        of a correction (``"flip_yz"``, ...), see :data:`visla_edu.diagnostics.CORRECTIONS`.
+        of a correction, see :data:`visla_edu.diagnostics.CORRECTIONS`.
     landmark_cross_covariance : bool
         Mode: slam (teaching comparison, notebook 08). True: a new landmark enters correlated
         with the state (``G_pose Sigma_pose,x``). False is the textbook shortcut (pixel
@@ -171,8 +162,7 @@ class FilterConfig:
         the dead-reckoned poses as exact.
     vio_refine_landmarks : bool
         Mode: vio (teaching comparison, notebook 07). True: also update the landmarks with the
-        observations that just corrected the pose, which counts each observation twice; off
-        by default.
+        observations that just corrected the pose, which counts each observation twice.
     skip_repeated_frames : bool
         Modes: mapping, vio, slam. Make no update at frames whose observations exactly repeat
         the previous frame's (a duplicated camera frame while the IMU moved on; dataset 03
@@ -183,8 +173,7 @@ class FilterConfig:
     slam_error : {"invariant", "right"}
         Mode: slam. What the joint state's error means (:mod:`visla_edu.filters._forms`):
         ``"invariant"`` (world-frame error, ``T = exp(hat(xi)) mu``) or ``"right"`` (the right
-        perturbation ``T = mu exp(hat(delta))``); the last point above says why the default is
-        the invariant form.
+        perturbation of :mod:`visla_edu.lie`).
     reinit_gated_landmarks : bool
         Mode: slam (``msckf_window=0``). A landmark no update has used yet (only its first
         observation placed it) is placed again from its next observation when that one falls

@@ -16,9 +16,9 @@ Both share one pipeline, usable on its own for any true trajectory::
     tracks = simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng,
                              appear=appear, max_landmarks=config.num_landmarks)
 
-Conventions are the library's: twist ``u = [v; w]`` (linear first), motion
-``T_{t+1} = T_t @ se3_exp(tau_t u_t)``, ``world`` = IMU frame at the first time stamp
-(x forward, y left, z up), camera optical frame x right, y down, z forward.
+Conventions are the library's (:mod:`visla_edu.lie`, :mod:`visla_edu.motion`); ``world`` = IMU
+frame at the first time stamp (x forward, y left, z up), camera optical frame x right, y down,
+z forward.
 
 How the tracks are made (all of it vectorised; a loop runs over track *age*, not frames):
 

@@ -9,8 +9,8 @@ world frame) and landmarks ``m_j`` (world xyz)::
 with the stereo model ``h`` of :mod:`visla_edu.camera`, ``V = sigma_pixel^2 I4``,
 ``W_t = tau_t^2 diag(sigma_v^2 I3, sigma_w^2 I3)`` (:func:`visla_edu.motion.motion_noise`),
 the twist ``u_t = [v; w]`` of the step ``t -> t+1`` (:func:`visla_edu.motion.select_twists`)
-and a robust loss ``rho``. Gauss-Newton / Levenberg-Marquardt with the right perturbation
-``T <- T exp(delta^)``, ``m <- m + dm``; the landmarks are eliminated by the Schur
+and a robust loss ``rho``. Gauss-Newton / Levenberg-Marquardt in the perturbations of
+:mod:`visla_edu.lie`; the landmarks are eliminated by the Schur
 complement and the reduced pose system is solved by a block envelope Cholesky factor, which
 also gives the marginal covariances.
 

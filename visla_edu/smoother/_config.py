@@ -43,17 +43,17 @@ class SmootherConfig:
     course's fixed 0.5 m/s, 0.05 rad/s and lag 0. :meth:`from_filter_config` takes a filter's
     resolved settings, which is how ``visla-edu run --mode smooth`` gives both the same model.
 
+    Defaults, units and ranges: the field declarations (and ``visla-edu run --help``).
+
     Attributes
     ----------
     sigma_pixel : float
-        Standard deviation of each stereo pixel coordinate (px): ``V = sigma_pixel^2 I4``.
+        As the filters': ``V = sigma_pixel^2 I4``.
     sigma_linear_velocity, sigma_angular_velocity : float or (float, float, float)
-        Noise on each velocity sample (m/s, rad/s), one value or one per body axis:
-        ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` (:func:`visla_edu.motion.motion_noise`).
-        :meth:`from_filter_config` takes the filter's values, measured from the data when the
-        filter's are ``"auto"``.
+        As the filters': ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)``
+        (:func:`visla_edu.motion.motion_noise`).
     imu_lag : int
-        The step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
+        As the filters': the step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
     loss : {"cauchy", "huber", "none"}
         Robust loss ``rho(s)`` of the squared whitened reprojection error ``s = |r|^2 / sigma^2``:
         Cauchy ``k^2 log(1 + s / k^2)``, Huber ``s`` up to ``k^2`` then ``2 k sqrt(s) - k^2``.
@@ -85,17 +85,17 @@ class SmootherConfig:
     min_observations : int
         Landmarks with fewer usable observations are dropped from the problem.
     min_depth : float
-        Landmarks predicted closer than this (m, camera z) in any observation are dropped.
+        Landmarks predicted closer than this (camera z) in any observation are dropped.
     min_disparity : float
-        Landmarks never seen with at least this disparity ``uL - uR`` (px) are left out, and
+        Landmarks never seen with at least this disparity ``uL - uR`` are left out, and
         an estimate that drifts beyond twice that range (largest predicted disparity below
         ``min_disparity / 2``) is dropped after a round. Their depth, beyond
         ``fsu b / min_disparity``, is so poorly observed that Gauss-Newton on xyz landmarks
         sends them off along their viewing rays (on dataset 03, landmarks at 300 m ran to
-        minus a million metres in six iterations), which stalls Levenberg-Marquardt. The same
-        3 px as :attr:`visla_edu.filters.FilterConfig.min_init_disparity`.
+        minus a million metres in six iterations), which stalls Levenberg-Marquardt.
+        :meth:`from_filter_config` takes the filters' ``min_init_disparity``.
     skip_repeated_frames : bool
-        Ignore the observations of frames that exactly repeat the previous frame's.
+        As the filters'.
     pose_covariance, landmark_covariance : bool
         Compute the marginal covariances at the solution.
     window_size : int

@@ -248,10 +248,8 @@ def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_
         ``window_size``, ``window_iterations``, ``window_mode`` and the noise model (a window
         longer than the drive optimises every frame so far at each new frame).
     blas_threads : int or None
-        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`): its dense blocks
-        are small (6x6 to a few hundred rows), where a second thread costs far more in
-        synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
-        12 s with two on a busy 2-core machine); None leaves numpy's setting alone.
+        BLAS threads while it runs, as for :func:`~._batch.smooth` (None leaves numpy's setting
+        alone).
 
     Returns
     -------

@@ -107,7 +107,7 @@ def dataset_choices(data_dir=None):
 def world_position_covariance(world_T_imu, pose_cov):
     """Covariance of the IMU position in the world frame, shape (3, 3).
 
-    With the right perturbation ``T = mu exp(delta^)``, ``delta = [v; w]``, the position is
+    With the right perturbation ``delta = [v; w]`` (:mod:`visla_edu.lie`), the position is
     ``p = p_mu + R_mu v`` to first order, so its covariance is ``R Sigma_vv R^T``.
 
     Parameters

@@ -4,14 +4,17 @@ Every ``check_<name>(student_fn, hidden=False)`` calls the student's function on
 edge-case inputs (near the identity, near pi, far points, empty frames...), compares with the
 library version and
 
-* prints one ``✓ ...`` line when everything agrees (``hidden=True`` runs other cases, drawn
-  from ``VISLA_EDU_HIDDEN_SEED`` if set, and prints nothing);
-* raises ``AssertionError`` otherwise (nbgrader counts the cell as failed). The message's
-  first line (at most 79 characters, as ``nbgrader validate`` cuts long lines) names the
-  likely mistake in its first words; details follow. Mistakes are recognised by computing
-  deliberately wrong variants from the library (twist order ``[w; v]``, a transposed
-  rotation, a missing minus sign, a closed form without its small-angle series...) and
-  seeing whether the student's output equals one of them;
+* prints one ``✓ ...`` line when everything agrees (``hidden=True`` runs other cases instead,
+  their random ones drawn from ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed,
+  and prints nothing on success; a value of that variable that is not a non-negative integer
+  raises ``ValueError``);
+* raises ``AssertionError`` otherwise: a result of the wrong type, shape or values, or a
+  function that raised, called a hidden library function or changed ``visla_edu`` (nbgrader
+  counts the cell as failed). The message's first line (at most 79 characters, as ``nbgrader
+  validate`` cuts long lines) names the likely mistake in its first words; details follow.
+  Mistakes are recognised by computing deliberately wrong variants from the library (twist
+  order ``[w; v]``, a transposed rotation, a missing minus sign, a closed form without its
+  small-angle series...) and seeing whether the student's output equals one of them;
 * raises ``NotImplementedError`` (with a pointer to the cell to fill in) while the exercise
   is still the stub of the student notebook.
 
@@ -27,10 +30,9 @@ Graded cells load a fresh copy, so that nothing an answer cell assigned to the c
 
 Re-executing this file (``importlib.reload``) reloads each submodule below, in order.
 
-Conventions (README, "Conventions"): twist ``u = [v; w]``, ``twist_hat(u) = [[hat(w), v], [0, 0]]``,
-pose ``world_T_imu``, motion ``T_{t+1} = T_t exp(tau u^)``, right perturbation
-``T = mu exp(delta^)``. The visible inputs are drawn from a fixed seed, so a check gives the
-same verdict every time.
+Conventions (twists ``[v; w]``, the right perturbation): :mod:`visla_edu.lie`; the motion
+model: :mod:`visla_edu.motion`. The visible inputs are drawn from a fixed seed, so a check
+gives the same verdict every time.
 """
 
 import importlib as _importlib

@@ -208,20 +208,7 @@ def check_capstone_predict(predict, hidden=False):
         ``Sigma`` (D, D), the twist ``u = [v; w]`` (6,), the step ``tau`` (s) and the motion noise
         ``W`` (6, 6) to the predicted pair.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "predict"
     generator, spy = rng(hidden), _Spy()
@@ -312,20 +299,7 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
         ``imu_T_cam`` (4, 4) and the pixel part of the new covariances ``C_pixels`` (k, 3, 3) to
         the new means and the augmented covariance.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "add_landmarks"
     generator, spy = rng(hidden), _Spy()
@@ -397,20 +371,7 @@ def check_capstone_slam(slam_update, hidden=False):
         slots of the observed landmarks (k,), their observations ``z`` (k, 4), ``Ks`` (4, 4),
         ``cam_T_imu`` (4, 4) and the pixel noise variance to the updated triple.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "slam_update"
     generator, spy = rng(hidden), _Spy()

@@ -84,20 +84,7 @@ def check_observations_at(observations_at, hidden=False):
         observed) and a frame index ``t`` to the observed landmark ids and their pixels
         ``[uL, vL, uR, vR]``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "observations_at"
     call = student(observations_at, name, hide=[Dataset.observations])
@@ -151,20 +138,7 @@ def check_track_spans(track_spans, hidden=False):
         The student's function: the dense course array ``features`` (4, M, T) to the first and
         last frame (M, 2) of each landmark.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "track_spans"
     call = student(track_spans, name, hide=[Dataset.track_spans])

@@ -67,20 +67,7 @@ def check_white_noise(white_noise, hidden=False):
         The student's function: velocity samples ``[v; w]`` (T, 6) to the standard deviation of
         the white noise of each axis (6,).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "white_noise"
     call = student(white_noise, name, hide=[diagnostics.imu_noise])

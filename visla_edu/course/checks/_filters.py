@@ -97,20 +97,7 @@ def check_landmark_update(landmark_update, hidden=False):
         observation ``z`` (4,), ``world_T_imu`` (4, 4), ``Ks`` (4, 4), ``cam_T_imu`` (4, 4) and the
         pixel noise variance to the tuple ``(m_new (3,), Sigma_new (3, 3))``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -213,20 +200,7 @@ def check_pose_update(pose_update, hidden=False):
         ``p_world`` (k, 3), ``Ks``, ``cam_T_imu`` and the pixel noise variance to the tuple
         ``(mu_new (4, 4), Sigma_new (6, 6))``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -304,20 +278,7 @@ def check_landmark_observation_noise(landmark_observation_noise, hidden=False):
         landmarks' covariances (k, 3, 3) and the pixel noise variance (px^2) to the noise
         covariance of each observation (k, 4, 4).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "landmark_observation_noise"
     call = student(landmark_observation_noise, name, hide=[ekf.innovation_covariances, ekf.pose_update])
@@ -359,20 +320,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
         The student's function: pose and landmark Jacobians of ``k`` observations, their slots in
         the state and the number ``n`` of landmarks in the state to the joint Jacobian.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "slam_jacobian"
     generator = rng(hidden)
@@ -444,20 +392,7 @@ def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
         The student's function: the number of landmarks and the stride to the bytes of the dense
         joint covariance.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "dense_covariance_bytes"
     cases = [(5105, 1), (13289, 1), (5105, 10), (13289, 20), (7, 3), (1, 1)]
@@ -504,20 +439,7 @@ def check_marginalize(marginalize, hidden=False):
         The student's function: a covariance (D, D) and the indices to keep (k,) to the marginal
         covariance (k, k).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "marginalize"
     generator = rng(hidden)

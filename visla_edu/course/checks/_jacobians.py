@@ -38,20 +38,7 @@ def check_projection_jacobian(projection_jacobian, hidden=False):
         The student's function: a homogeneous camera-frame point ``q`` (4,) to the Jacobian of
         ``pi(q) = q / q3`` (4, 4).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "projection_jacobian"
     generator = rng(hidden)
@@ -87,20 +74,7 @@ def check_odot(odot, hidden=False):
     odot : callable
         The student's function: a homogeneous point ``s`` (4,) to ``[[I, -hat(s)], [0, 0]]`` (4, 6).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "odot"
     generator = rng(hidden)
@@ -167,20 +141,7 @@ def check_numerical_jacobian(numerical_jacobian, hidden=False):
         The student's function: a function ``f`` from (n,) to (m,), a point ``x`` (n,) and a step
         ``eps`` to the Jacobian of ``f`` at ``x`` (m, n).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "numerical_jacobian"
     call = student(numerical_jacobian, name, hide=[numdiff.central_jacobian])
@@ -257,20 +218,7 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
         ``mu`` = ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
         pixels with respect to the right perturbation ``[v; w]`` (4, 6).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -329,20 +277,7 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
         The student's function: ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), ``world_T_imu`` (4, 4) and a
         world point ``m`` (3,) to the Jacobian of its pixels with respect to ``m`` (4, 3).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "landmark_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

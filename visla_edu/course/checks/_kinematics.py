@@ -41,20 +41,7 @@ def check_hat(hat, hidden=False):
     hat : callable
         The student's function: a 3-vector ``w`` to the skew-symmetric matrix (3, 3).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "hat"
     call = student(hat, name, hide=[lie.hat])
@@ -138,20 +125,7 @@ def check_so3_exp(so3_exp, hidden=False):
     so3_exp : callable
         The student's function: a rotation vector ``w`` (3,) to the rotation matrix (3, 3).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "so3_exp"
     generator = rng(hidden)
@@ -231,20 +205,7 @@ def check_se3_exp(se3_exp, hidden=False):
     se3_exp : callable
         The student's function: a twist ``u = [v; w]`` (6,) to the pose (4, 4).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "se3_exp"
     generator = rng(hidden)
@@ -353,20 +314,7 @@ def check_dead_reckon(dead_reckon, hidden=False):
         The student's function: time stamps (T,), body twists ``[v; w]`` (T, 6) and the lag (an
         int) to the poses ``world_T_imu`` (T, 4, 4).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "dead_reckon"
     T = 45 if hidden else 30
@@ -450,20 +398,7 @@ def check_so3_log(so3_log, hidden=False):
         The student's function: a rotation matrix (3, 3) to its rotation vector ``w`` (3,), with
         ``so3_exp(w) == R`` and an angle ``|w|`` in [0, pi].
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "so3_log"
     cases, tiny = _log_cases(rng(hidden), hidden)

@@ -91,20 +91,7 @@ def check_slam_null_space(slam_null_space, hidden=False):
         the directions of moving the whole world (6 + 3n, 6), one per component of
         ``eps = [eps_v; eps_w]``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "slam_null_space"
     generator = rng(hidden)
@@ -159,20 +146,7 @@ def check_invariant_pose_jacobian(invariant_pose_jacobian, hidden=False):
         estimate ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
         pixels with respect to the invariant pose error ``xi = [p; theta]`` (4, 6).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "invariant_pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

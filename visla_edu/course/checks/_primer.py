@@ -73,20 +73,7 @@ def check_kalman_update_1d(kalman_update_1d, hidden=False):
         The student's function: prior mean and variance, measurement ``z`` and its noise
         variance ``r`` to the posterior ``(mean, variance)``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "kalman_update_1d"
     call = student(kalman_update_1d, name, hide=[kalman.update_1d, kalman.update, ekf.cholesky_update])
@@ -131,20 +118,7 @@ def check_kalman_predict(kalman_predict, hidden=False):
         The student's function: mean ``x`` (n,), covariance ``Sigma`` (n, n), transition ``F``
         (n, n) and motion noise ``W`` (n, n) to the pair (mean (n,), covariance (n, n)).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "kalman_predict"
     call = student(kalman_predict, name, hide=[kalman.predict, motion.predict_pose_covariance])

@@ -1,8 +1,7 @@
 """Checks of notebooks 13 and 14 (smoothing): the motion factor, the Schur complement, a Gauss-Newton step
 and the poses' marginal covariance.
 
-Conventions: poses ``world_T_imu``, right perturbation ``T <- T exp(delta^)``, twists
-``[v; w]`` (linear first), the Gauss-Newton system ``H dx = -g``.
+Conventions: :mod:`visla_edu.lie`'s; the Gauss-Newton system is ``H dx = -g``.
 """
 
 import numpy as np
@@ -104,20 +103,7 @@ def check_motion_residual(motion_residual, hidden=False):
         The student's function: the poses ``world_T_imu`` at the start and end of a step (4, 4)
         each and ``step_inv = exp(-tau u^)`` (4, 4) to the residual and its Jacobians.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "motion_residual"
     call = student(motion_residual, name, hide=[motion_residuals, reference_motion_residual,
@@ -223,20 +209,7 @@ def check_schur_reduce(schur_reduce, hidden=False):
         The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L), the landmark blocks
         ``H_mm`` (L, 3, 3), ``g_p`` (p,) and ``g_m`` (3 L,) to the reduced system ``(S, b)``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "schur_reduce"
     call = student(schur_reduce, name, hide=[reference_schur_reduce])
@@ -308,20 +281,7 @@ def check_pose_marginal_covariance(pose_marginal_covariance, hidden=False):
         The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L) and the landmark blocks
         ``H_mm`` (L, 3, 3) of an information matrix to the poses' marginal covariance (p, p).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "pose_marginal_covariance"
     call = student(pose_marginal_covariance, name, hide=[reference_pose_marginal_covariance, reference_schur_reduce])
@@ -423,20 +383,7 @@ def check_gauss_newton_step(gauss_newton_step, hidden=False):
         The student's function: the current pose (4, 4), points in the body frame (N, 3) and
         their measured world positions (N, 3) to the pose after one step.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "gauss_newton_step"
     call = student(gauss_newton_step, name, hide=[_step])

@@ -25,20 +25,7 @@ def check_curly_hat(curly_hat, hidden=False):
     curly_hat : callable
         The student's function: a twist ``u = [v; w]`` (6,) to its adjoint matrix (6, 6).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "curly_hat"
     generator = rng(hidden)
@@ -80,20 +67,7 @@ def check_pose_transition(pose_transition, hidden=False):
         The student's function: a body twist ``u = [v; w]`` (6,) and the step ``tau`` (s) to the
         perturbation transition ``F`` (6, 6).
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "pose_transition"
     generator = rng(hidden)
@@ -204,20 +178,7 @@ def check_left_pose_prediction(left_pose_prediction, hidden=False):
         its left perturbation ``xi = [p; theta]``, the twist ``u = [v; w]`` (6,), the step ``tau``
         (s) and the twist noise ``W`` (6, 6) to the predicted ``(mu_next, Sigma_next)``.
     hidden : bool
-        Run the hidden cases instead (other inputs, the random ones drawn from
-        ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed) and print nothing on success;
-        False prints one ``✓ ...`` line on success.
-
-    Raises
-    ------
-    AssertionError
-        The result has the wrong type, shape or values (the first line names the likely
-        mistake), or the function raised, called a hidden library function or changed
-        ``visla_edu``.
-    NotImplementedError
-        The function is still the notebook's stub.
-    ValueError
-        ``hidden`` is True and ``VISLA_EDU_HIDDEN_SEED`` is not a non-negative integer.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
     """
     name = "left_pose_prediction"
     call = student(left_pose_prediction, name,
