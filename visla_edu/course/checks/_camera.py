@@ -38,7 +38,7 @@ def check_stereo_matrix(stereo_matrix, hidden=False):
         The student's function: intrinsics ``K`` (3, 3) and baseline ``b`` (m) to the stereo
         matrix ``Ks`` (4, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "stereo_matrix"
     call = student(stereo_matrix, name, hide=[cam.stereo_matrix])
@@ -93,7 +93,7 @@ def check_project(project, hidden=False):
         The student's function: stereo matrix ``Ks`` (4, 4), ``cam_T_imu`` (4, 4),
         ``world_T_imu`` (4, 4) and world points (M, 3) to pixels ``[uL, vL, uR, vR]`` (M, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "project"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -130,7 +130,7 @@ def check_triangulate(triangulate, hidden=False):
         The student's function: pixels ``z`` (M, 4), intrinsics ``K`` (3, 3) and baseline ``b`` (m)
         to points in the left camera frame (M, 3).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "triangulate"
     generator = rng(hidden)
@@ -186,7 +186,7 @@ def check_init_landmark(init_landmark, hidden=False):
         The student's function: one observation ``z`` (4,), ``K`` (3, 3), ``b`` (m),
         ``imu_T_cam`` (4, 4) and ``world_T_imu`` (4, 4) to the landmark in the world frame (3,).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "init_landmark"
     generator, (K, b, imu_T_cam), camera = rng(hidden), rig(hidden), stereo_camera(hidden)

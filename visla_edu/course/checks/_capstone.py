@@ -208,7 +208,7 @@ def check_capstone_predict(predict, hidden=False):
         ``Sigma`` (D, D), the twist ``u = [v; w]`` (6,), the step ``tau`` (s) and the motion noise
         ``W`` (6, 6) to the predicted pair.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "predict"
     generator, spy = rng(hidden), _Spy()
@@ -299,7 +299,7 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
         ``imu_T_cam`` (4, 4) and the pixel part of the new covariances ``C_pixels`` (k, 3, 3) to
         the new means and the augmented covariance.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "add_landmarks"
     generator, spy = rng(hidden), _Spy()
@@ -371,7 +371,7 @@ def check_capstone_slam(slam_update, hidden=False):
         slots of the observed landmarks (k,), their observations ``z`` (k, 4), ``Ks`` (4, 4),
         ``cam_T_imu`` (4, 4) and the pixel noise variance to the updated triple.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "slam_update"
     generator, spy = rng(hidden), _Spy()

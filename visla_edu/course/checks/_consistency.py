@@ -26,7 +26,7 @@ def check_motion_noise(motion_noise, hidden=False):
         The student's function: the step ``tau`` (s) and the velocity noise ``sigma_v`` (m/s)
         and ``sigma_w`` (rad/s) to the twist noise covariance (6, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "motion_noise"
     cases = [(0.1, 0.5, 0.02), (0.104, 1.0, 0.05), (0.5, 0.2, 0.3)]
@@ -66,7 +66,7 @@ def check_nees(nees, hidden=False):
         The student's function: an error ``e`` (n,) and its covariance (n, n) to the normalised
         estimation error squared.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "nees"
     generator = rng(hidden)
@@ -104,7 +104,7 @@ def check_average_nees_bounds(average_nees_bounds, hidden=False):
         The student's function: the degrees of freedom of one NEES, the number ``n`` of values
         averaged and the probability ``p`` to the bounds ``(lo, hi)``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "average_nees_bounds"
     cases = [(6, 1, 0.95), (6, 50, 0.95), (4, 200, 0.99), (3, 10, 0.9)]
@@ -182,7 +182,7 @@ def check_gate(gate, hidden=False):
         The student's function: innovations ``z - z_pred`` (k, 4), their covariances (k, 4, 4)
         and the gate probability to a boolean mask (k,), True for the observations to use.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "gate"
     call = student(gate, name, hide=[ekf.mahalanobis_squared])
@@ -263,7 +263,7 @@ def check_align_rigid(align_rigid, hidden=False):
         The student's function: estimated and true positions (N, 3), row ``i`` the same frame, to
         the pose ``gt_T_est`` (4, 4) that best maps the estimate onto the truth.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "align_rigid"
     call = student(align_rigid, name, hide=[metrics.align_se3, metrics.ate])

@@ -84,7 +84,7 @@ def check_observations_at(observations_at, hidden=False):
         observed) and a frame index ``t`` to the observed landmark ids and their pixels
         ``[uL, vL, uR, vR]``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "observations_at"
     call = student(observations_at, name, hide=[Dataset.observations])
@@ -138,7 +138,7 @@ def check_track_spans(track_spans, hidden=False):
         The student's function: the dense course array ``features`` (4, M, T) to the first and
         last frame (M, 2) of each landmark.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "track_spans"
     call = student(track_spans, name, hide=[Dataset.track_spans])

@@ -67,7 +67,7 @@ def check_white_noise(white_noise, hidden=False):
         The student's function: velocity samples ``[v; w]`` (T, 6) to the standard deviation of
         the white noise of each axis (6,).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "white_noise"
     call = student(white_noise, name, hide=[diagnostics.imu_noise])

@@ -97,7 +97,7 @@ def check_landmark_update(landmark_update, hidden=False):
         observation ``z`` (4,), ``world_T_imu`` (4, 4), ``Ks`` (4, 4), ``cam_T_imu`` (4, 4) and the
         pixel noise variance to the tuple ``(m_new (3,), Sigma_new (3, 3))``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -200,7 +200,7 @@ def check_pose_update(pose_update, hidden=False):
         ``p_world`` (k, 3), ``Ks``, ``cam_T_imu`` and the pixel noise variance to the tuple
         ``(mu_new (4, 4), Sigma_new (6, 6))``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -278,7 +278,7 @@ def check_landmark_observation_noise(landmark_observation_noise, hidden=False):
         landmarks' covariances (k, 3, 3) and the pixel noise variance (px^2) to the noise
         covariance of each observation (k, 4, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "landmark_observation_noise"
     call = student(landmark_observation_noise, name, hide=[ekf.innovation_covariances, ekf.pose_update])
@@ -320,7 +320,7 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
         The student's function: pose and landmark Jacobians of ``k`` observations, their slots in
         the state and the number ``n`` of landmarks in the state to the joint Jacobian.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "slam_jacobian"
     generator = rng(hidden)
@@ -392,7 +392,7 @@ def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
         The student's function: the number of landmarks and the stride to the bytes of the dense
         joint covariance.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "dense_covariance_bytes"
     cases = [(5105, 1), (13289, 1), (5105, 10), (13289, 20), (7, 3), (1, 1)]
@@ -439,7 +439,7 @@ def check_marginalize(marginalize, hidden=False):
         The student's function: a covariance (D, D) and the indices to keep (k,) to the marginal
         covariance (k, k).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "marginalize"
     generator = rng(hidden)

@@ -38,7 +38,7 @@ def check_projection_jacobian(projection_jacobian, hidden=False):
         The student's function: a homogeneous camera-frame point ``q`` (4,) to the Jacobian of
         ``pi(q) = q / q3`` (4, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "projection_jacobian"
     generator = rng(hidden)
@@ -74,7 +74,7 @@ def check_odot(odot, hidden=False):
     odot : callable
         The student's function: a homogeneous point ``s`` (4,) to ``[[I, -hat(s)], [0, 0]]`` (4, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "odot"
     generator = rng(hidden)
@@ -141,7 +141,7 @@ def check_numerical_jacobian(numerical_jacobian, hidden=False):
         The student's function: a function ``f`` from (n,) to (m,), a point ``x`` (n,) and a step
         ``eps`` to the Jacobian of ``f`` at ``x`` (m, n).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "numerical_jacobian"
     call = student(numerical_jacobian, name, hide=[numdiff.central_jacobian])
@@ -218,7 +218,7 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
         ``mu`` = ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
         pixels with respect to the right perturbation ``[v; w]`` (4, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -277,7 +277,7 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
         The student's function: ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), ``world_T_imu`` (4, 4) and a
         world point ``m`` (3,) to the Jacobian of its pixels with respect to ``m`` (4, 3).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "landmark_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

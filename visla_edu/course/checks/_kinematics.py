@@ -41,7 +41,7 @@ def check_hat(hat, hidden=False):
     hat : callable
         The student's function: a 3-vector ``w`` to the skew-symmetric matrix (3, 3).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "hat"
     call = student(hat, name, hide=[lie.hat])
@@ -125,7 +125,7 @@ def check_so3_exp(so3_exp, hidden=False):
     so3_exp : callable
         The student's function: a rotation vector ``w`` (3,) to the rotation matrix (3, 3).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "so3_exp"
     generator = rng(hidden)
@@ -205,7 +205,7 @@ def check_se3_exp(se3_exp, hidden=False):
     se3_exp : callable
         The student's function: a twist ``u = [v; w]`` (6,) to the pose (4, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "se3_exp"
     generator = rng(hidden)
@@ -314,7 +314,7 @@ def check_dead_reckon(dead_reckon, hidden=False):
         The student's function: time stamps (T,), body twists ``[v; w]`` (T, 6) and the lag (an
         int) to the poses ``world_T_imu`` (T, 4, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "dead_reckon"
     T = 45 if hidden else 30
@@ -398,7 +398,7 @@ def check_so3_log(so3_log, hidden=False):
         The student's function: a rotation matrix (3, 3) to its rotation vector ``w`` (3,), with
         ``so3_exp(w) == R`` and an angle ``|w|`` in [0, pi].
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "so3_log"
     cases, tiny = _log_cases(rng(hidden), hidden)

@@ -91,7 +91,7 @@ def check_slam_null_space(slam_null_space, hidden=False):
         the directions of moving the whole world (6 + 3n, 6), one per component of
         ``eps = [eps_v; eps_w]``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "slam_null_space"
     generator = rng(hidden)
@@ -146,7 +146,7 @@ def check_invariant_pose_jacobian(invariant_pose_jacobian, hidden=False):
         estimate ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
         pixels with respect to the invariant pose error ``xi = [p; theta]`` (4, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "invariant_pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

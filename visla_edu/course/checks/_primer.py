@@ -73,7 +73,7 @@ def check_kalman_update_1d(kalman_update_1d, hidden=False):
         The student's function: prior mean and variance, measurement ``z`` and its noise
         variance ``r`` to the posterior ``(mean, variance)``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "kalman_update_1d"
     call = student(kalman_update_1d, name, hide=[kalman.update_1d, kalman.update, ekf.cholesky_update])
@@ -118,7 +118,7 @@ def check_kalman_predict(kalman_predict, hidden=False):
         The student's function: mean ``x`` (n,), covariance ``Sigma`` (n, n), transition ``F``
         (n, n) and motion noise ``W`` (n, n) to the pair (mean (n,), covariance (n, n)).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "kalman_predict"
     call = student(kalman_predict, name, hide=[kalman.predict, motion.predict_pose_covariance])

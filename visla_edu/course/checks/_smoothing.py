@@ -103,7 +103,7 @@ def check_motion_residual(motion_residual, hidden=False):
         The student's function: the poses ``world_T_imu`` at the start and end of a step (4, 4)
         each and ``step_inv = exp(-tau u^)`` (4, 4) to the residual and its Jacobians.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "motion_residual"
     call = student(motion_residual, name, hide=[motion_residuals, reference_motion_residual,
@@ -209,7 +209,7 @@ def check_schur_reduce(schur_reduce, hidden=False):
         The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L), the landmark blocks
         ``H_mm`` (L, 3, 3), ``g_p`` (p,) and ``g_m`` (3 L,) to the reduced system ``(S, b)``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "schur_reduce"
     call = student(schur_reduce, name, hide=[reference_schur_reduce])
@@ -281,7 +281,7 @@ def check_pose_marginal_covariance(pose_marginal_covariance, hidden=False):
         The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L) and the landmark blocks
         ``H_mm`` (L, 3, 3) of an information matrix to the poses' marginal covariance (p, p).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "pose_marginal_covariance"
     call = student(pose_marginal_covariance, name, hide=[reference_pose_marginal_covariance, reference_schur_reduce])
@@ -383,7 +383,7 @@ def check_gauss_newton_step(gauss_newton_step, hidden=False):
         The student's function: the current pose (4, 4), points in the body frame (N, 3) and
         their measured world positions (N, 3) to the pose after one step.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "gauss_newton_step"
     call = student(gauss_newton_step, name, hide=[_step])

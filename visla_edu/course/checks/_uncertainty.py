@@ -25,7 +25,7 @@ def check_curly_hat(curly_hat, hidden=False):
     curly_hat : callable
         The student's function: a twist ``u = [v; w]`` (6,) to its adjoint matrix (6, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "curly_hat"
     generator = rng(hidden)
@@ -67,7 +67,7 @@ def check_pose_transition(pose_transition, hidden=False):
         The student's function: a body twist ``u = [v; w]`` (6,) and the step ``tau`` (s) to the
         perturbation transition ``F`` (6, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "pose_transition"
     generator = rng(hidden)
@@ -178,7 +178,7 @@ def check_left_pose_prediction(left_pose_prediction, hidden=False):
         its left perturbation ``xi = [p; theta]``, the twist ``u = [v; w]`` (6,), the step ``tau``
         (s) and the twist noise ``W`` (6, 6) to the predicted ``(mu_next, Sigma_next)``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.checks`.
+        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
     """
     name = "left_pose_prediction"
     call = student(left_pose_prediction, name,
