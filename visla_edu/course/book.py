@@ -81,7 +81,7 @@ _REPOSITORY = re.compile(r"https://(github|gitlab)\.com/[\w.-]+/[\w.-]+")
 class BookError(RuntimeError):
     """The build stopped on valid input: a notebook failed outside its exercises, or Sphinx failed.
 
-    ``failed`` tells the command line's error boundary to exit with status 1 (a failure), not 2.
+    ``failed``: exit status 1, not 2 (:mod:`visla_edu.cli`).
     """
 
     failed = True
