@@ -2,8 +2,7 @@
 
 **Pages.** One per notebook of ``solutions/`` (every ``*.ipynb`` there, in file-name order, found
 when the book is built), each the **student edition** of the notebook
-(:func:`visla_edu.course.release.student_notebook`: solutions replaced by stubs, hidden tests removed,
-answers to the questions replaced by ``YOUR ANSWER HERE``) with its outputs and figures, and an
+(:func:`visla_edu.course.release.student_notebook`) with its outputs and figures, and an
 index page: the table of contents and how to run the notebooks (a clone, Binder, Colab). A
 notebook without code (a page of notation, say) is a page like the others, without execution.
 
@@ -52,8 +51,8 @@ __all__ = ["BookError", "BOOK_PACKAGES", "STUDENT_FOLDER", "CELL_TIMEOUT", "requ
 #: The packages of the ``book`` extra that the build imports: import name -> distribution name.
 BOOK_PACKAGES = {"sphinx": "sphinx", "myst_nb": "myst-nb", "sphinx_book_theme": "sphinx-book-theme",
                  "jupyter_server_mathjax": "jupyter-server-mathjax", "nbclient": "nbclient"}
-#: The repository's folder of the student notebooks (``visla-edu release`` writes it): the Binder and
-#: Colab buttons of a page open ``STUDENT_FOLDER/<page>.ipynb`` of the repository.
+#: The repository's folder of the student notebooks (:data:`visla_edu.course.STUDENT_NOTEBOOKS`):
+#: the Binder and Colab buttons of a page open ``STUDENT_FOLDER/<page>.ipynb`` of the repository.
 STUDENT_FOLDER = "visla_edu/course/notebooks"
 #: Seconds one cell may run (as the notebook tests allow).
 CELL_TIMEOUT = 600
@@ -102,7 +101,7 @@ def require_book_tools():
 
 
 def default_solutions():
-    """The repository's ``solutions/`` folder (beside the package in a source checkout)."""
+    """The repository's ``solutions/`` folder (:data:`visla_edu.course.release.SOLUTIONS`)."""
     return release.SOLUTIONS
 
 
