@@ -129,7 +129,7 @@ def check_site_folder(out_dir):
     Parameters
     ----------
     out_dir : str or os.PathLike
-        The site's folder: new, empty, or a site built before (it holds Sphinx's ``.buildinfo``).
+        The site's folder (the module docstring's "The folder").
 
     Returns
     -------
@@ -252,7 +252,7 @@ def student_page(path, work_dir, course_data=True):
     work_dir : str or os.PathLike
         The kernel's working folder (the notebook may write there).
     course_data : bool
-        Let the kernel see the course data (``VISLA_EDU_DATA``); False hides it.
+        As :func:`build_book`.
 
     Returns
     -------
