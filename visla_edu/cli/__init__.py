@@ -8,7 +8,8 @@ never a traceback. Exit status:
 
 * 0 - done;
 * 1 - the filter (or the diagnostics) failed on valid input: divergence, a singular matrix,
-  numerical overflow, out of memory (the line names the frame and the likely cause);
+  numerical overflow, out of memory (the line names the frame and the likely cause), or an
+  error marked ``failed = True`` (its ``hint``, like any error's, ends the line);
 * 2 - bad input: a command-line error, a bad ``--set`` value, a missing, unreadable or
   invalid file, an output path that cannot or must not be written (checked before any work);
 * 3 - an internal error (a bug): one line asking to report it;
@@ -81,9 +82,7 @@ def build_parser():
     Returns
     -------
     argparse.ArgumentParser
-        A subclass whose ``error`` prints one line, ``"visla-edu: error: ... (see visla-edu
-        --help)"``, to stderr and raises ``SystemExit`` with status 2 (:data:`EXIT_BAD_INPUT`)
-        instead of printing the usage block.
+        Its usage errors are one line and status 2 (:class:`_Parser`, the module docstring).
     """
     parser = _Parser(prog="visla-edu",
                      description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
@@ -485,16 +484,14 @@ def main(argv=None):
     Returns
     -------
     int
-        The exit status of a command that ran: 0, 1 (a failure on valid input), 2 (bad input)
-        or 130 (:data:`EXIT_INTERRUPTED`: Ctrl-C, i.e. ``KeyboardInterrupt``, at any moment from
-        parsing to the last line printed; files being written are left as they were, see
-        :func:`visla_edu._files.atomic_write`).
+        The exit status of a command that ran (the module docstring); 130 for Ctrl-C at any
+        moment from parsing to the last line printed.
 
     Raises
     ------
     SystemExit
-        As argparse does, for a usage error (status 2, one line on stderr), ``--help``
-        (status 0) and ``release --check`` finding notebooks that drifted (status 1).
+        For a usage error (status 2), ``--help`` (0) and ``release --check`` finding notebooks
+        that drifted (1).
 
     Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected,
     not printed: a failure is reported by its one line (the filter detects a non-finite state
@@ -555,7 +552,7 @@ def _one_line(text):
 
 
 def _describe(err, args):
-    """``(exit status, message)`` of an exception that reached the boundary."""
+    """``(exit status, message)`` of an exception that reached the boundary (statuses: the module docstring)."""
     import numpy as np
 
     from visla_edu.filters import FilterDivergedError

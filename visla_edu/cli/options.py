@@ -1,8 +1,8 @@
 """The values of the command line's options, parsed (argparse ``type=`` functions).
 
 Each function takes the option's text and returns its value, or raises
-:class:`argparse.ArgumentTypeError` with one line that names what is wrong: argparse then
-prints ``usage`` and that line, and :mod:`visla_edu.cli` exits with status 2.
+:class:`argparse.ArgumentTypeError` with one line that names what is wrong: a usage error of
+:mod:`visla_edu.cli` (see there).
 """
 
 import argparse

@@ -8,9 +8,8 @@
   generated from the repository's ``solutions/`` by ``visla-edu release``
   (:mod:`visla_edu.course.release`) and checked in. It is the only copy: the wheel carries it (and
   nothing of the solutions), so a student who ``pip install``-ed the package has it.
-* :mod:`visla_edu.course.manifest`: what ``release`` last wrote into a folder (sha256 digests in
-  ``.release.json`` beside the notebooks), so that a release never overwrites a notebook edited
-  by hand.
+* :mod:`visla_edu.course.manifest`: what ``release`` last wrote into a folder, so that a
+  release never overwrites a notebook edited by hand.
 * :mod:`visla_edu.course.student`: ``visla-edu student DIR``, the student's own working folder:
   copies of the student edition that are never overwritten, and a short README.
 * :mod:`visla_edu.course.project`: the summative project: the written assignment (``PROJECT.md``,

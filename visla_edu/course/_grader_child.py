@@ -7,8 +7,8 @@
    path, the drive file the grader prepared (no ground truth,
    :func:`visla_edu.course.project.prepare_drive`), the settings, the limits;
 2. loads the drive and builds the :class:`~visla_edu.filters.FilterConfig`;
-3. lowers its resource limits for good (:func:`limit_resources`): address space, CPU seconds,
-   file size, no new processes or threads;
+3. lowers its resource limits for good (:func:`limit_resources`; the limits:
+   :mod:`visla_edu.course._runner`);
 4. hides the library (:func:`visla_edu.course._sandbox.hide_library`, ``block_imports``);
 5. imports the submission (writing ``progress``: ``import``), calls ``make_filter(dataset,
    config)`` (``make_filter``) and steps the filter once per frame (``frame N``), checking
@@ -65,8 +65,7 @@ def limit_resources(request):
     Parameters
     ----------
     request : dict
-        ``memory_limit`` (bytes of address space, or None), ``cpu_limit`` (CPU seconds),
-        ``file_limit`` (bytes any one written file may reach).
+        ``memory_limit`` (bytes, or None), ``cpu_limit`` (s), ``file_limit`` (bytes).
 
     Returns
     -------

@@ -3,9 +3,8 @@
 ``DIR/<name>/`` holds ``report.md``, ``trajectory.png`` (top-down, against the ground truth,
 dead reckoning and the library's filters), ``errors.png`` (position error over time),
 ``consistency.png`` (pose NEES and NIS per degree of freedom with their chi-square bands),
-``estimate.npz`` (the submission's ``world_T_imu``, ``pose_cov``, ``nis``, ``nis_dof``,
-``step_seconds`` for the frames it completed), ``output.txt`` (what it printed) and, when it
-raised, ``traceback.txt``. ``DIR/summary.md`` and ``DIR/grades.csv`` list every submission.
+``estimate.npz`` (as the grading process wrote it, :mod:`visla_edu.course._grader_child`),
+``output.txt`` (what it printed) and, when it raised, ``traceback.txt``. ``DIR/summary.md`` and ``DIR/grades.csv`` list every submission.
 Figures are drawn on :class:`matplotlib.figure.Figure` objects (no pyplot state) and every
 file is written atomically.
 """

@@ -8,6 +8,12 @@ importing the submission, so the grader's own start-up is not the submission's t
 whole group is killed), and reads the outcome (:func:`read_outcome`). A child that left no
 outcome is described by how it ended: killed at the time limit (``timeout``), by a signal or
 an early exit (``crashed``).
+
+**The limits** of a submission: the time limit, wall clock, for its import, ``make_filter``
+and every step together; CPU seconds of that plus :data:`CPU_MARGIN`; address space (None: no
+limit); :data:`FILE_LIMIT` bytes a file; no new processes or threads. The child sets all but
+the first on itself for good (:func:`visla_edu.course._grader_child.limit_resources`; Linux
+and macOS).
 """
 
 import json
@@ -22,9 +28,9 @@ from pathlib import Path
 __all__ = ["ChildOutcome", "DEFAULT_TIME_LIMIT", "DEFAULT_MEMORY_LIMIT", "EXIT_STATUSES", "STARTUP_SECONDS",
            "FILE_LIMIT", "write_request", "wait_with_time_limit", "read_outcome", "run_submission"]
 
-#: Seconds a submission may take (import, make_filter and every step) by default.
+#: The default time limit (s; the module docstring).
 DEFAULT_TIME_LIMIT = 600.0
-#: Bytes of address space a submission's process may use by default.
+#: The default memory limit (bytes of address space).
 DEFAULT_MEMORY_LIMIT = 4 * 2**30
 #: The folder that holds the ``visla_edu`` package: the child imports this very copy.
 PACKAGE_PARENT = Path(__file__).resolve().parents[2]
@@ -56,23 +62,12 @@ class ChildOutcome:
 
     Attributes
     ----------
-    status : str
-        A key of :data:`visla_edu.course._grader_child.STATUSES` or of :data:`EXIT_STATUSES`.
-    message : str
-        One line (without the submission's name).
-    frames : int
-        Frames the submission completed.
-    seconds : float
-        Its own time: import, ``make_filter`` and the steps (NaN when it left no outcome).
-    hidden_calls : list of str
-        Hidden visla_edu functions (and imports) it called.
-    traceback : str
-        The text of its error, for its report (``""`` when none).
-    notes : list of str
-        The grader's notes (a limit that could not be set...).
+    status, message, frames, seconds, hidden_calls, traceback, notes
+        As in ``outcome.json`` (:mod:`visla_edu.course._grader_child`). Without it: ``status``
+        a key of :data:`EXIT_STATUSES`, ``seconds`` NaN.
     arrays : dict of str to ndarray
-        ``estimate.npz``: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6), ``nis``, ``nis_dof``,
-        ``step_seconds`` (k,), for the ``k = frames`` frames done (empty without it).
+        ``estimate.npz`` (:mod:`visla_edu.course._grader_child`), ``k = frames`` rows each;
+        empty without it.
     output : str
         The end of what the process printed (the submission's prints), at most 4000 characters.
     """
@@ -95,14 +90,9 @@ def write_request(folder, submission, drive_file, config, time_limit, memory_lim
     ----------
     folder : pathlib.Path
         The submission's working folder (the child's current folder and where it writes).
-    submission, drive_file : pathlib.Path
-        The submission's file and the prepared drive (:func:`visla_edu.data.save`).
-    config : visla_edu.filters.FilterConfig
-        Resolved; sent as its :meth:`~visla_edu.filters.FilterConfig.to_dict`.
-    time_limit : float
-        Seconds; the child's CPU limit is this plus :data:`CPU_MARGIN`.
-    memory_limit : int or None
-        Bytes of address space, or None for no limit.
+    submission, drive_file, config, time_limit, memory_limit
+        As :func:`run_submission`; ``config`` is sent as its
+        :meth:`~visla_edu.filters.FilterConfig.to_dict`.
     """
     request = {"submission": str(Path(submission).resolve()), "drive": str(drive_file), "config": config.to_dict(),
                "out": str(folder), "memory_limit": memory_limit, "cpu_limit": int(time_limit + CPU_MARGIN),
@@ -241,15 +231,15 @@ def run_submission(submission, drive_file, config, folder, time_limit, memory_li
     ----------
     submission : pathlib.Path
     drive_file : pathlib.Path
-        The prepared drive (no ground truth).
+        The prepared drive (no ground truth, :func:`visla_edu.data.save`).
     config : visla_edu.filters.FilterConfig
         Resolved.
     folder : pathlib.Path
         An empty working folder for this submission.
     time_limit : float
-        Seconds for the import, ``make_filter`` and every step together.
+        Seconds (the module docstring's limits).
     memory_limit : int or None
-        Bytes of address space.
+        Bytes of address space, or None for no limit.
     num_frames : int
         Frames of the drive (for the messages).
     """

@@ -134,8 +134,6 @@ def _methods_of(cls):
 def hide_library():
     """Make every function and method of the loaded hidden visla_edu modules raise :class:`SubmissionUsedLibrary`.
 
-    For good: meant for the grading process, which ends after the submission ran.
-
     Returns
     -------
     int

@@ -2,8 +2,7 @@
 
 **Pages.** One per notebook of ``solutions/`` (every ``*.ipynb`` there, in file-name order, found
 when the book is built), each the **student edition** of the notebook
-(:func:`visla_edu.course.release.student_notebook`: solutions replaced by stubs, hidden tests removed,
-answers to the questions replaced by ``YOUR ANSWER HERE``) with its outputs and figures, and an
+(:func:`visla_edu.course.release.student_notebook`) with its outputs and figures, and an
 index page: the table of contents and how to run the notebooks (a clone, Binder, Colab). A
 notebook without code (a page of notation, say) is a page like the others, without execution.
 
@@ -52,8 +51,8 @@ __all__ = ["BookError", "BOOK_PACKAGES", "STUDENT_FOLDER", "CELL_TIMEOUT", "requ
 #: The packages of the ``book`` extra that the build imports: import name -> distribution name.
 BOOK_PACKAGES = {"sphinx": "sphinx", "myst_nb": "myst-nb", "sphinx_book_theme": "sphinx-book-theme",
                  "jupyter_server_mathjax": "jupyter-server-mathjax", "nbclient": "nbclient"}
-#: The repository's folder of the student notebooks (``visla-edu release`` writes it): the Binder and
-#: Colab buttons of a page open ``STUDENT_FOLDER/<page>.ipynb`` of the repository.
+#: The repository's folder of the student notebooks (:data:`visla_edu.course.STUDENT_NOTEBOOKS`):
+#: the Binder and Colab buttons of a page open ``STUDENT_FOLDER/<page>.ipynb`` of the repository.
 STUDENT_FOLDER = "visla_edu/course/notebooks"
 #: Seconds one cell may run (as the notebook tests allow).
 CELL_TIMEOUT = 600
@@ -81,7 +80,7 @@ _REPOSITORY = re.compile(r"https://(github|gitlab)\.com/[\w.-]+/[\w.-]+")
 class BookError(RuntimeError):
     """The build stopped on valid input: a notebook failed outside its exercises, or Sphinx failed.
 
-    ``failed`` tells the command line's error boundary to exit with status 1 (a failure), not 2.
+    ``failed``: exit status 1, not 2 (:mod:`visla_edu.cli`).
     """
 
     failed = True
@@ -102,7 +101,7 @@ def require_book_tools():
 
 
 def default_solutions():
-    """The repository's ``solutions/`` folder (beside the package in a source checkout)."""
+    """The repository's ``solutions/`` folder (:data:`visla_edu.course.release.SOLUTIONS`)."""
     return release.SOLUTIONS
 
 
@@ -130,7 +129,7 @@ def check_site_folder(out_dir):
     Parameters
     ----------
     out_dir : str or os.PathLike
-        The site's folder: new, empty, or a site built before (it holds Sphinx's ``.buildinfo``).
+        The site's folder (the module docstring's "The folder").
 
     Returns
     -------
@@ -253,7 +252,7 @@ def student_page(path, work_dir, course_data=True):
     work_dir : str or os.PathLike
         The kernel's working folder (the notebook may write there).
     course_data : bool
-        Let the kernel see the course data (``VISLA_EDU_DATA``); False hides it.
+        As :func:`build_book`.
 
     Returns
     -------

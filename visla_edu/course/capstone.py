@@ -6,15 +6,10 @@ interface (``step()`` returns a :class:`~visla_edu.filters.StepRecord`, so
 :class:`visla_edu.stepper.Stepper` can step it) whose loop -- data, landmark bookkeeping,
 gating, retiring finished tracks, what is recorded -- calls two sets of functions:
 
-* :class:`Parts`, the exercises of notebooks 01-09 with the notebooks' signatures
-  (``se3_exp``, ``pose_transition``, ``project``, ``pose_jacobian``, ``landmark_jacobian``,
-  ``init_landmark``, ``odot``, ``pose_update``, ``slam_jacobian``, ``marginalize``);
+* :class:`Parts`, the exercises of notebooks 01-09 with the notebooks' signatures;
   :func:`library_parts` gives the library's, and ``dataclasses.replace`` swaps in one's own;
-* :class:`Steps`, the three assembly functions notebook 12 asks for, each taking ``parts``
-  first: ``predict(parts, world_T_imu, Sigma, u, tau, W) -> (world_T_imu, Sigma)``,
-  ``add_landmarks(parts, world_T_imu, Sigma, z, K, b, imu_T_cam, C_pixels) -> (p_new, Sigma)``
-  and ``slam_update(parts, world_T_imu, Sigma, p_active, slots, z, Ks, cam_T_imu, noise_var)
-  -> (world_T_imu, Sigma, p_active)``.
+* :class:`Steps`, the three assembly functions notebook 12 asks for (``predict``,
+  ``add_landmarks``, ``slam_update``), each taking ``parts`` first.
 
 The error form is the right perturbation the notebooks derive (``T = mu exp(delta^)``,
 ``m = mu_m + delta_m``), so a correct assembly reproduces the library's

@@ -2,7 +2,7 @@
 
 Kept apart from the grader so that ``visla-edu`` builds its parser without importing it;
 :mod:`visla_edu.cli` calls :func:`add_parser` and, for ``project``, :func:`run` inside its
-error boundary (a bad submission path or folder is one line and exit status 2).
+error boundary.
 """
 
 import argparse

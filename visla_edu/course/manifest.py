@@ -1,13 +1,13 @@
 """What ``visla-edu release`` last wrote into a folder: ``.release.json``, one sha256 per file.
 
 ``release`` (:func:`visla_edu.course.release.make_student_notebooks`) writes the student notebooks and
-then this manifest beside them, and the manifest is committed with them. Before it replaces a
-notebook, release compares the file's digest with the recorded one:
+then this manifest beside them, and the manifest is committed with them. Before it writes
+anything, release compares the digest of each notebook it would replace with the recorded one:
 
 * the same digest: the file is release's own output, and a newer release may replace it;
 * another digest, or a file the manifest does not list: someone made or edited it (a student
-  answering in a clone, a teacher fixing a typo in the generated copy), so release refuses and
-  names it, unless forced.
+  answering in a clone, a teacher fixing a typo in the generated copy), so release refuses,
+  names it and writes nothing, unless forced.
 
 The file (sorted keys, two-space indentation, a final newline: the same bytes for the same
 notebooks, so the test that the folder is in sync checks it too)::

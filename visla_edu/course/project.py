@@ -9,15 +9,15 @@ a :class:`visla_edu.filters.StepRecord`, frame after frame).
 
 :func:`grade` (``visla-edu project grade``) grades submissions on one drive:
 
-1. :func:`prepare_drive` loads the drive, measures its calibration once (the ``"auto"``
-   settings, the extrinsic correction) and makes what a submission gets: a copy of the drive
-   **without** its ground truth, metadata or source (so neither the truth nor a simulation's
-   seed reaches it), its ``imu_T_cam`` already corrected, and the resolved
-   :class:`~visla_edu.filters.FilterConfig` (``extrinsic_correction="none"``). The library's
-   ``slam``, ``vio`` and ``deadreckon`` run on exactly these inputs: the references;
-2. each submission runs in a process of its own with the library hidden (``_sandbox``) and
-   a time and memory limit (``_runner``, ``_grader_child``); a failure is one line on stderr
-   and in its report, and the next submission is graded;
+1. :func:`prepare_drive` loads the drive, measures its calibration once
+   (:func:`visla_edu.run.resolve_config`, the extrinsic correction) and makes what a
+   submission gets: a copy of the drive **without** its ground truth, metadata or source (so
+   neither the truth nor a simulation's seed reaches it), its ``imu_T_cam`` already
+   corrected, and the resolved :class:`~visla_edu.filters.FilterConfig`
+   (``extrinsic_correction="none"``). The library's ``slam``, ``vio`` and ``deadreckon`` run
+   on exactly these inputs: the references;
+2. each submission runs in a process of its own with the library hidden
+   (:mod:`visla_edu.course._sandbox`) and its limits (:mod:`visla_edu.course._runner`);
 3. :func:`measure` computes ATE (raw and aligned), KITTI drift, pose NEES and NIS per degree
    of freedom, and :func:`measured_points` the grader's part of the rubric
    (:data:`MEASURED_TOTAL` points; :func:`rubric_table` is PROJECT.md's table of it);
@@ -315,8 +315,8 @@ def grade(submissions, drive, out_dir, ground_truth=None, ground_truth_times=Non
           memory_limit=DEFAULT_MEMORY_LIMIT, data_dir=None):
     """Grade each submission on ``drive``; write the reports in ``out_dir``; return the :class:`Grade` list.
 
-    Prints a line per submission: on stdout when it completed, on stderr (one line, never a
-    traceback) when it did not; the next submission is graded either way.
+    Prints a line per submission: on stdout when it completed, on stderr when it did not; the
+    next submission is graded either way.
 
     Parameters
     ----------
@@ -326,10 +326,8 @@ def grade(submissions, drive, out_dir, ground_truth=None, ground_truth_times=Non
         As :func:`prepare_drive`.
     out_dir : str or os.PathLike
         A new or empty folder, or an earlier grading's (its files are replaced).
-    time_limit : float
-        Seconds per submission: import, ``make_filter`` and every step.
-    memory_limit : int or None
-        Bytes of address space per submission (Linux and macOS).
+    time_limit, memory_limit
+        Per submission, as :func:`visla_edu.course._runner.run_submission`.
 
     Raises
     ------

@@ -2,9 +2,8 @@
 
 ``solutions/*.ipynb`` hold the full course: derivations, exercises with their solutions
 between nbgrader's markers, and graded check cells. This module turns them into the student
-edition, ``visla_edu/course/notebooks/*.ipynb`` (:data:`visla_edu.course.STUDENT_NOTEBOOKS`,
-package data: the wheel carries it, and ``visla-edu student DIR`` copies it into a student's
-folder), the files students open:
+edition (:data:`visla_edu.course.STUDENT_NOTEBOOKS`), the files students open. A marker is a
+whole line, compared after stripping spaces:
 
 * in every cell, the lines between ``### BEGIN SOLUTION`` and ``### END SOLUTION`` are
   replaced by a stub (``raise NotImplementedError(...)`` in code, ``YOUR ANSWER HERE`` in
@@ -24,9 +23,8 @@ It also writes the table of points per notebook (from the graded cells' nbgrader
 into the teacher's guide, ``TEACHING.md``, between :data:`POINTS_BEGIN` and :data:`POINTS_END`.
 
 The output depends only on the input (no time stamps, no random cell ids), so the student
-notebooks can be checked in and a test can prove they are in sync. Beside them release keeps
-the digests of what it wrote (:mod:`visla_edu.course.manifest`), and it refuses to replace a
-notebook that no longer has its digest (someone edited it) unless forced::
+notebooks can be checked in and a test can prove they are in sync. Release never replaces a
+notebook edited by hand unless forced (:mod:`visla_edu.course.manifest`)::
 
     python -m visla_edu.course.release                 # solutions/ -> visla_edu/course/notebooks/
     python -m visla_edu.course.release --force         # also replace notebooks edited by hand
@@ -168,13 +166,11 @@ def _enclosing_function(lines_before, indent):
 
 
 def strip_hidden_tests(source, where="cell"):
-    """Remove every hidden-test region of ``source`` (markers included).
+    """Remove every hidden-test region of ``source`` (markers included; the module docstring).
 
-    A region runs from a line ``### BEGIN HIDDEN TESTS`` to a line ``### END HIDDEN TESTS``
-    (compared after stripping spaces). When the last region ends the cell (only blank lines
-    after it), the blank lines before it and after it are dropped too, so the result does not
-    end where the tests were; otherwise the cell's end is kept as it was. Without a region
-    ``source`` is returned unchanged.
+    When the last region ends the cell (only blank lines after it), the blank lines before it
+    and after it are dropped too, so the result does not end where the tests were; otherwise
+    the cell's end is kept as it was. Without a region ``source`` is returned unchanged.
 
     Parameters
     ----------
@@ -309,12 +305,10 @@ def _expected(src_dir):
 def make_student_notebooks(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST, force=False):
     """Write the student version of every ``src_dir/*.ipynb`` to ``dst_dir``, never over someone's edits.
 
-    Files are rewritten only when their content changes, each atomically (an interrupted
-    release leaves every notebook whole, old or new), and then the manifest of what was written
-    (:mod:`visla_edu.course.manifest`). Before anything is written, every notebook about to be
-    replaced is checked against the manifest: one that is not as release last wrote it (edited
-    by hand, or a file release never wrote) stops the release, which then changes nothing,
-    unless ``force``. Student notebooks without a solution notebook are left alone
+    Files are rewritten only when their content changes, each atomically, and then the
+    manifest of what was written. A notebook to replace that release did not write as it is
+    (:mod:`visla_edu.course.manifest`) stops the release before anything is written, unless
+    ``force``. Student notebooks without a solution notebook are left alone
     (:func:`check_in_sync` reports them).
 
     Parameters
@@ -360,8 +354,7 @@ def _holds(path, text):
 def _write_text(path, text):
     """Write ``text`` as UTF-8 bytes, atomically (:func:`visla_edu._files.atomic_write`): never half a file.
 
-    Bytes, not text mode: the file holds exactly the text on every system (no newline
-    translation), so its digest is the text's (:func:`visla_edu.course.manifest.digest`).
+    Bytes, not text mode: no newline translation, so the file's digest is the text's.
     """
     with atomic_write(path, "wb") as f:
         f.write(text.encode("utf-8"))
@@ -507,8 +500,8 @@ def _teaching_next_to(src_dir):
 def main(argv=None):
     """Command line: ``python -m visla_edu.course.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
 
-    Without ``--check``: writes the student notebooks (:func:`make_student_notebooks`; one
-    edited by hand stops everything unless ``--force``), then with ``--clean-sources`` strips
+    Without ``--check``: writes the student notebooks (:func:`make_student_notebooks`), then
+    with ``--clean-sources`` strips
     the solution notebooks (:func:`clean_sources`) and, if ``TEACHING.md`` exists in the folder
     above ``--src``, writes its points table (:func:`update_points_table`), printing each file
     written. With ``--check``: writes nothing and lists what is out of date

@@ -3,12 +3,20 @@
 :func:`make_filter` builds a mode by name (:data:`MODES`, from :mod:`visla_edu.codes`),
 :func:`iterate_filter` steps it, :func:`run_filter` runs it to the end into a
 :class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
-:func:`load_result` write and read it (atomically, :func:`visla_edu._files.atomic_write`). How
+:func:`load_result` write and read its file (:mod:`visla_edu.run._results`). How
 the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
 (:func:`limit_blas_threads`) and the progress bar. :func:`run_smoother` runs the batch or the
 sliding-window smoother (:mod:`visla_edu.smoother`) into the same :class:`RunResult`.
 :mod:`visla_edu.run.workload` says what a run will cost before it starts and names the likely cause
 when one fails.
+
+**"auto" settings.** Every run first measures the settings left at ``"auto"`` from the data
+(:func:`resolve_config`): the velocity noise and the IMU lag by
+:func:`visla_edu.diagnostics.calibrate` (cached by the data's content, applied by
+:meth:`~visla_edu.filters.FilterConfig.resolve`), and ``extrinsic_correction`` with the camera,
+from the same calibration (:func:`visla_edu.diagnostics.resolve_extrinsics`; ``verbose``
+prints its evidence). The smoothers take the resolved values
+(:meth:`~visla_edu.smoother.SmootherConfig.from_filter_config`).
 
 >>> from visla_edu import data, run
 >>> ds = data.load("sim-tiny")
@@ -39,10 +47,7 @@ _MODE_CLASSES = {DEADRECKON: filters.DeadReckoning, MAPPING: filters.LandmarkMap
 
 
 def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
-    """Build the filter object for ``mode`` with the settings and calibration resolved.
-
-    Settings left at ``"auto"`` (the velocity noise, the IMU lag, the extrinsic correction)
-    are measured from the data first (:func:`resolve_config`).
+    """Build the filter object for ``mode`` with the settings and calibration resolved (module docstring).
 
     Parameters
     ----------
@@ -58,7 +63,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     Returns
     -------
     filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
-        Its ``config`` is the resolved one (no ``"auto"`` left but ``extrinsic_correction``).
+        Its ``config`` is :func:`resolve_config`'s.
 
     Raises
     ------
@@ -101,13 +106,9 @@ def _check_enough_data(dataset, mode):
 
 
 def resolve_config(dataset, config):
-    """``config`` with its ``"auto"`` settings measured from ``dataset``.
+    """``config`` with its ``"auto"`` settings measured from ``dataset`` (module docstring).
 
-    The velocity noise and the IMU lag come from :func:`visla_edu.diagnostics.calibrate`
-    (cached by the data's content, applied by :meth:`~visla_edu.filters.FilterConfig.resolve`);
-    ``extrinsic_correction="auto"`` stays as it is and is resolved with the camera
-    (:func:`_imu_T_cam`, the same calibration). The smoothers take the resolved values
-    (:meth:`~visla_edu.smoother.SmootherConfig.from_filter_config`).
+    ``extrinsic_correction="auto"`` stays as it is: it is resolved with the camera (:func:`_imu_T_cam`).
 
     Parameters
     ----------
@@ -128,11 +129,7 @@ def resolve_config(dataset, config):
 
 
 def _imu_T_cam(dataset, config, verbose):
-    """The camera's extrinsic with ``config.extrinsic_correction`` applied (``"auto"`` resolved), shape (4, 4).
-
-    :func:`visla_edu.diagnostics.resolve_extrinsics`; ``verbose`` prints the evidence of an
-    automatic correction.
-    """
+    """The camera's extrinsic with ``config.extrinsic_correction`` applied (``"auto"`` resolved), shape (4, 4)."""
     imu_T_cam, evidence = diagnostics.resolve_extrinsics(dataset, config.extrinsic_correction)
     if verbose and evidence:
         print(evidence)
@@ -191,8 +188,7 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     Raises
     ------
     ValueError
-        As :func:`make_filter` (bad mode or settings, implausible calibration, no
-        observations for a mode that needs them), or a bad ``blas_threads``.
+        As :func:`make_filter`, or a bad ``blas_threads``.
     visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError, ArithmeticError, MemoryError
         The filter failed; the exception's ``frame`` attribute is the frame it failed at
         (see :func:`visla_edu.run.workload.divergence_hint`).
@@ -233,8 +229,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     EKF's trajectory and map (:func:`run_filter` with ``"slam"``, kept as
     ``start_world_T_imu``). ``"window"``: the fixed-lag sliding window
     (:func:`visla_edu.smoother.smooth_window`). Both use the filter's model: the resolved
-    ``config`` (velocity noise and lag measured from the data when ``"auto"``) and its camera
-    calibration.
+    ``config`` and its camera calibration (module docstring).
 
     Parameters
     ----------
@@ -356,7 +351,7 @@ def _smoother_run_result(dataset, config, solved, start):
 def evaluate_result(result, ground_truth):
     """ATE and KITTI drift of a run's estimate and of its dead reckoning against the ground truth.
 
-    Stores the figures in ``result.evaluation`` (so :func:`save_result` writes them).
+    Stores the figures in ``result.evaluation`` (:attr:`RunResult.evaluation`).
 
     Parameters
     ----------

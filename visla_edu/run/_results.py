@@ -1,7 +1,18 @@
 """A whole run's result, its per-frame arrays, and its file: :class:`RunResult`, :class:`RunArrays`.
 
-:func:`save_result` writes a result atomically (:func:`visla_edu._files.atomic_write`) and
-:func:`load_result` reads it back; :mod:`visla_edu.run` produces them and re-exports all four.
+:mod:`visla_edu.run` produces them and re-exports all four.
+
+**The file** (``.npz``, no pickle; :func:`save_result` writes it atomically,
+:func:`visla_edu._files.atomic_write`, and :func:`load_result` reads it): one key per array
+field of :class:`RunResult` (``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks``
+(M, 3), ...; ``start_world_T_imu`` only from the batch smoother), ``name``, ``mode``,
+``dense``, ``notes`` and ``start_mode``; ``config_<name>`` for every setting used (None stored
+as an empty array; files of earlier versions hold ``blas_threads`` so), ``eval_<name>`` for
+:attr:`RunResult.evaluation`, ``track_<name>`` for :attr:`RunResult.track_counts`, and
+``status_names``, the name of each column of ``status_counts``. Codes are only appended, so a
+file of an earlier version (fewer columns, or no ``status_names``: the first codes) loads
+with zeros in the missing ones; its smoother runs counted the observations of dropped
+landmarks as ``ignored`` (they stay there: the file cannot tell them apart).
 """
 
 from dataclasses import dataclass, field
@@ -165,26 +176,13 @@ class RunArrays:
 
 
 def save_result(result, path):
-    """Save a :class:`RunResult` to ``path`` (npz), atomically; return the path written.
-
-    Keys: ``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks`` (M, 3) (NaN where never
-    initialised), ``pose_cov``, ``landmark_cov``, ``dead_reckoning``, ``nis``, ``nis_dof``,
-    ``status_counts``, ``step_seconds``, ``imu_T_cam``, ``name``, ``mode``, ``dense`` and
-    ``status_names`` (the name of each column of ``status_counts``, so that a later version with
-    more codes reads them),
-    ``config_<name>`` for every setting used (a setting of None is stored as an empty array,
-    so the file loads without pickle; files of earlier versions hold ``blas_threads`` so), and
-    ``eval_<name>`` for the figures against ground truth (:attr:`RunResult.evaluation`),
-    ``notes`` (the smoothers' summary; empty for the filters) and, from the batch smoother,
-    ``start_world_T_imu``.
+    """Save a :class:`RunResult` to ``path`` (the module docstring's file), atomically; return the path written.
 
     Parameters
     ----------
     result : RunResult
     path : str or os.PathLike
-        ``.npz`` is appended if missing (as ``numpy.savez`` does). The file is written to a
-        temporary file first and then renamed (:func:`visla_edu._files.atomic_write`), so an
-        interrupted save leaves a previous result there intact.
+        ``.npz`` is appended if missing (as ``numpy.savez`` does).
 
     Returns
     -------
@@ -223,10 +221,7 @@ def load_result(path):
     Returns
     -------
     RunResult
-
-    A file of an earlier version has fewer ``status_counts`` columns (codes are only appended):
-    the missing ones load as zeros. Its smoother runs counted the observations of dropped
-    landmarks as ``ignored`` (they stay there: the file cannot tell them apart).
+        Of a file of an earlier version too (the module docstring).
 
     Raises
     ------
@@ -251,8 +246,7 @@ def load_result(path):
 def _status_columns(counts, names, path):
     """A saved ``status_counts`` (T, k) in the columns of :data:`~visla_edu.codes.STATUS_NAMES`.
 
-    ``names`` (the file's ``status_names``) names the columns; a file without them (written
-    before they were saved) holds the first ``k`` codes.
+    ``names``: the file's ``status_names``, or None (the first ``k`` codes).
     """
     named = names is not None
     names = tuple(names.tolist()) if named else STATUS_NAMES[:counts.shape[1]]

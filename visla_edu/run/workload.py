@@ -35,7 +35,7 @@ SECONDS_PER_FRAME = 5e-3  # the rest of a step (prediction, gating, bookkeeping)
 #: and their memory per observation (dataset 03: 270 MB for 66,000 observations).
 SMOOTHER_FACTOR = 5
 SMOOTHER_BYTES_PER_OBSERVATION = 4096
-#: ``visla-edu run`` refuses a run estimated past these limits unless given ``--force``.
+#: The limits of :meth:`WorkEstimate.over_limits` (the module docstring).
 WORK_LIMIT_BYTES = 2 * 2**30
 WORK_LIMIT_SECONDS = 15 * 60
 
