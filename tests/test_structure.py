@@ -26,16 +26,22 @@ def _modules():
     return {_module_name(path): path for path in sorted(PACKAGE.rglob("*.py"))}
 
 
-def _targets(node, here, modules):
-    """Package modules a top-level import statement loads (a submodule, not its package, when named)."""
-    if isinstance(node, ast.Import):
-        return [alias.name for alias in node.names if alias.name in modules]
+def _from_base(node, here, modules):
+    """The absolute module name of a ``from ... import`` statement in module ``here`` (relative ones resolved)."""
     base = node.module or ""
     if node.level:
         package = here if modules[here].name == "__init__.py" else here.rpartition(".")[0]
         for _ in range(node.level - 1):
             package = package.rpartition(".")[0]
         base = f"{package}.{base}" if base else package
+    return base
+
+
+def _targets(node, here, modules):
+    """Package modules a top-level import statement loads (a submodule, not its package, when named)."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names if alias.name in modules]
+    base = _from_base(node, here, modules)
     found = [f"{base}.{alias.name}" for alias in node.names if f"{base}.{alias.name}" in modules]
     return found or ([base] if base in modules else [])
 
@@ -193,12 +199,7 @@ def _imported_names(node, here, modules):
     """Dotted names an import statement (anywhere in a module) reaches: modules and their attributes."""
     if isinstance(node, ast.Import):
         return [alias.name for alias in node.names]
-    base = node.module or ""
-    if node.level:
-        package = here if modules[here].name == "__init__.py" else here.rpartition(".")[0]
-        for _ in range(node.level - 1):
-            package = package.rpartition(".")[0]
-        base = f"{package}.{base}" if base else package
+    base = _from_base(node, here, modules)
     return [base] + [f"{base}.{alias.name}" for alias in node.names]
 
 
