@@ -115,3 +115,61 @@ def test_dense_state_holds_every_landmark_with_the_placeholder():
 def test_pose_cov_must_be_six_by_six(shape):
     with pytest.raises(ValueError, match=r"pose_cov must have shape \(6, 6\)"):
         ActiveSet(M, np.zeros(shape))
+
+
+def test_propagate_is_the_forms_prediction_with_static_landmarks():
+    """``propagate`` with the right form: ``F Sigma_pp F^T + W`` on the pose, ``F Sigma_pl`` across,
+    the landmark block untouched (the explicit ``Phi Sigma Phi^T + Q``)."""
+    from visla_edu.filters._forms import RightForm
+
+    rng = np.random.default_rng(3)
+    state = _state_with([4, 9], rng)
+    F, W = rng.normal(size=(6, 6)), np.diag(rng.uniform(0.1, 1.0, 6))
+    Phi = np.eye(state.dim)
+    Phi[:6, :6] = F
+    Q = np.zeros((state.dim, state.dim))
+    Q[:6, :6] = W
+    expected = Phi @ state.Sigma @ Phi.T + Q
+    state.propagate(RightForm, np.eye(4), np.zeros((2, 3)), F, W)
+    np.testing.assert_allclose(state.Sigma, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_update_is_the_kalman_update_of_the_explicit_form():
+    """``update``: ``Sigma - K H Sigma`` and ``delta = K r`` with ``K = Sigma H^T S^-1``."""
+    rng = np.random.default_rng(4)
+    state = _state_with([1, 2, 3], rng)
+    H = rng.normal(size=(4, state.dim))
+    Sigma = state.Sigma.copy()
+    S = H @ Sigma @ H.T + 2.0 * np.eye(4)
+    r = rng.normal(size=4)
+    K = Sigma @ H.T @ np.linalg.inv(S)
+    delta, nis = state.update(Sigma @ H.T, S, r)
+    np.testing.assert_allclose(delta, K @ r, rtol=1e-10)
+    np.testing.assert_allclose(state.Sigma, Sigma - K @ H @ Sigma, rtol=1e-9, atol=1e-9)
+    assert nis == pytest.approx(r @ np.linalg.solve(S, r), rel=1e-10)
+
+
+def test_landmark_covs_are_the_slots_diagonal_blocks_in_the_right_form():
+    from visla_edu.filters._forms import RightForm
+
+    rng = np.random.default_rng(5)
+    state = _state_with([7, 3, 11], rng)
+    covs = state.landmark_covs(RightForm, np.array([3, 11]), np.zeros((2, 3)))
+    np.testing.assert_array_equal(covs, state.marginals(np.array([3, 11])))
+
+
+def test_correct_is_the_joint_correction_on_the_slots_of_the_ids():
+    """``correct(ids, ...)`` is :func:`visla_edu.ekf.joint_correction` at the slots holding ``ids``."""
+    from visla_edu import ekf
+
+    rng = np.random.default_rng(6)
+    state = _state_with([5, 8, 13], rng)
+    ids = np.array([13, 5])
+    z = rng.normal(size=(2, 4))
+    prediction = (rng.normal(size=(2, 4)), rng.normal(size=(2, 4, 3)), rng.normal(size=(2, 4, 6)))
+    Sigma = state.Sigma.copy()
+    delta_ref, nis_ref = ekf.joint_correction(Sigma, np.array([2, 0]), z, 1.5, prediction)
+    delta, nis = state.correct(ids, z, 1.5, prediction, ekf.STEREO_ROWS)
+    np.testing.assert_array_equal(delta, delta_ref)
+    np.testing.assert_array_equal(state.Sigma, Sigma)
+    assert nis == nis_ref

@@ -167,12 +167,8 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    mode : {"deadreckon", "mapping", "vio", "slam"}
-        One of :data:`visla_edu.codes.MODES`.
-    config : visla_edu.filters.FilterConfig, optional
-    dense : bool
-        Textbook dense joint filter (``mode="slam"`` only).
+    dataset, mode, config, dense
+        As :func:`make_filter`.
     progress : bool, optional
         Show a tqdm progress bar; by default only for runs longer than 500 frames.
     verbose : bool
