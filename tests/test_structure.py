@@ -277,3 +277,17 @@ def test_only_the_state_helper_changes_the_joint_covariance():
     found = [f"{name}:{line}" for name, path in _modules().items() if name != "visla_edu.filters._state"
              for line in _covariance_writes(ast.parse(path.read_text(), filename=str(path)))]
     assert not found, "the joint covariance changed outside ActiveSet: " + ", ".join(found)
+
+
+@pytest.mark.parametrize("name", ["checks", "odometry", "workload"])
+def test_a_moved_module_says_where_it_is_now(name):
+    """A notebook from an earlier version (``from visla_edu import checks``) gets one line naming the new import."""
+    import importlib
+
+    import visla_edu
+
+    with pytest.raises(ImportError, match=rf"visla_edu\.{name} moved to {visla_edu.MOVED[name]}\.{name}"):
+        exec(f"from visla_edu import {name}", {})  # noqa: S102
+    importlib.import_module(f"{visla_edu.MOVED[name]}.{name}")  # where it is now imports
+    with pytest.raises(AttributeError, match="no attribute 'no_such_module'"):
+        visla_edu.no_such_module  # noqa: B018
