@@ -40,11 +40,13 @@ from visla_edu.filters._config import pixel_noise_inflation
 #: Candidate defaults of part 2: a label and the settings that differ from ``FilterConfig()``.
 CANDIDATES = {
     "default": {},
-    "no clones (the joint EKF of notebook 08)": {"msckf_window": 0},
+    "the previous default (clones everywhere, r^2 alone)": {"msckf_window": 20, "inflation_power": 2.0},
+    "clones everywhere (msckf_window=20)": {"msckf_window": 20},
+    "no clones anywhere (the joint EKF of notebook 08)": {"msckf_window": 0},
+    "r^2 alone (no track correlation)": {"inflation_power": 2.0},
     "no inflation": {"pixel_noise_inflation": 1.0},
-    "no clones, no inflation (the old default)": {"msckf_window": 0, "pixel_noise_inflation": 1.0},
-    "inflation power 1": {"inflation_power": 1.0},
-    "inflation power 3": {"inflation_power": 3.0},
+    "r^1 alone": {"inflation_power": 1.0},
+    "r^3 alone": {"inflation_power": 3.0},
     "msckf_window=10": {"msckf_window": 10},
     "msckf_window=30": {"msckf_window": 30},
     "track_gate_probability=0.99": {"track_gate_probability": 0.99},
@@ -109,7 +111,8 @@ def drives(args):
 
 
 def _config(ds, settings):
-    """``FilterConfig`` of a candidate; ``inflation_power`` resolves ``pixel_noise_inflation`` with that exponent."""
+    """``FilterConfig`` of a candidate; ``inflation_power`` resolves ``pixel_noise_inflation`` as ``max(1, r)^power``
+    alone (no track correlation)."""
     settings = dict(settings)
     power = settings.pop("inflation_power", None)
     if power is None:

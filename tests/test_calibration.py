@@ -213,6 +213,7 @@ def test_to_dict_round_trip(small_drive):
     assert back.report() == cal.report()
     np.testing.assert_array_equal(back.imu_T_cam, cal.imu_T_cam)
     assert back.tracks == cal.tracks and back.vo == cal.vo
+    assert back.track_correlation == cal.track_correlation and "residual correlation along tracks" in cal.report()
     with pytest.raises(ValueError, match="sigma_linear_velocity"):
         Calibration.from_dict({**cal.to_dict(), "sigma_linear_velocity": [1.0, 2.0]})
     with pytest.raises(ValueError, match="malformed"):
@@ -271,10 +272,11 @@ def _edit(key, value, inner=None):
     _edit("white_noise", [-1.0] * 6), _edit("reasons", None), _edit("reasons", {"imu_lag": 3}),
     _edit("outliers", "x"), _edit("outliers", {"epipolar": 2.0}), _edit("repeated_frames", [1e9]),
     _edit("repeated_frames", None), _edit("seconds", "x"), _edit("rotation_slope", None, inner="vo"),
-    _edit("lag_residual", None, inner="vo"),
+    _edit("lag_residual", None, inner="vo"), _edit("track_correlation", 2.0), _edit("track_correlation", None),
+    _edit("correlated_tracks", -1),
 ], ids=["lag-huge", "lag-text", "lag-bool", "lag-float", "sigma-zero", "sigma-negative", "white-negative",
         "reasons-none", "reason-number", "outliers-text", "outliers-partial", "repeated-float", "repeated-none",
-        "seconds-text", "vo-slope-none", "vo-residual-none"])
+        "seconds-text", "vo-slope-none", "vo-residual-none", "rho-above-one", "rho-none", "tracks-negative"])
 def test_a_cache_file_with_edited_values_is_recomputed(small_drive, change):
     """Valid JSON with values calibrate never writes: recomputed, never used by the filter or the report."""
     computed = calibrate(_fresh(small_drive), cache=False)

@@ -19,13 +19,13 @@ from visla_edu.filters import FilterConfig, FilterDivergedError
 #: The simulated drives have no extrinsic error and no IMU lag, and these tests are not about
 #: measuring the noise: fixed settings (the former defaults) skip the calibration and keep them fast.
 FIXED = dict(extrinsic_correction="none", sigma_linear_velocity=0.5, sigma_angular_velocity=0.05, imu_lag=0,
-             pixel_noise_inflation=1.0)
+             pixel_noise_inflation=1.0, msckf_window=20)
 CFG = FilterConfig(**FIXED)
 #: The joint EKF without clones (every landmark enters at its first observation), whose mechanics
 #: (active set = dense, entry, the gate per observation, re-placement) these tests are about; the
 #: clone window has its own tests (tests/test_tracks.py).
 CLASSIC = dict(msckf_window=0)
-CFG_CLASSIC = FilterConfig(**FIXED, **CLASSIC)
+CFG_CLASSIC = FilterConfig(**{**FIXED, **CLASSIC})
 
 
 def matched_config(ds, **overrides):

@@ -9,7 +9,7 @@ from visla_edu.filters import FilterConfig
 
 #: The tiny simulated drive has no lag or extrinsic error; fixed noise skips the calibration.
 CFG = FilterConfig(extrinsic_correction="none", sigma_linear_velocity=0.2, sigma_angular_velocity=0.02, imu_lag=0,
-                   pixel_noise_inflation=1.0)
+                   pixel_noise_inflation=1.0, msckf_window=20)
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from fdiff import fd_jacobian
 
-from visla_edu import ekf, lie, metrics, motion, run, simulate
+from visla_edu import diagnostics, ekf, lie, metrics, motion, run, simulate
 from visla_edu.camera import StereoCamera
 from visla_edu.filters import ActiveSet, FilterConfig, JointSlam, _tracks
-from visla_edu.filters._config import MAX_INFLATION, pixel_noise_inflation
+from visla_edu.filters._config import GYRO_REGIME_RATIO, MAX_INFLATION, MSCKF_WINDOW, gyro_ratio, msckf_window, \
+    pixel_noise_inflation
 from visla_edu.filters._forms import InvariantForm, RightForm
 
 RNG = np.random.default_rng(7)
@@ -218,6 +219,53 @@ def test_auto_inflation_is_resolved_from_the_drive_and_reaches_the_filter():
     with pytest.raises(TypeError, match="needs the drive's focal_length"):
         FilterConfig(sigma_linear_velocity=0.1, sigma_angular_velocity=0.1, imu_lag=0).resolve(None)
     assert not FilterConfig(imu_lag=0, sigma_linear_velocity=0.1, sigma_angular_velocity=0.1).resolved
+
+
+def test_track_correlation_raises_the_inflation_in_the_gyro_regime_only():
+    clean, noisy = 0.002, 0.05  # rad/s: r = 10.7 and 0.43 for 1.5 px at 700 px in 0.1 s
+    assert gyro_ratio(1.5, 700.0, clean, 0.1) > GYRO_REGIME_RATIO > gyro_ratio(1.5, 700.0, noisy, 0.1)
+    r2 = gyro_ratio(1.5, 700.0, clean, 0.1) ** 2
+    assert pixel_noise_inflation(1.5, 700.0, clean, 0.1, track_correlation=0.99) == pytest.approx(1.99 / 0.01)
+    assert pixel_noise_inflation(1.5, 700.0, clean, 0.1, track_correlation=0.5) == pytest.approx(r2)  # 3 < r^2
+    assert pixel_noise_inflation(1.5, 700.0, noisy, 0.1, track_correlation=0.99) == 1.0
+    assert pixel_noise_inflation(1.5, 700.0, clean, 0.1, track_correlation=1.0) == MAX_INFLATION
+
+
+def test_auto_clone_window_is_zero_in_the_gyro_regime_and_the_window_elsewhere():
+    assert msckf_window(1.5, 700.0, 0.002, 0.1) == 0
+    assert msckf_window(1.5, 700.0, 0.05, 0.1) == MSCKF_WINDOW
+    ds = simulate.simulate_drive("tiny", 0)
+    fixed = dict(sigma_linear_velocity=0.1, imu_lag=0, extrinsic_correction="none")
+    assert run.resolve_config(ds, FilterConfig(sigma_angular_velocity=0.001, **fixed)).msckf_window == 0
+    assert run.resolve_config(ds, FilterConfig(sigma_angular_velocity=0.05, **fixed)).msckf_window == MSCKF_WINDOW
+    assert run.resolve_config(ds, FilterConfig(sigma_angular_velocity=0.001, msckf_window=7, **fixed)).msckf_window == 7
+    assert not FilterConfig(sigma_angular_velocity=0.001, pixel_noise_inflation=1.0, **fixed).resolved
+
+
+def _with_track_error(ds, rho, sigma, seed):
+    """``ds`` with an AR(1) pixel error of correlation ``rho`` added along each track (the same shift on all four rows)."""
+    rng = np.random.default_rng(seed)
+    frames = np.repeat(np.arange(ds.num_frames), np.diff(ds.frame_ptr))
+    z = ds.obs_z.copy()
+    for landmark in np.unique(ds.obs_ids):
+        rows = np.flatnonzero(ds.obs_ids == landmark)
+        rows = rows[np.argsort(frames[rows])]
+        e = np.empty(len(rows))
+        e[0] = rng.normal(0, sigma)
+        for k in range(1, len(rows)):
+            e[k] = rho * e[k - 1] + rng.normal(0, sigma * np.sqrt(1 - rho**2))
+        z[rows] += e[:, None]
+    return dataclasses.replace(ds, obs_z=z, extra={})
+
+
+def test_track_correlation_is_near_zero_for_white_pixels_and_finds_a_persistent_error():
+    ds = simulate.simulate_drive("small", 0)
+    truth = ds.ground_truth.world_T_imu
+    white, tracks = diagnostics.track_correlation(ds, truth, ds.imu_T_cam)
+    assert abs(white) < 0.15 and tracks > 100
+    persistent, _ = diagnostics.track_correlation(_with_track_error(ds, 0.9, 3.0, 1), truth, ds.imu_T_cam)
+    assert persistent > white + 0.4  # 0.9 x 9 / (9 + 1) = 0.81 less the short tracks' bias (module docstring)
+    assert diagnostics.calibrate(ds, cache=False).correlated_tracks > 0
 
 
 # ----------------------------------------------------------------------------- the filter

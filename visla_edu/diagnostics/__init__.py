@@ -10,6 +10,8 @@ frames. Two kinds of evidence measure them:
   must land on its later observations 1-5 frames on; the median pixel error scores the
   candidate, and a bootstrap over landmarks says whether the best one is better than every
   other with 95% confidence. It works on sparse drives too.
+* **residual correlation along tracks** (:mod:`._correlation`): how long a track's pixel errors
+  persist, along the dead-reckoned poses; ``pixel_noise_inflation="auto"`` reads it.
 * **visual odometry** (:mod:`._vo`, :mod:`._motion`): the robust RANSAC stereo odometry
   (:func:`visla_edu.diagnostics.odometry.visual_odometry`) against the IMU: slopes of the extrinsic check,
   rotation residual per lag, gyro bias and velocity scale, each with a standard error and a
@@ -29,7 +31,7 @@ geometry and the same two kinds of evidence, before the axis flips, and the
 
 Modules: ``_vo`` (odometry access, corrections, extrinsic check, time alignment), ``_motion``
 (gyro bias, velocity scale), ``_noise`` (white and hold noise), ``_bootstrap`` (cluster
-bootstrap of medians), ``_tracks`` (track reprojection), ``_readings`` (the reading of a 2025+
+bootstrap of medians), ``_tracks`` (track reprojection), ``_correlation`` (residual correlation along tracks), ``_readings`` (the reading of a 2025+
 file's extrinsics), ``_calibration`` (the decision and the cache), ``_report`` (its text),
 ``_checks`` (the single checks with calibrated defaults).
 """
@@ -43,6 +45,7 @@ from visla_edu.diagnostics._calibration import (
     calibrate,
     outlier_indicators,
 )
+from visla_edu.diagnostics._correlation import track_correlation
 from visla_edu.diagnostics._checks import check_time_alignment, diagnose, imu_noise_and_bias, resolve_extrinsics
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR, UNMEASURED_SIGMA_ANGULAR,
@@ -91,6 +94,7 @@ __all__ = [
     "gyro_bias",
     "velocity_scale",
     "track_pairs",
+    "track_correlation",
     "outlier_indicators",
     "diagnose",
 ]

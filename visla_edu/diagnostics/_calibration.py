@@ -22,8 +22,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from visla_edu import cache as user_cache
+from visla_edu.motion import dead_reckon
 from visla_edu.camera import right_in_left_pixels
 from visla_edu.dataset import Dataset, repeated_frames
+from visla_edu.diagnostics._correlation import track_correlation
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR,
                                           UNMEASURED_SIGMA_ANGULAR, UNMEASURED_SIGMA_LINEAR, imu_noise)
@@ -46,7 +48,7 @@ __all__ = ["CALIBRATION_VERSION", "CACHED_ARRAYS", "VoEvidence", "Calibration", 
 
 #: Bump whenever the diagnostics change what they compute: cached calibrations of older
 #: versions are then ignored.
-CALIBRATION_VERSION = 5
+CALIBRATION_VERSION = 6
 #: The dataset arrays the cache key is computed from (with ``K_right`` and the readings' left
 #: cameras, ``extrinsic_readings``, when the dataset has them).
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
@@ -128,6 +130,11 @@ class Calibration:
         Frames repeating the previous frame exactly.
     outliers : dict
         :func:`outlier_indicators`.
+    track_correlation : float
+        :func:`~._correlation.track_correlation` along the dead-reckoned poses (chosen lag and
+        correction).
+    correlated_tracks : int
+        The tracks it pooled.
     seconds : float
         Time the computation took.
     source : str
@@ -151,6 +158,8 @@ class Calibration:
     vo: VoEvidence
     repeated_frames: list
     outliers: dict
+    track_correlation: float = 0.0
+    correlated_tracks: int = 0
     seconds: float = 0.0
     source: str = "computed"
     version: int = CALIBRATION_VERSION
@@ -217,6 +226,9 @@ def _check_decisions(fields):
         raise ValueError(f"outliers must be shares in [0, 1], got {outliers!r}")
     if not all(type(t) is int and t >= 0 for t in repeated):
         raise ValueError(f"repeated_frames must be frame indices, got {repeated!r}")
+    rho, tracks = fields.get("track_correlation"), fields.get("correlated_tracks")
+    if type(rho) not in (int, float) or not -1 <= rho <= 1 or type(tracks) is not int or tracks < 0:
+        raise ValueError(f"track_correlation must be in [-1, 1] and correlated_tracks a count, got {rho!r}, {tracks!r}")
 
 
 def _noise_reason(noise, samples):
@@ -342,6 +354,7 @@ def _compute(dataset):
     lag, why_lag = _decide_lag(lag_choice)
     imu_T_cam = CORRECTIONS[correction] @ base
     noise = imu_noise(dataset.twists)
+    rho, correlated = track_correlation(dataset, dead_reckon(dataset.time_stamps, dataset.twists, lag=lag), imu_T_cam)
     return Calibration(
         extrinsic_correction=correction, imu_T_cam=imu_T_cam, imu_lag=lag,
         sigma_linear_velocity=noise["sigma"][:3], sigma_angular_velocity=noise["sigma"][3:],
@@ -351,7 +364,7 @@ def _compute(dataset):
         tracks=scorer.evidence(correction_choice, lag_choice),
         vo=_vo_evidence(dataset, check, slope_lag, imu_T_cam, lag),
         repeated_frames=repeated_frames(dataset), outliers=outlier_indicators(dataset),
-        seconds=time.perf_counter() - start, reading=reading)
+        track_correlation=rho, correlated_tracks=correlated, seconds=time.perf_counter() - start, reading=reading)
 
 
 def cache_path(dataset):

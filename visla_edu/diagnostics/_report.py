@@ -128,6 +128,11 @@ def calibration_report(calibration, name=""):
     lines.append(f"observations with non-positive disparity: {100 * out['non_positive_disparity']:.2f}%, "
                  f"breaking the epipolar line by > 3 px: {100 * out['epipolar']:.2f}%, "
                  f"tracked points rejected by visual odometry: {100 * out['vo_rejected']:.1f}%")
+    lines.append(f"residual correlation along tracks (dead-reckoned poses): rho {c.track_correlation:+.2f} over "
+                 f"{c.correlated_tracks} tracks, so a track of L observations is worth about "
+                 f"{(1 - c.track_correlation) / (1 + c.track_correlation):.2f} L independent ones "
+                 f"(the dead reckoning's own drift adds to it where the gyro is noisy; pixel_noise_inflation='auto' reads it "
+                 f"only where the gyro beats the camera)")
     lines.append(f"extrinsic correction: {c.reasons['extrinsic_correction']}")
     lines.append(f"IMU lag: {c.reasons['imu_lag']}")
     lines.append(f"the filter will use: extrinsic_correction {c.extrinsic_correction!r}, imu_lag {c.imu_lag:+d}, "

@@ -8,7 +8,8 @@ from visla_edu.diagnostics import CORRECTIONS
 from visla_edu.metrics import chi2_quantile
 from visla_edu.settings import check_settings, setting
 
-__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS", "INFLATION_POWER", "pixel_noise_inflation"]
+__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS", "DRIVE_FIELDS", "INFLATION_POWER", "GYRO_REGIME_RATIO", "MSCKF_WINDOW",
+           "gyro_ratio", "pixel_noise_inflation", "msckf_window"]
 
 #: The value of a setting the driver measures from the data (:func:`visla_edu.diagnostics.calibrate`).
 AUTO = "auto"
@@ -16,25 +17,23 @@ AUTO = "auto"
 MAX_IMU_LAG = 2
 #: Settings that may be ``"auto"`` and their attribute on the calibration that resolves them.
 AUTO_FIELDS = ("sigma_linear_velocity", "sigma_angular_velocity", "imu_lag")
+#: Settings that may be ``"auto"`` and are resolved from the drive's gyro ratio (:func:`gyro_ratio`).
+DRIVE_FIELDS = ("pixel_noise_inflation", "msckf_window")
 #: Largest ``pixel_noise_inflation`` (the camera is then ignored in all but name).
 MAX_INFLATION = 1e4
 #: Exponent of :func:`pixel_noise_inflation`, chosen on the cross-drive benchmark
 #: (``benchmarks/bench_accuracy.py`` prints the candidates).
 INFLATION_POWER = 2
+#: The gyro regime: :func:`gyro_ratio` at least this. Chosen on the cross-drive benchmark, where
+#: the simulated drives and dataset 10's motion (ratio 1.1-1.3) gain from the clones and the
+#: GPS-aided drives 0020 and 0042 and their pieces (2.6-4.2) lose by them.
+GYRO_REGIME_RATIO = 2.0
+#: ``msckf_window`` outside the gyro regime.
+MSCKF_WINDOW = 20
 
 
-def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, power=INFLATION_POWER):
-    """How much less than ``sigma_pixel`` promises the camera is to be trusted on a drive: ``max(1, r)^power``.
-
-    ``r = (sigma_pixel / focal_length) / (sigma_w tau)`` compares the angle one observation
-    resolves with the angle the gyro resolves in one step. Track errors are correlated from
-    frame to frame (tracker drift, a feature that slides along an edge: the course drives'
-    residuals barely change between consecutive frames), so many observations of a track are
-    worth about one. Where the gyro resolves angles better than one observation (``r > 1``, the
-    GPS-aided velocities of the 2019 release), a camera treated as independent pixels would
-    pull a good dead reckoning off by the sum of its correlated errors: its noise is inflated,
-    and the more so the better the gyro. Where one observation beats a gyro step (``r <= 1``,
-    the 2020 release's noisy velocities), the camera carries the estimate and is not inflated.
+def gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step):
+    """``r = (sigma_pixel / focal_length) / (sigma_w tau)``: the angle one observation resolves over the gyro's in one step.
 
     Parameters
     ----------
@@ -46,18 +45,73 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
         The angular-velocity noise (rad/s); per-axis values are averaged.
     time_step : float
         A typical step ``tau`` (s).
-    power : float
 
     Returns
     -------
     float
-        The factor on ``sigma_pixel``, at least 1.
+        ``inf`` for a noise-free gyro.
     """
     gyro_angle = float(np.mean(sigma_angular)) * float(time_step)
-    if gyro_angle <= 0:
+    return float(sigma_pixel / focal_length / gyro_angle) if gyro_angle > 0 else np.inf
+
+
+def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, power=INFLATION_POWER,
+                          track_correlation=0.0):
+    """How much less than ``sigma_pixel`` promises the camera is to be trusted on a drive.
+
+    ``max(1, r)^power`` with ``r`` of :func:`gyro_ratio`, and in the gyro regime (``r >=``
+    :data:`GYRO_REGIME_RATIO`) at least ``(1 + rho) / (1 - rho)`` for the track correlation
+    ``rho``. Track errors are correlated from frame to frame (tracker drift, a feature that
+    slides along an edge), so many observations of a track are worth fewer. Where the gyro
+    resolves angles better than one observation (``r > 1``, the GPS-aided velocities of the
+    2019 release), a camera treated as independent pixels would pull a good dead reckoning off
+    by the sum of its correlated errors: its noise is inflated, the more so the better the
+    gyro, and the more so the more the errors persist along a track (a track of ``L``
+    observations is worth about ``L (1 - rho) / (1 + rho)``: 0.25 on 0020, 0.9 on the highway
+    drive 0042). Where one observation beats a gyro step (``r <= 1``, the 2020 release's noisy
+    velocities), the camera carries the estimate and is not inflated.
+
+    Parameters
+    ----------
+    sigma_pixel, focal_length, sigma_angular, time_step
+        As in :func:`gyro_ratio`.
+    power : float
+    track_correlation : float
+        ``rho`` in ``[-1, 1)``: :func:`visla_edu.diagnostics.track_correlation` along the
+        dead-reckoned poses (which the gyro regime makes locally accurate).
+
+    Returns
+    -------
+    float
+        The factor on ``sigma_pixel``, from 1 to :data:`MAX_INFLATION`.
+    """
+    ratio = gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step)
+    if not np.isfinite(ratio):
         return MAX_INFLATION  # a noise-free gyro: the camera can add nothing
-    ratio = (sigma_pixel / focal_length) / gyro_angle
-    return float(min(MAX_INFLATION, max(1.0, ratio) ** power))
+    inflation = max(1.0, ratio) ** power
+    if ratio >= GYRO_REGIME_RATIO:
+        rho = min(float(track_correlation), 1 - 1 / MAX_INFLATION)
+        inflation = max(inflation, (1 + rho) / (1 - rho))
+    return float(min(MAX_INFLATION, inflation))
+
+
+def msckf_window(sigma_pixel, focal_length, sigma_angular, time_step):
+    """Clones kept on a drive: 0 (the joint EKF without clones) in the gyro regime, else :data:`MSCKF_WINDOW`.
+
+    In the gyro regime (:func:`gyro_ratio` at least :data:`GYRO_REGIME_RATIO`) dead reckoning
+    is locally accurate and the camera a weak corrector; the clones' multi-frame updates of the
+    short tracks then add the tracks' correlated errors more than information.
+
+    Parameters
+    ----------
+    sigma_pixel, focal_length, sigma_angular, time_step
+        As in :func:`gyro_ratio`.
+
+    Returns
+    -------
+    int
+    """
+    return 0 if gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step) >= GYRO_REGIME_RATIO else MSCKF_WINDOW
 
 
 @dataclass
@@ -98,9 +152,9 @@ class FilterConfig:
       overconfident and less accurate.
     * ``pixel_noise_inflation`` (``"auto"``): :func:`pixel_noise_inflation` says why; its
       exponent was chosen on the cross-drive benchmark.
-    * ``msckf_window`` 20: on the cross-drive benchmark the clones beat the filter without them
-      where the landmarks are few and far (a highway) and match it elsewhere; 10 and 30 were
-      worse.
+    * ``msckf_window`` (``"auto"``): :func:`msckf_window` says why; outside the gyro regime
+      the clones (20) beat the filter without them on the cross-drive benchmark where the
+      camera carries the estimate, and 10 and 30 were worse.
     * ``slam_error="invariant"``: the invariant error's unobservable directions do not depend
       on the estimate, so it stays consistent where the right perturbation (notebooks 06-08)
       becomes overconfident (notebook 10).
@@ -179,8 +233,8 @@ class FilterConfig:
         observation placed it) is placed again from its next observation when that one falls
         outside the gate: the first observation was the outlier. False keeps the first
         placement, so a landmark born from a bad observation gates its whole track.
-    msckf_window : int
-        Mode: slam (not dense). Frames of past poses kept in the joint state as clones for the
+    msckf_window : int or "auto"
+        Mode: slam (not dense). ``"auto"``: :func:`msckf_window` of the drive. Frames of past poses kept in the joint state as clones for the
         multi-frame track updates (:mod:`visla_edu.filters._tracks`): a landmark's observations
         wait until its track ends and are then used together in a null-space (MSCKF) update
         that never puts the landmark in the state; a track still seen after this many frames
@@ -224,7 +278,8 @@ class FilterConfig:
     reinit_gated_landmarks: bool = setting(True, bool)
     pixel_noise_inflation: object = setting(AUTO, float, 1.0, MAX_INFLATION, words=(AUTO,),
                                             why="a factor of at least 1 on sigma_pixel")
-    msckf_window: int = setting(20, int, 0, 200, why="0 is the classic joint EKF; a clone is a 6x6 block per frame")
+    msckf_window: object = setting(AUTO, int, 0, 200, words=(AUTO,),
+                                   why="0 is the classic joint EKF; a clone is a 6x6 block per frame")
     track_gate_probability: float = setting(0.95, float, 0.0, 1.0, low_open=True,
                                             why="a probability; 1 disables the whole-track gate")
     max_slam_landmarks: int = setting(40, int, 0, 100_000, why="0 keeps every track in the window")
@@ -247,21 +302,24 @@ class FilterConfig:
 
     @property
     def resolved(self):
-        """True when no setting of :data:`AUTO_FIELDS` nor ``pixel_noise_inflation`` is ``"auto"``."""
-        return not any(isinstance(getattr(self, name), str) for name in AUTO_FIELDS + ("pixel_noise_inflation",))
+        """True when no setting of :data:`AUTO_FIELDS` nor of :data:`DRIVE_FIELDS` is ``"auto"``."""
+        return not any(isinstance(getattr(self, name), str) for name in AUTO_FIELDS + DRIVE_FIELDS)
 
     def resolve(self, calibration, focal_length=None, time_step=None):
-        """A copy with every ``"auto"`` of :data:`AUTO_FIELDS` replaced by the calibration's value.
+        """A copy with every ``"auto"`` of :data:`AUTO_FIELDS` and :data:`DRIVE_FIELDS` replaced by the drive's value.
 
         Parameters
         ----------
         calibration : object
             Has the attributes of :data:`AUTO_FIELDS` (e.g. a
-            :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag.
-            Only the attributes of the settings that are ``"auto"`` are read.
+            :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag,
+            and ``track_correlation`` (float). Only the attributes that an ``"auto"`` needs are
+            read (``track_correlation`` by ``pixel_noise_inflation`` in the gyro regime); None
+            when none is needed.
         focal_length, time_step : float, optional
-            The drive's ``fsu`` (px) and typical time step (s), for ``pixel_noise_inflation="auto"``
-            (:func:`pixel_noise_inflation`, with the resolved angular-velocity noise).
+            The drive's ``fsu`` (px) and typical time step (s), for :data:`DRIVE_FIELDS`
+            (:func:`pixel_noise_inflation`, :func:`msckf_window`, with the resolved
+            angular-velocity noise).
 
         Returns
         -------
@@ -277,16 +335,22 @@ class FilterConfig:
         AttributeError
             ``calibration`` lacks an attribute that is needed.
         TypeError
-            ``pixel_noise_inflation`` is ``"auto"`` and ``focal_length`` or ``time_step`` is missing.
+            A setting of :data:`DRIVE_FIELDS` is ``"auto"`` and ``focal_length`` or ``time_step`` is missing.
         """
         values = {name: getattr(calibration, name) for name in AUTO_FIELDS if getattr(self, name) == AUTO}
         config = replace(self, **values)
+        auto = [name for name in DRIVE_FIELDS if getattr(config, name) == AUTO]
+        if not auto:
+            return config
+        if focal_length is None or time_step is None:
+            raise TypeError(f"FilterConfig.resolve: {auto[0]}='auto' needs the drive's focal_length "
+                            "and time_step (visla_edu.run.resolve_config passes them)")
+        drive = (config.sigma_pixel, focal_length, config.sigma_angular_velocity, time_step)
+        if config.msckf_window == AUTO:
+            config = replace(config, msckf_window=msckf_window(*drive))
         if config.pixel_noise_inflation == AUTO:
-            if focal_length is None or time_step is None:
-                raise TypeError("FilterConfig.resolve: pixel_noise_inflation='auto' needs the drive's focal_length "
-                                "and time_step (visla_edu.run.resolve_config passes them)")
-            inflation = pixel_noise_inflation(config.sigma_pixel, focal_length, config.sigma_angular_velocity, time_step)
-            config = replace(config, pixel_noise_inflation=inflation)
+            rho = calibration.track_correlation if gyro_ratio(*drive) >= GYRO_REGIME_RATIO else 0.0
+            config = replace(config, pixel_noise_inflation=pixel_noise_inflation(*drive, track_correlation=rho))
         return config
 
     def to_dict(self):

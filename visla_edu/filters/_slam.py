@@ -22,7 +22,8 @@ placed again from its next observation when that one falls outside the gate
 (``FilterConfig.reinit_gated_landmarks``): its first observation was the outlier, or the
 landmark moved. Without this, a landmark born from a bad observation gates all of its track.
 
-**With clones** (``FilterConfig.msckf_window > 0``, the default; not dense) the state also holds
+**With clones** (``FilterConfig.msckf_window > 0``, the default outside the gyro regime of
+:func:`~visla_edu.filters._config.msckf_window`; not dense) the state also holds
 copies of the last poses, and a landmark enters it only when its track outlives the window
 (delayed entry, from all its observations); shorter tracks update the state in one null-space
 (MSCKF) update when they end, without ever entering it (:mod:`visla_edu.filters._tracks`). A

@@ -122,8 +122,8 @@ def resolve_config(dataset, config):
     """
     if config.resolved:
         return config
-    calibration = diagnostics.calibrate(dataset) if any(getattr(config, n) == filters.AUTO for n in filters.AUTO_FIELDS) \
-        else None
+    needs = filters.AUTO_FIELDS + ("pixel_noise_inflation",)  # the inflation reads the track correlation
+    calibration = diagnostics.calibrate(dataset) if any(getattr(config, n) == filters.AUTO for n in needs) else None
     return config.resolve(calibration, focal_length=float(dataset.K[0, 0]),
                           time_step=float(np.median(dataset.time_steps)) if dataset.num_frames > 1 else 0.1)
 
