@@ -262,6 +262,14 @@ def test_summary_mentions_mode_and_counts(tiny, tiny_results):
     assert "deadreckon" in tiny_results["deadreckon"].summary()
 
 
+def test_summary_says_how_far_the_camera_was_trusted(tiny, tiny_results):
+    config = tiny_results["slam"].config
+    assert (f"camera: sigma_pixel {config['sigma_pixel']:g} px x pixel_noise_inflation "
+            f"{config['pixel_noise_inflation']:.3g}, msckf_window {config['msckf_window']}") in tiny_results["slam"].summary()
+    assert "msckf_window" not in tiny_results["vio"].summary() and "camera:" in tiny_results["vio"].summary()
+    assert "camera:" not in tiny_results["deadreckon"].summary()
+
+
 @pytest.mark.parametrize("blas_threads", [1, None])
 def test_save_and_load_result_round_trip(tiny, tmp_path, blas_threads):
     cfg = FilterConfig(**FIXED, landmark_stride=2)

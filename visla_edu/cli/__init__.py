@@ -68,7 +68,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 #: What the dataset argument of ``info`` and ``run`` accepts.
-_DATASET_HELP = "03, 0022, 0020, 10, datasetNN, sim, sim-small, sim-tiny, or a path to an .npz or 2025+ .npy file"
+_DATASET_HELP = "03, 0022, 0020, 0042, 10, datasetNN, sim, sim-small, sim-tiny, or a path to an .npz or 2025+ .npy file"
 
 
 def build_parser():

@@ -116,12 +116,27 @@ class RunResult:
             c = self.track_counts
             lines.append(f"tracks: {c['tracks_used']} used in multi-frame updates, {c['tracks_gated']} gated whole, "
                          f"{c['entered']} entered the state, {c['tracks_short']} too short")
+        camera = self._camera_line()
+        if camera:
+            lines.append(camera)
         if self.notes:
             lines.append(self.notes)
         else:
             lines.append(f"time: {self.step_seconds.sum():.2f} s, median step "
                          f"{1e3 * np.median(self.step_seconds):.2f} ms")
         return "\n".join(lines)
+
+
+    def _camera_line(self):
+        """How far the run trusted the camera (the resolved ``pixel_noise_inflation``, and in slam the clones), or None."""
+        c = self.config or {}
+        inflation, window = c.get("pixel_noise_inflation"), c.get("msckf_window")
+        if self.mode == "deadreckon" or not isinstance(inflation, (int, float)) or "sigma_pixel" not in c:
+            return None
+        line = f"camera: sigma_pixel {c['sigma_pixel']:g} px x pixel_noise_inflation {inflation:.3g}"
+        if self.mode == "slam" and not self.dense and isinstance(window, int):
+            line += f", msckf_window {window}" + ("" if window else " (the joint EKF without clones)")
+        return line
 
 
 class RunArrays:
