@@ -266,6 +266,8 @@ def test_track_correlation_is_near_zero_for_white_pixels_and_finds_a_persistent_
     persistent, _ = diagnostics.track_correlation(_with_track_error(ds, 0.9, 3.0, 1), truth, ds.imu_T_cam)
     assert persistent > white + 0.4  # 0.9 x 9 / (9 + 1) = 0.81 less the short tracks' bias (module docstring)
     assert diagnostics.calibrate(ds, cache=False).correlated_tracks > 0
+    with pytest.raises(ValueError, match=r"world_T_imu must have shape \(300, 4, 4\), one pose per frame"):
+        diagnostics.track_correlation(ds, truth[:10], ds.imu_T_cam)
 
 
 # ----------------------------------------------------------------------------- the filter

@@ -20,6 +20,7 @@ about 0.5), so it understates the persistence on short tracks. A trajectory's ow
 import numpy as np
 
 from visla_edu import lie
+from visla_edu.camera import project_points
 
 __all__ = ["MIN_TRACK", "MAX_RESIDUAL", "track_correlation"]
 
@@ -45,10 +46,10 @@ def _left_u_residuals(Ks, cam_T_world, z):
     p = _triangulate(Ks, cam_T_world, z)
     if p is None:
         return None
-    q = cam_T_world @ p
-    if np.any(q[:, 2] <= 0):
+    z_pred, q = project_points(Ks, cam_T_world, np.broadcast_to(p[:3], (len(z), 1, 3)), jacobians=False)
+    if np.any(q[:, 0, 2] <= 0):
         return None
-    r = z[:, 0] - (q @ Ks[0]) / q[:, 2]
+    r = z[:, 0] - z_pred[:, 0, 0]
     return r if np.max(np.abs(r)) <= MAX_RESIDUAL else None
 
 
@@ -69,10 +70,19 @@ def track_correlation(dataset, world_T_imu, imu_T_cam):
         In ``[-1, 1]``; 0 when no track qualifies.
     tracks : int
         The tracks that entered.
+
+    Raises
+    ------
+    ValueError
+        ``world_T_imu`` is not one pose per frame.
     """
-    cam_T_world = lie.se3_inv(imu_T_cam) @ lie.se3_inv(np.asarray(world_T_imu, dtype=float))
+    world_T_imu = np.asarray(world_T_imu, dtype=float)
+    if world_T_imu.shape != (dataset.num_frames, 4, 4):
+        raise ValueError(f"track_correlation: {dataset.name}: world_T_imu must have shape ({dataset.num_frames}, 4, 4), "
+                         f"one pose per frame, got {world_T_imu.shape}")
+    cam_T_world = lie.se3_inv(imu_T_cam) @ lie.se3_inv(world_T_imu)
     Ks = dataset.stereo_camera(imu_T_cam).Ks
-    frames = np.repeat(np.arange(dataset.num_frames), np.diff(dataset.frame_ptr))
+    frames = dataset.observation_frames()
     order = np.lexsort((frames, dataset.obs_ids))
     ids, frames, z = dataset.obs_ids[order], frames[order], dataset.obs_z[order]
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
