@@ -31,8 +31,8 @@ geometry and the same two kinds of evidence, before the axis flips, and the
 
 Modules: ``_vo`` (odometry access, corrections, extrinsic check, time alignment), ``_motion``
 (gyro bias, velocity scale), ``_noise`` (white and hold noise), ``_bootstrap`` (cluster
-bootstrap of medians), ``_tracks`` (track reprojection), ``_correlation`` (residual correlation along tracks), ``_readings`` (the reading of a 2025+
-file's extrinsics), ``_calibration`` (the decision and the cache), ``_report`` (its text),
+bootstrap of medians), ``_tracks`` (track reprojection), ``_correlation`` (residual correlation
+along tracks), ``_readings`` (the reading of a 2025+ file's extrinsics), ``_calibration`` (the decision and the cache), ``_report`` (its text),
 ``_checks`` (the single checks with calibrated defaults).
 """
 

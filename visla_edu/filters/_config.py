@@ -8,8 +8,8 @@ from visla_edu.diagnostics import CORRECTIONS
 from visla_edu.metrics import chi2_quantile
 from visla_edu.settings import check_settings, setting
 
-__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS", "DRIVE_FIELDS", "INFLATION_POWER", "GYRO_REGIME_RATIO", "MSCKF_WINDOW",
-           "gyro_ratio", "pixel_noise_inflation", "msckf_window"]
+__all__ = ["FilterConfig", "AUTO", "MAX_IMU_LAG", "AUTO_FIELDS", "DRIVE_FIELDS", "INFLATION_POWER", "GYRO_REGIME_RATIO",
+           "MSCKF_WINDOW", "gyro_ratio", "pixel_noise_inflation", "msckf_window"]
 
 #: The value of a setting the driver measures from the data (:func:`visla_edu.diagnostics.calibrate`).
 AUTO = "auto"
@@ -67,8 +67,8 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
     2019 release), a camera treated as independent pixels would pull a good dead reckoning off
     by the sum of its correlated errors: its noise is inflated, the more so the better the
     gyro, and the more so the more the errors persist along a track (a track of ``L``
-    observations is worth about ``L (1 - rho) / (1 + rho)``: 0.25 on 0020, 0.9 on the highway
-    drive 0042). Where one observation beats a gyro step (``r <= 1``, the 2020 release's noisy
+    observations is worth about ``L (1 - rho) / (1 + rho)``; rho is 0.25 on 0020, 0.9 on the
+    highway drive 0042). Where one observation beats a gyro step (``r <= 1``, the 2020 release's noisy
     velocities), the camera carries the estimate and is not inflated.
 
     Parameters
@@ -234,10 +234,11 @@ class FilterConfig:
         outside the gate: the first observation was the outlier. False keeps the first
         placement, so a landmark born from a bad observation gates its whole track.
     msckf_window : int or "auto"
-        Mode: slam (not dense). ``"auto"``: :func:`msckf_window` of the drive. Frames of past poses kept in the joint state as clones for the
-        multi-frame track updates (:mod:`visla_edu.filters._tracks`): a landmark's observations
-        wait until its track ends and are then used together in a null-space (MSCKF) update
-        that never puts the landmark in the state; a track still seen after this many frames
+        Mode: slam (not dense). ``"auto"``: :func:`msckf_window` of the drive. Frames of past
+        poses kept in the joint state as clones for the multi-frame track updates
+        (:mod:`visla_edu.filters._tracks`): a landmark's observations wait until its track ends
+        and are then used together in a null-space (MSCKF) update that never puts the landmark
+        in the state; a track still seen after this many frames
         enters the state as a landmark (delayed entry, from all its observations). 0: every
         landmark enters the state at its first observation, the joint EKF of notebook 08.
     track_gate_probability : float
