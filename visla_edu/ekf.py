@@ -8,9 +8,13 @@ Every update here is the textbook EKF update written with a Cholesky factor
     delta = A^T L^{-1} r                (= K r with K = Sigma H^T S^{-1})
     Sigma = Sigma - A^T A               (= (I - K H) Sigma)
 
-The observation of landmark ``m`` from pose ``T`` is ``z = Ks pi(cam_T_imu T^{-1} m)`` (see
-:mod:`visla_edu.camera`); noise ``R = sigma_pixel^2 I4`` per observation. Pose corrections are
-applied on the right, ``mu <- mu @ se3_exp(delta_pose)``; landmark corrections are added.
+Parameters shared by the functions below: ``world_T_imu`` (4, 4) is the pose mean ``mu`` (the
+IMU in the world); ``z`` (k, 4) the stereo pixels ``[uL, vL, uR, vR]`` of k observations,
+``z = Ks pi(cam_T_imu T^{-1} m)`` for landmark ``m``, predicted with their Jacobians by
+``camera``, a :class:`visla_edu.camera.StereoCamera`; ``noise_var`` the pixel noise variance
+(px^2), ``R = noise_var I4`` per observation; ``Sigma`` (D, D) a covariance overwritten with
+the posterior. Pose corrections are applied on the right, ``mu <- mu @ se3_exp(delta_pose)``
+(right perturbation, see :mod:`visla_edu.lie`); landmark corrections are added.
 """
 
 import numpy as np
@@ -39,9 +43,7 @@ POSE_DIM = 6
 
 
 def slot_columns(slots):
-    """Columns of landmark slots in the joint state ``[pose (6); slot 0 (3); slot 1 (3); ...]``.
-
-    Slot ``s`` occupies columns ``6 + 3 s``, ``6 + 3 s + 1`` and ``6 + 3 s + 2``.
+    """Columns ``6 + 3 s + [0, 1, 2]`` of landmark slots ``s`` in the joint state ``[pose (6); slot 0 (3); ...]``.
 
     Parameters
     ----------
@@ -55,58 +57,48 @@ def slot_columns(slots):
 
 
 def cholesky_update(Sigma, H, cols, innovation, R):
-    """One EKF update on the state columns ``cols`` of ``Sigma``, in place.
+    """One EKF update, in place, with an observation Jacobian ``H`` on the columns ``cols`` (zero elsewhere).
 
     Parameters
     ----------
     Sigma : ndarray, shape (D, D)
-        Full state covariance; overwritten with the posterior.
     H : ndarray, shape (m, c)
-        Observation Jacobian restricted to the columns ``cols`` (all other columns are zero).
     cols : ndarray of int, shape (c,)
     innovation : ndarray, shape (m,)
         ``z - h(mu)``.
     R : ndarray, shape (m, m)
-        Observation noise covariance.
 
     Returns
     -------
     delta : ndarray, shape (D,)
-        State correction ``K r``.
     nis : float
-        Normalised innovation squared ``r^T S^{-1} r`` (chi-square with m dof if consistent).
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        If the innovation covariance is not positive definite.
+        As :func:`gain_update`, which raises ``numpy.linalg.LinAlgError`` if ``S`` is not
+        positive definite.
     """
     Sigma_Ht = Sigma[:, cols] @ H.T  # (D, m)
     return gain_update(Sigma, Sigma_Ht, H @ Sigma_Ht[cols] + R, innovation)
 
 
 def gain_update(Sigma, Sigma_Ht, S, innovation):
-    """The EKF gain step in place: ``Sigma -= A^T A``, ``delta = A^T L^{-1} r`` with ``S = L L^T``, ``A = L^{-1} H Sigma``.
+    """The EKF gain step in place: ``Sigma -= A^T A``, ``delta = A^T L^{-1} r`` (module docstring).
 
-    ``A.T @ A`` is computed as a symmetric rank-m product, so a symmetric ``Sigma`` stays
-    exactly symmetric.
+    ``A.T @ A`` is a symmetric rank-m product: a symmetric ``Sigma`` stays exactly symmetric.
 
     Parameters
     ----------
     Sigma : ndarray, shape (D, D)
-        The state covariance, overwritten with the posterior.
     Sigma_Ht : ndarray, shape (D, m)
         ``Sigma H^T``.
     S : ndarray, shape (m, m)
-        The innovation covariance ``H Sigma H^T + R``.
+        ``H Sigma H^T + R``.
     innovation : ndarray, shape (m,)
 
     Returns
     -------
     delta : ndarray, shape (D,)
-        ``K r``.
+        State correction ``K r``.
     nis : float
-        ``r^T S^-1 r``.
+        ``r^T S^{-1} r`` (chi-square with m dof if consistent).
 
     Raises
     ------
@@ -155,26 +147,19 @@ def innovation_covariances(J_pose, J_landmark, Sigma_pose, Sigma_pose_landmark, 
 
 
 def mahalanobis_squared(innovation, S):
-    """``r_i^T S_i^{-1} r_i`` for each observation; innovation (k, 4), S (k, 4, 4) -> (k,).
-
-    ``S_i^{-1} r_i`` is a linear solve, never an inverse. With ``k = 0`` the result is empty.
+    """``r_i^T S_i^{-1} r_i`` per observation, by a linear solve (never an inverse); empty for ``k = 0``.
 
     Parameters
     ----------
     innovation : ndarray, shape (k, 4)
-        Residuals ``r_i = z_i - h_i(mu)`` in pixels, ``[uL, vL, uR, vR]``.
+        Residuals ``z_i - h_i(mu)`` (px).
     S : ndarray, shape (k, 4, 4)
-        Innovation covariances, e.g. from :func:`innovation_covariances`, in pixels squared.
+        Innovation covariances (px^2), e.g. from :func:`innovation_covariances`.
 
     Returns
     -------
     ndarray, shape (k,)
-        Squared Mahalanobis distances (chi-square with 4 dof if consistent).
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        If some ``S_i`` is singular.
+        Chi-square with 4 dof if consistent.
     """
     return np.einsum("ki,ki->k", innovation, np.linalg.solve(S, innovation[..., None])[..., 0])
 
@@ -187,10 +172,9 @@ def initialize_landmarks(world_T_imu, z, camera, noise_var):
 
         m ~ m0 + G_pose delta + G_z dz,   G_pose = R [I, -hat(p_imu)],   G_z = R R_ic J_tri
 
-    with ``R`` the rotation of ``world_T_imu``, ``R_ic`` that of ``imu_T_cam`` and ``p_imu`` the
-    point in the IMU frame. In joint SLAM the new block is ``G_pose Sigma_pp G_pose^T + C_tri``
-    and its correlation with every other state entry ``x`` is ``G_pose Sigma_px``: a landmark
-    placed from an uncertain pose inherits that uncertainty. Dropping this correlation (the
+    with ``R``, ``R_ic`` the rotations of ``world_T_imu``, ``imu_T_cam`` and ``p_imu`` the point in
+    the IMU frame. In joint SLAM the new block is ``G_pose Sigma_pp G_pose^T + C_tri`` and its
+    correlation with every other state entry ``x`` is ``G_pose Sigma_px``; dropping it (the
     textbook shortcut) makes the filter overconfident.
 
     Parameters
@@ -199,7 +183,6 @@ def initialize_landmarks(world_T_imu, z, camera, noise_var):
     z : ndarray, shape (k, 4)
     camera : visla_edu.camera.StereoCamera
     noise_var : float
-        Pixel noise variance.
 
     Returns
     -------
@@ -219,8 +202,7 @@ def initialize_landmarks(world_T_imu, z, camera, noise_var):
 def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var, extra_noise=None):
     """Landmark-mapping update with the pose held fixed, one 3x3 EKF per landmark (batched).
 
-    With the pose known, observations of different landmarks are independent, so the joint
-    (3M x 3M) update is block diagonal and each landmark updates on its own::
+    With the pose known the joint (3M x 3M) update is block diagonal::
 
         H_i = Ks dpi/dq(q_i) cam_T_imu T^{-1} P^T          (4 x 3)
         K_i = Sigma_i H_i^T (H_i Sigma_i H_i^T + R)^{-1}
@@ -256,15 +238,14 @@ def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var, 
 def pose_update(world_T_imu, Sigma_pose, p_world, z, camera, noise_var, Sigma_landmark=None):
     """Visual-inertial update of the pose alone, landmarks treated as known.
 
-    ``H_i = -Ks dpi/dq(q_i) cam_T_imu odot(T^{-1} m_i)`` stacked over the observations;
-    with landmark covariances given, each observation's noise becomes
-    ``R_i = noise_var I + J_landmark_i Sigma_landmark_i J_landmark_i^T``.
-    The correction is applied on the right: ``T <- T @ se3_exp(delta)``.
+    ``H_i = -Ks dpi/dq(q_i) cam_T_imu odot(T^{-1} m_i)`` stacked over the observations; with
+    landmark covariances given, ``R_i = noise_var I + J_landmark_i Sigma_landmark_i J_landmark_i^T``.
 
     Parameters
     ----------
     world_T_imu : ndarray, shape (4, 4)
     Sigma_pose : ndarray, shape (6, 6)
+        Not modified.
     p_world : ndarray, shape (k, 3)
     z : ndarray, shape (k, 4)
     camera : visla_edu.camera.StereoCamera
@@ -286,43 +267,34 @@ def pose_update(world_T_imu, Sigma_pose, p_world, z, camera, noise_var, Sigma_la
     return world_T_imu @ lie.se3_exp(delta), 0.5 * (Sigma + Sigma.T), nis
 
 
-#: Stereo rows ``[uL, vL, uR, vR]`` -> ``[uL, (vL + vR)/sqrt(2), uR]``. Rows 2 and 4 of ``Ks`` are
-#: equal for a rig with one intrinsics, so ``vL`` and ``vR`` have the same prediction and Jacobian:
-#: with noise ``sigma^2 I`` their difference carries no information about the state. Rotating the
-#: pair orthonormally and dropping the difference row is an exact reduction from 4 to 3 rows. A rig
-#: with two intrinsics has its own exact reduction (:func:`visla_edu.camera.stereo_rows`).
+#: :data:`visla_edu.camera.STEREO_ROWS`: the exact reduction of the stereo rows from 4 to 3 for a rig
+#: with one intrinsics (why it is exact, and a rig with two: :func:`visla_edu.camera.stereo_rows`).
 STEREO_ROWS = camera.STEREO_ROWS
 
 
 def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, prediction=None):
-    """Joint EKF update of the pose and all landmarks in the state, covariance in place.
+    """Joint EKF update of the pose and all landmarks in the state, ``Sigma`` in place.
 
-    The state is ``[pose perturbation (6); landmark slot 0 (3); slot 1 (3); ...]``. The
-    observation of the landmark in slot s touches the pose columns and that slot's columns::
+    The observation of the landmark in slot s touches the pose columns and that slot's columns
+    (:func:`slot_columns`)::
 
         H_i = [J_pose_i (4x6), 0, ..., J_landmark_i (4x3) at columns 6+3s.., ..., 0]
 
-    so ``Sigma H^T`` and ``H Sigma H^T`` are assembled block by block instead of with the
-    mostly-zero ``H``, and each observation's rows are reduced exactly from 4 to 3
-    (``camera.stereo_rows``: :data:`STEREO_ROWS` for one intrinsics). Every landmark in the
-    state moves (unobserved ones through their correlation with the pose), so the whole
-    ``p_active`` is corrected.
+    so :func:`joint_correction` assembles ``Sigma H^T`` and ``H Sigma H^T`` block by block. Every
+    landmark in the state moves (unobserved ones through their correlation with the pose), so the
+    whole ``p_active`` is corrected.
 
     Parameters
     ----------
-    Sigma : ndarray, shape (D, D), D = 6 + 3 n (columns of slot s: :func:`slot_columns`)
-        Joint covariance, overwritten with the posterior.
+    Sigma : ndarray, shape (D, D), D = 6 + 3 n
     world_T_imu : ndarray, shape (4, 4)
-        Pose mean.
     p_active : ndarray, shape (n, 3)
         Means of all landmarks in the state, in slot order.
     obs_slots : ndarray of int, shape (k,)
         Slot of each observed landmark.
     z : ndarray, shape (k, 4)
-        Its stereo pixels.
     camera : visla_edu.camera.StereoCamera
     noise_var : float
-
     prediction : tuple of ndarray, optional
         ``camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])`` if already computed
         (the filter has it from gating).
@@ -332,7 +304,7 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     world_T_imu_new : ndarray, shape (4, 4)
     p_active_new : ndarray, shape (n, 3)
     nis : float
-        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom).
+        As :func:`joint_correction`.
     """
     if prediction is None:
         prediction = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
@@ -342,17 +314,15 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
 
 
 def joint_correction(Sigma, obs_slots, z, noise_var, prediction, rows=STEREO_ROWS):
-    """The gain step of :func:`joint_update`: the state correction ``K r``, covariance in place.
+    """The gain step of :func:`joint_update`: the state correction ``K r``, ``Sigma`` in place.
 
-    Shared by both forms of the joint filter: the right-perturbation form applies the
-    correction as ``mu exp(hat(delta_pose))``, ``m + delta_m`` (:func:`joint_update`), the
-    invariant form as :func:`invariant_retract`; they differ only in the Jacobians passed in
-    ``prediction``.
+    Shared by both error forms of the joint filter (:mod:`visla_edu.filters._forms`): they differ
+    only in the Jacobians in ``prediction`` and in how ``delta`` is applied (:func:`joint_update`,
+    :func:`invariant_retract`). Each observation's rows are reduced exactly from 4 to 3 by ``rows``.
 
     Parameters
     ----------
     Sigma : ndarray, shape (D, D)
-        Joint covariance, overwritten with the posterior.
     obs_slots : ndarray of int, shape (k,)
     z : ndarray, shape (k, 4)
     noise_var : float
@@ -392,24 +362,22 @@ def joint_correction(Sigma, obs_slots, z, noise_var, prediction, rows=STEREO_ROW
 
 
 def invariant_pose_jacobian(J_landmark):
-    """Pose Jacobian of the invariant form, ``[-J_landmark, 0]``, shape (k, 4, 6).
+    """Pose Jacobian of the invariant form (:mod:`visla_edu.filters._forms`), ``[-J_landmark, 0]``.
 
-    With ``T = exp(hat(xi)) mu`` and ``m_j = exp(hat(theta)) mu_j + e_j`` the point seen by the
-    camera is ``inv(T) m_j ~ inv(mu) (mu_j + e_j - p)`` to first order, ``xi = [p; theta]``: the
-    observation depends on the pose error only through ``p``, with minus the landmark
-    Jacobian, and not at all on ``theta``. Moving the whole world (the same ``p`` and ``e_j``)
-    changes nothing, whatever the estimate: that is what keeps the invariant filter consistent.
+    With ``T = exp(hat(xi)) mu``, ``xi = [p; theta]``, the point seen by the camera is
+    ``inv(T) m_j ~ inv(mu) (mu_j + e_j - p)`` to first order: it depends on the pose error only
+    through ``p`` and not at all on ``theta``, so moving the whole world changes nothing, whatever
+    the estimate (what keeps the invariant filter consistent).
 
     Parameters
     ----------
     J_landmark : ndarray, shape (k, 4, 3)
-        Landmark Jacobians ``Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` of
-        :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
+        ``J_z_landmark`` of :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
 
     Returns
     -------
     ndarray, shape (k, 4, 6)
-        ``[-J_landmark, 0]``: columns 0-2 for ``p``, columns 3-5 (zero) for ``theta``.
+        Columns 0-2 for ``p``, columns 3-5 (zero) for ``theta``.
     """
     return np.concatenate([-J_landmark, np.zeros_like(J_landmark)], axis=-1)
 
@@ -417,8 +385,7 @@ def invariant_pose_jacobian(J_landmark):
 def invariant_retract(world_T_imu, p_active, delta):
     """Apply an invariant correction: ``mu <- exp(hat(xi)) mu``, ``mu_j <- R_xi mu_j + J_l(theta) e_j``.
 
-    The group update of the invariant filter (pose and landmarks move together, ``R_xi`` the
-    rotation of ``exp(hat(xi))``, ``J_l`` :func:`visla_edu.lie.so3_left_jacobian`).
+    ``R_xi`` is the rotation of ``exp(hat(xi))``, ``J_l`` :func:`visla_edu.lie.so3_left_jacobian`.
 
     Parameters
     ----------

@@ -152,10 +152,9 @@ def twist_hat(u):
 
 
 def twist_vee(U):
-    """Inverse of :func:`twist_hat`: ``(..., 4, 4) -> (..., 6)`` as ``[v; w]``.
+    """Inverse of :func:`twist_hat`: ``[[hat(w), v], [0, 0]] -> [v; w]``.
 
-    ``twist_vee([[hat(w), v], [0, 0]]) = [v; w]``. Only ``U[..., :3, 3]`` and the entries
-    ``U32, U13, U21`` are read; the rest of ``U`` is not checked.
+    Only ``U[..., :3, 3]`` and ``U32, U13, U21`` are read; the rest of ``U`` is not checked.
 
     Parameters
     ----------
@@ -164,12 +163,6 @@ def twist_vee(U):
     Returns
     -------
     ndarray, shape (..., 6)
-        The twist ``[v; w]``, linear part first.
-
-    Raises
-    ------
-    ValueError
-        ``U`` does not have shape (..., 4, 4).
     """
     U = _as_matrices(U, 4, 4, "twist_vee")
     w = np.stack([U[..., 2, 1], U[..., 0, 2], U[..., 1, 0]], axis=-1)
@@ -232,7 +225,7 @@ def _q_coefficients(theta, theta2):
 
 
 def so3_exp(w):
-    """Rodrigues' formula: ``exp(hat(w)) = I + A hat(w) + B hat(w)^2``.
+    """Rodrigues' formula: ``exp(hat(w)) = I + A hat(w) + B hat(w)^2``, ``A = sin(t) / t``, ``B`` as in the module.
 
     Parameters
     ----------
@@ -242,7 +235,6 @@ def so3_exp(w):
     Returns
     -------
     ndarray, shape (..., 3, 3)
-        Rotation matrix, with ``A = sin(t)/t`` and ``B = (1 - cos(t))/t^2``.
     """
     w = _as_vectors(w, 3, "so3_exp")
     theta, theta2 = _angle(w)
@@ -253,10 +245,7 @@ def so3_exp(w):
 
 
 def so3_left_jacobian(w):
-    """Left Jacobian of SO(3): ``J_l(w) = I + B hat(w) + C hat(w)^2``.
-
-    ``exp(hat(w + d)) ~ exp(hat(J_l(w) d)) exp(hat(w))`` to first order, and the translation
-    of ``se3_exp([v; w])`` is ``J_l(w) v`` (the ``V`` of :func:`se3_exp`).
+    """Left Jacobian of SO(3): ``J_l(w) = I + B hat(w) + C hat(w)^2``, the ``V`` of :func:`se3_exp`.
 
     Parameters
     ----------
@@ -265,7 +254,6 @@ def so3_left_jacobian(w):
     Returns
     -------
     ndarray, shape (..., 3, 3)
-        With ``B = (1 - cos t)/t^2`` and ``C = (t - sin t)/t^3`` (series for small ``t``).
     """
     w = _as_vectors(w, 3, "so3_left_jacobian")
     theta, theta2 = _angle(w)
@@ -285,7 +273,6 @@ def so3_right_jacobian(w):
     Returns
     -------
     ndarray, shape (..., 3, 3)
-        ``exp(hat(w + d)) ~ exp(hat(w)) exp(hat(J_r(w) d))`` to first order.
     """
     return so3_left_jacobian(-_as_vectors(w, 3, "so3_right_jacobian"))
 
@@ -300,7 +287,6 @@ def so3_right_jacobian_inv(w):
     Returns
     -------
     ndarray, shape (..., 3, 3)
-        ``log(exp(hat(w)) exp(hat(d))) ~ w + J_r(w)^{-1} d``; ``D`` as in the module docstring.
     """
     w = _as_vectors(w, 3, "so3_right_jacobian_inv")
     D = _inverse_jacobian_coefficient(*_angle(w))[..., None, None]
@@ -356,8 +342,8 @@ def _near_pi_log(R, s, c, theta):
 def se3_exp(u):
     """SE(3) exponential of a twist ``u = [v; w]`` in closed form.
 
-    ``exp(twist_hat(u)) = [[R, V v], [0, 1]]`` with ``R = so3_exp(w)`` and
-    ``V = I + B hat(w) + C hat(w)^2``, ``B = (1 - cos t)/t^2``, ``C = (t - sin t)/t^3``.
+    ``exp(twist_hat(u)) = [[R, V v], [0, 1]]`` with ``R = so3_exp(w)`` and ``V = J_l(w)``
+    (:func:`so3_left_jacobian`).
 
     Parameters
     ----------
@@ -386,8 +372,8 @@ def se3_exp(u):
 def se3_log(T):
     """SE(3) logarithm: the twist ``u = [v; w]`` with ``se3_exp(u) == T``.
 
-    ``w = so3_log(R)`` and ``v = V^{-1} p`` with
-    ``V^{-1} = I - hat(w)/2 + D hat(w)^2``, ``D = (1 - A / (2 B)) / t^2``.
+    ``w = so3_log(R)`` and ``v = V^{-1} p`` with ``V^{-1} = I - hat(w)/2 + D hat(w)^2`` (``D`` as in
+    the module docstring).
 
     Parameters
     ----------
@@ -424,12 +410,10 @@ def se3_right_jacobian(x):
     Parameters
     ----------
     x : array_like, shape (..., 6)
-        Twists, linear part first.
 
     Returns
     -------
     ndarray, shape (..., 6, 6)
-        ``exp(x + d) ~ exp(x) exp(J_r(x) d)``; ``Q_r`` as in the module docstring.
     """
     x = _as_vectors(x, 6, "se3_right_jacobian")
     A = so3_right_jacobian(x[..., 3:])
@@ -450,7 +434,6 @@ def se3_right_jacobian_inv(x):
     Returns
     -------
     ndarray, shape (..., 6, 6)
-        ``log(exp(x) exp(d)) ~ x + J_r(x)^{-1} d``.
     """
     x = _as_vectors(x, 6, "se3_right_jacobian_inv")
     A_inv = so3_right_jacobian_inv(x[..., 3:])
@@ -524,8 +507,6 @@ def curly_hat(u):
 
 def odot(s):
     """The 4x6 matrix with ``twist_hat(u) @ s == odot(s) @ u`` for homogeneous ``s``.
-
-    ``odot([x; 1]) = [[I, -hat(x)], [0, 0]]`` (more generally ``s4 I`` in the corner).
 
     Parameters
     ----------

@@ -4,6 +4,10 @@ Errors of a pose estimate ``mu`` against the truth ``T`` are right perturbations
 (:mod:`visla_edu.lie`): ``e = se3_log(inv(mu) @ T)``.
 :func:`evaluate` gathers what a run is judged by against ground truth (ATE raw and aligned,
 KITTI drift) in a :class:`TrajectoryEvaluation`.
+
+Trajectories ``est_world_T_imu``, ``gt_world_T_imu`` (T, 4, 4), ``world`` the first IMU frame for
+both, need ``T >= 1`` and every pose finite and rigid to :data:`~visla_edu.validation.POSE_RIGID_TOL`,
+else a ``ValueError`` names the first bad frame.
 """
 
 from dataclasses import dataclass
@@ -32,10 +36,7 @@ def _check_trajectories(est, gt, caller="metrics"):
 
 
 def _check_poses(poses, name, caller):
-    """Raise a ValueError naming the first frame whose pose is not finite or not a rigid transform.
-
-    Rigid to :data:`visla_edu.validation.POSE_RIGID_TOL` (:func:`visla_edu.validation.check_rigid_poses`).
-    """
+    """A ValueError naming the first frame whose pose is not finite or not rigid (validation.check_rigid_poses)."""
     bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
     if len(bad):
         raise ValueError(f"{caller}: the {name}'s pose of frame {bad[0]} is not finite")
@@ -73,8 +74,7 @@ def ate(est_world_T_imu, gt_world_T_imu, align=True):
     est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
     align : bool
         First apply the rigid transform of :func:`align_se3` (removes the arbitrary choice of
-        world frame); without it both trajectories must share the world frame (visla-edu's
-        world is the first IMU frame, so they do).
+        world frame); without it both trajectories must share the world frame.
 
     Returns
     -------
@@ -98,17 +98,12 @@ def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
     ----------
     est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
     delta : int
-        Frames between the two poses of each pair, ``1 <= delta < T``.
+        Frames between the two poses of each pair, ``1 <= delta < T`` (else a ``ValueError``).
 
     Returns
     -------
     (float, float)
         Translation RMS (m) and rotation RMS (rad) of ``inv(rel_est) rel_gt``.
-
-    Raises
-    ------
-    ValueError
-        Bad shapes, a pose that is not finite or rigid, or a bad ``delta``.
     """
     est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "rpe")
     if isinstance(delta, bool) or not isinstance(delta, (int, np.integer)):
@@ -175,9 +170,8 @@ def nees(errors, covariances, skip_singular=True):
 def chi2_quantile(probability, dof):
     """Quantile of the chi-square distribution: ``x`` with ``P(chi2_dof <= x) = probability``.
 
-    ``x = 2 gammaincinv(dof / 2, probability)``, the inverse of the regularised lower incomplete
-    gamma function, which is what ``scipy.stats.chi2.ppf`` evaluates (the same numbers), without
-    importing scipy.stats: that import alone takes longer than calibrating a course drive.
+    ``x = 2 gammaincinv(dof / 2, probability)``: the numbers of ``scipy.stats.chi2.ppf``, without
+    importing scipy.stats (that import alone takes longer than calibrating a course drive).
 
     Parameters
     ----------
@@ -201,14 +195,13 @@ def chi2_quantile(probability, dof):
 def chi2_bounds(dof, probability=0.95):
     """Two-sided ``probability`` interval of a chi-square value with ``dof`` degrees of freedom.
 
-    ``[chi2.ppf(a, dof), chi2.ppf(1 - a, dof)]`` with ``a = (1 - probability) / 2``: the one
-    place the package computes a chi-square band (NEES, NIS, the stepper's and the plots'
-    bands all call it).
+    ``[chi2.ppf(a, dof), chi2.ppf(1 - a, dof)]``, ``a = (1 - probability) / 2``: the package's one
+    chi-square band (NEES, NIS, the stepper's and the plots' bands all call it).
 
     Parameters
     ----------
     dof : int or array_like of int
-        Degrees of freedom; entries ``<= 0`` give NaN.
+        Entries ``<= 0`` give NaN.
     probability : float
 
     Returns
@@ -229,7 +222,7 @@ def nis_band(dof, probability=0.95):
     Parameters
     ----------
     dof : int or array_like of int
-        Degrees of freedom; entries ``<= 0`` (no update) give NaN.
+        Entries ``<= 0`` (no update) give NaN.
     probability : float
 
     Returns
@@ -245,22 +238,20 @@ def nis_band(dof, probability=0.95):
 def average_nees_bounds(dof, runs, probability=0.95):
     """Interval for the average of ``runs`` independent chi-square(dof) values.
 
-    ``sum`` of the values is chi-square with ``runs * dof`` dof, so the average lies in
-    ``chi2.ppf([a, 1 - a], runs * dof) / runs`` with ``a = (1 - probability) / 2``.
+    Their sum is chi-square with ``runs * dof`` dof, so the average lies in
+    ``chi2_bounds(runs * dof, probability) / runs``.
 
     Parameters
     ----------
     dof : int
-        Degrees of freedom of each value (6 for a pose NEES).
+        Of each value (6 for a pose NEES).
     runs : int
         How many values are averaged (e.g. Monte-Carlo runs, or time steps).
     probability : float
-        Two-sided coverage of the interval.
 
     Returns
     -------
-    (float, float)
-        Lower and upper bound of the average.
+    lower, upper : float
     """
     lo, hi = chi2_bounds(dof * runs, probability)
     return lo / runs, hi / runs
@@ -315,7 +306,6 @@ def kitti_drift(est_world_T_imu, gt_world_T_imu, lengths=DRIFT_LENGTHS, step=DRI
     rotation_deg_per_100m : float or None
         Mean ``angle(E) / L`` in degrees per 100 m.
     segments : int
-        Number of segments averaged.
     """
     est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "kitti_drift")
     dist = path_distances(gt)
@@ -342,15 +332,14 @@ class TrajectoryEvaluation:
     Attributes
     ----------
     ate_raw : float
-        RMS position error (m), no alignment (``world`` = the first IMU frame for both).
+        :func:`ate` (m) without alignment.
     ate_aligned : float
-        RMS position error (m) after the best rigid alignment (:func:`align_se3`).
+        :func:`ate` (m) after the best rigid alignment (:func:`align_se3`).
     drift_translation : float or None
         KITTI translation drift (% of segment length, :func:`kitti_drift`); None when unavailable.
     drift_rotation : float or None
         KITTI rotation drift (degrees per 100 m); None when unavailable.
     drift_segments : int
-        Segments averaged for the drift.
     drift_note : str
         Why the drift is unavailable (``""`` when it is available).
     path_length : float
@@ -395,7 +384,6 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
     Parameters
     ----------
     est_world_T_imu : ndarray, shape (T, 4, 4)
-        The estimate, ``world`` = the first IMU frame.
     gt_world_T_imu : ndarray, shape (n, 4, 4)
         The ground truth of frames ``0 .. n - 1``, ``1 <= n <= T`` (a real drive's poses may
         cover fewer frames than the dataset: the first ``n`` estimated poses are compared).
@@ -408,8 +396,7 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
     Raises
     ------
     ValueError
-        Shapes do not fit, the ground truth has more frames than the estimate, or a pose
-        is not finite or not a rigid transform (the message names the frame).
+        The ground truth has more frames than the estimate, or a check of the module docstring fails.
     """
     est = np.asarray(est_world_T_imu, dtype=float)
     gt = np.asarray(gt_world_T_imu, dtype=float)
@@ -440,8 +427,8 @@ def gated_share(status_totals):
     Parameters
     ----------
     status_totals : dict
-        Observation counts by status name, as :meth:`visla_edu.run.RunResult.status_totals`
-        returns them; ``"used"`` and ``"gated"`` are read (missing ones count as 0).
+        Observation counts by status name (:meth:`visla_edu.run.RunResult.status_totals`);
+        ``"used"`` and ``"gated"`` are read, missing ones count as 0.
 
     Returns
     -------

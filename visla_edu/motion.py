@@ -13,9 +13,12 @@ and ``n_t ~ N(0, W_t)``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` for white 
 standard deviation ``sigma_v`` (m/s) and ``sigma_w`` (rad/s) on each velocity sample (one value
 for all three axes, or one per axis).
 
-The invariant joint filter (:func:`predict_invariant_covariance`) measures the pose error in
-the world frame instead, ``T = exp(hat(xi)) mu``: then the error does not change along a
-noise-free step (its transition is the identity) and the noise enters through ``Ad(mu)``.
+Parameters shared below: ``u`` (6,) is the step's body twist ``[v; w]`` (m/s, rad/s), ``tau``
+the step's duration (s), ``world_T_imu`` (4, 4) the pose mean ``mu`` (the IMU in the world),
+``W`` (6, 6) the step's noise covariance (:func:`motion_noise`).
+
+The invariant joint filter measures the pose error in the world frame instead,
+``T = exp(hat(xi)) mu`` (:mod:`visla_edu.filters._forms`; :func:`predict_invariant_covariance`).
 """
 
 import numpy as np
@@ -65,7 +68,6 @@ def dead_reckon(time_stamps, twists, world_T_imu0=None, lag=0):
     ----------
     time_stamps : array_like, shape (T,)
     twists : array_like, shape (T, 6)
-        ``[v; w]`` per time stamp (body frame).
     world_T_imu0 : array_like, shape (4, 4), optional
         Initial pose; identity by default (world = IMU frame at the first time stamp).
     lag : int
@@ -102,15 +104,14 @@ def motion_noise(tau, sigma_linear, sigma_angular):
     Parameters
     ----------
     tau : float
-        The step's duration (s).
     sigma_linear, sigma_angular : float or (float, float, float)
-        White noise of the measured linear (m/s) and angular (rad/s) velocity: one number for
-        every axis, or a triple ``(x, y, z)`` in the body frame.
+        ``sigma_v`` (m/s) and ``sigma_w`` (rad/s): one number for every axis, or a triple
+        ``(x, y, z)`` in the body frame.
 
     Returns
     -------
     ndarray, shape (6, 6)
-        Diagonal: ``(tau sigma_v)^2`` for the three linear entries, then ``(tau sigma_w)^2``.
+        Diagonal.
     """
     return np.diag((tau * _noise_sigmas(sigma_linear, sigma_angular)) ** 2)
 
@@ -118,24 +119,14 @@ def motion_noise(tau, sigma_linear, sigma_angular):
 def pose_transition(u, tau):
     """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6).
 
-    For the right perturbation ``delta`` (:mod:`visla_edu.lie`): ``delta_{t+1} = F delta_t + n_t``.
-
     Parameters
     ----------
     u : array_like, shape (6,)
-        The body twist ``[v; w]`` (m/s, rad/s) that moves the pose over the step.
     tau : float
-        The step's duration (s).
 
     Returns
     -------
     ndarray, shape (6, 6)
-        ``F`` acting on perturbations ``[v; w]``.
-
-    Raises
-    ------
-    ValueError
-        ``u`` does not have 6 entries.
     """
     return lie.adjoint(lie.se3_exp(-tau * np.asarray(u, dtype=float)))
 
@@ -146,9 +137,7 @@ def imu_step(u, tau, sigma_linear, sigma_angular):
     Parameters
     ----------
     u : array_like, shape (6,)
-        The body twist ``[v; w]`` that moves the pose over the step.
     tau : float
-        The step's duration (s).
     sigma_linear, sigma_angular : float or (float, float, float)
         As in :func:`motion_noise`.
 
@@ -166,46 +155,36 @@ def imu_step(u, tau, sigma_linear, sigma_angular):
 
 
 def predict_pose(world_T_imu, u, tau):
-    """Mean prediction ``mu @ se3_exp(tau u)``, (4, 4).
+    """Mean prediction ``mu @ se3_exp(tau u)``: ``world_T_imu`` at the end of the step.
 
     Parameters
     ----------
     world_T_imu : ndarray, shape (4, 4)
-        Pose mean ``mu`` of the IMU in the world frame at the start of the step.
+        At the start of the step.
     u : array_like, shape (6,)
-        The body twist ``[v; w]`` (m/s, rad/s).
     tau : float
-        The step's duration (s).
 
     Returns
     -------
     ndarray, shape (4, 4)
-        ``world_T_imu`` at the end of the step.
-
-    Raises
-    ------
-    ValueError
-        ``u`` does not have 6 entries.
     """
     return world_T_imu @ lie.se3_exp(tau * np.asarray(u, dtype=float))
 
 
 def predict_pose_covariance(Sigma_pose, F, W):
-    """Covariance prediction ``F Sigma F^T + W`` for the pose alone, (6, 6).
+    """Covariance prediction ``F Sigma F^T + W`` for the pose alone, a new (6, 6) array (not symmetrised).
 
     Parameters
     ----------
     Sigma_pose : ndarray, shape (6, 6)
-        Covariance of the right perturbation ``[v; w]`` of the pose; not modified.
+        Covariance of the pose's right perturbation; not modified.
     F : ndarray, shape (6, 6)
         :func:`pose_transition` (or the ``F`` of :func:`imu_step`).
     W : ndarray, shape (6, 6)
-        The step's noise covariance (:func:`motion_noise`).
 
     Returns
     -------
     ndarray, shape (6, 6)
-        A new array; not symmetrised.
     """
     return F @ Sigma_pose @ F.T + W
 
@@ -220,7 +199,6 @@ def predict_joint_covariance(Sigma, F, W):
     Parameters
     ----------
     Sigma : ndarray, shape (D, D)
-        Modified in place.
     F, W : ndarray, shape (6, 6)
 
     Returns
@@ -238,11 +216,10 @@ def predict_joint_covariance(Sigma, F, W):
 def invariant_noise_factor(world_T_imu, p_landmarks, W):
     """``B`` with ``B B^T`` the noise one IMU step adds to the invariant errors, (6 + 3n, 6).
 
-    The invariant joint filter's errors are ``xi`` of the pose (``T = exp(hat(xi)) mu``, world
-    frame, ``xi = [p; theta]``) and ``e_j = m_j - exp(hat(theta)) mu_j`` of each landmark (to first order:
-    :func:`visla_edu.lie.invariant_retract` applies the group exponential). A
-    noise ``n ~ N(0, W)`` on the step's twist (body frame) moves them by ``Ad(mu) n`` and
-    ``hat(mu_j) R n_w`` (``R`` the rotation of ``mu``, ``n_w`` the angular part), so::
+    The errors are ``xi = [p; theta]`` of the pose and ``e_j = m_j - exp(hat(theta)) mu_j`` of each
+    landmark (to first order; :func:`visla_edu.ekf.invariant_retract` applies the group
+    exponential). A noise ``n ~ N(0, W)`` on the step's twist (body frame) moves them by
+    ``Ad(mu) n`` and ``hat(mu_j) R n_w`` (``R`` the rotation of ``mu``, ``n_w`` the angular part), so::
 
         B = [[Ad(mu) L]; [hat(mu_j) R L_w] for each landmark],   W = L L^T, L_w = L[3:]
 
@@ -254,7 +231,6 @@ def invariant_noise_factor(world_T_imu, p_landmarks, W):
         Landmark means in state order (non-finite rows, the dense filter's placeholders, get
         zero rows: their covariance is written at their first observation).
     W : ndarray, shape (6, 6)
-        The step's noise covariance (:func:`motion_noise`).
 
     Returns
     -------
@@ -270,19 +246,17 @@ def invariant_noise_factor(world_T_imu, p_landmarks, W):
 
 
 def predict_invariant_covariance(Sigma, world_T_imu, p_landmarks, W):
-    """Invariant covariance prediction, in place: ``Sigma <- Sigma + B B^T``.
+    """Invariant covariance prediction, in place: ``Sigma <- Sigma + B B^T`` (:func:`invariant_noise_factor`).
 
-    The invariant errors do not change along a noise-free step (the transition is the
-    identity, whatever the state), so only the step's noise is added
-    (:func:`invariant_noise_factor`). Unlike the right-perturbation prediction, the directions
-    a filter can never observe (moving the whole world: the same translation in the pose's
-    ``p`` and every landmark's ``e_j``, and a rotation ``theta``) do not depend on the estimate,
-    which keeps the filter consistent along them.
+    The invariant errors do not change along a noise-free step (the transition is the identity),
+    so only the step's noise is added, through ``Ad(mu)``. The directions a filter can never
+    observe (moving the whole world: the same translation in ``p`` and every ``e_j``, and a
+    rotation ``theta``) do not depend on the estimate, unlike in the right-perturbation
+    prediction: that keeps the filter consistent.
 
     Parameters
     ----------
     Sigma : ndarray, shape (6 + 3 n, 6 + 3 n)
-        Modified in place.
     world_T_imu, p_landmarks, W
         As in :func:`invariant_noise_factor`.
 

@@ -17,8 +17,12 @@ converts an IMU trajectory to that convention.
 >>> trajectory.write_trajectory("slam.tum", result.time_stamps, result.world_T_imu)  # doctest: +SKIP
 >>> times, poses = trajectory.read_trajectory("slam.tum")                            # doctest: +SKIP
 
-Every problem with a file is a one-line ``FileNotFoundError`` or ``ValueError`` naming the
-file, the line and the value.
+Every problem with a file is a one-line error naming the file, the line and the value: a
+``FileNotFoundError`` (no such file, or a folder), a ``PermissionError`` (not readable) or a
+``ValueError`` (a FIFO or device, larger than :data:`MAX_TEXT_BYTES`, empty, not text, a row
+with another column count, a value that is not a finite number, a rotation not orthonormal
+to :data:`ORTHONORMAL_TOL` or with determinant -1, a TUM quaternion whose norm is not 1 to
+that tolerance, times not strictly increasing, an unknown suffix).
 """
 
 import os
@@ -42,7 +46,7 @@ ORTHONORMAL_TOL = POSE_RIGID_TOL
 
 
 def trajectory_format(path):
-    """The format of a trajectory file from its suffix: ``.kitti``/``.txt`` KITTI, ``.tum`` TUM.
+    """The format of a trajectory file from its suffix: ``.kitti``/``.txt`` KITTI, ``.tum`` TUM, else a ValueError.
 
     Parameters
     ----------
@@ -51,11 +55,6 @@ def trajectory_format(path):
     Returns
     -------
     {"kitti", "tum"}
-
-    Raises
-    ------
-    ValueError
-        Any other suffix (the message lists the known ones).
     """
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
@@ -85,16 +84,6 @@ def read_table(path, allowed_columns, what):
     table : ndarray, shape (n, c)
     line_numbers : ndarray of int, shape (n,)
         The file line (from 1) of each row, for error messages.
-
-    Raises
-    ------
-    FileNotFoundError
-        No such file (or a folder).
-    PermissionError
-        Not readable.
-    ValueError
-        A FIFO or device, larger than :data:`MAX_TEXT_BYTES`, empty, not text, a row with
-        another column count, a value that is not a finite number.
     """
     path = expand_user(path)
     _check_text_file(path, what)
@@ -153,10 +142,7 @@ def _parse_numbers(path, numbered):
 
 
 def _check_rotations(path, poses, line_numbers):
-    """Each pose's rotation (poses (n, 4, 4)) orthonormal to :data:`ORTHONORMAL_TOL` with determinant +1.
-
-    :func:`visla_edu.validation.nonrigid_frames`; the message names the line of the first that is not.
-    """
+    """Rotations of ``poses`` (n, 4, 4) orthonormal to :data:`ORTHONORMAL_TOL`, det +1, else a ValueError."""
     bad, deviation = nonrigid_frames(poses, ORTHONORMAL_TOL)
     if not bad.any():
         return
@@ -195,18 +181,8 @@ def read_kitti(path):
     Returns
     -------
     poses : ndarray, shape (n, 4, 4)
-        Row ``i`` as ``[[r11, r12, r13, t1], [r21, r22, r23, t2], [r31, r32, r33, t3], [0, 0, 0, 1]]``.
     times : ndarray, shape (n,), or None
         The first column of a 13-column file (strictly increasing), else None.
-
-    Raises
-    ------
-    FileNotFoundError
-        No such file.
-    ValueError
-        Empty, not text, a row with another column count, a value that is not a finite
-        number, a rotation not orthonormal to :data:`ORTHONORMAL_TOL` or with determinant -1,
-        times not increasing. The message names the file, the line and the value.
     """
     table, line_numbers = read_table(path, (12, 13), "KITTI poses: 12 numbers per row, row-major 3x4 [R | t]")
     times = table[:, 0].copy() if table.shape[1] == 13 else None
@@ -231,11 +207,6 @@ def read_tum(path):
         Strictly increasing.
     poses : ndarray, shape (n, 4, 4)
         Rotation from the (normalised) quaternion, scalar last.
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        As :func:`read_kitti`; also a quaternion whose norm is not 1 to :data:`ORTHONORMAL_TOL`.
     """
     table, line_numbers = read_table(path, (8,), "TUM trajectory: t x y z qx qy qz qw")
     norms = np.linalg.norm(table[:, 4:], axis=1)
@@ -250,10 +221,7 @@ def read_tum(path):
 
 
 def read_trajectory(path):
-    """Read a trajectory in the format of its suffix (:func:`trajectory_format`).
-
-    ``.tum`` is read by :func:`read_tum`, ``.kitti`` and ``.txt`` by :func:`read_kitti`; the
-    result is always ``(times, poses)``, times first.
+    """Read a trajectory in its suffix's format (:func:`trajectory_format`): :func:`read_tum` or :func:`read_kitti`.
 
     Parameters
     ----------
@@ -262,19 +230,9 @@ def read_trajectory(path):
     Returns
     -------
     times : ndarray, shape (n,), or None
-        Seconds, strictly increasing; None for a 12-column KITTI file.
+        Seconds, strictly increasing; None for a 12-column KITTI file. Always first.
     poses : ndarray, shape (n, 4, 4)
         The poses as written, e.g. ``world_T_imu`` of a run.
-
-    Raises
-    ------
-    ValueError
-        An unknown suffix (:func:`trajectory_format`), or a bad file as in :func:`read_kitti`
-        and :func:`read_tum`.
-    FileNotFoundError
-        No such file (or a folder).
-    PermissionError
-        Not readable.
     """
     if trajectory_format(path) == "tum":
         return read_tum(path)
@@ -318,7 +276,7 @@ def write_kitti(path, poses):
     path : str or os.PathLike
         Written atomically (a temporary file in the same folder, then renamed).
     poses : array_like, shape (T, 4, 4)
-        E.g. ``world_T_imu`` of a run.
+        E.g. ``world_T_imu`` of a run; finite, else a ``ValueError`` and nothing is written.
 
     Returns
     -------
@@ -330,14 +288,12 @@ def write_kitti(path, poses):
 
 
 def write_tum(path, time_stamps, poses):
-    """Write poses as a TUM trajectory: ``t x y z qx qy qz qw`` per row.
-
-    The quaternion is scipy's :meth:`Rotation.as_quat` of each rotation (scalar last).
+    """Write poses as a TUM trajectory (``t x y z qx qy qz qw`` per row, scipy's quaternion, scalar last).
 
     Parameters
     ----------
     path : str or os.PathLike
-        Written atomically.
+        Written atomically, as in :func:`write_kitti`.
     time_stamps : array_like, shape (T,)
         Seconds.
     poses : array_like, shape (T, 4, 4)

@@ -62,9 +62,7 @@ MAX_EXTRINSIC_TRANSLATION = 20.0  # m
 
 
 def magnitude(vectors):
-    """Euclidean norms of ``vectors`` (..., 3) without overflow (1e200 stays 1e200, not inf).
-
-    ``|v| = hypot(hypot(v1, v2), v3)``.
+    """Norms ``hypot(hypot(v1, v2), v3)`` of ``vectors``, without overflow (1e200 stays 1e200, not inf).
 
     Parameters
     ----------
@@ -89,7 +87,6 @@ def check_intrinsics(K, subject, key="K"):
     ----------
     K : array_like, shape (3, 3)
     subject : str
-        Starts every message: the input's name (``"stereo_matrix: K"``, ``"path: key 'K'"``).
     key : str
         How its entries are written in the messages (``K[0, 1]``).
 
@@ -122,22 +119,16 @@ def check_intrinsics(K, subject, key="K"):
 
 
 def check_baseline(b, subject):
-    """The stereo baseline ``b`` (metres) as a positive float.
+    """The stereo baseline ``b`` (metres) as a finite positive float, else a ValueError.
 
     Parameters
     ----------
     b : float or ndarray of shape ()
     subject : str
-        Starts the message (``"stereo_matrix: b"``, ``"path: key 'b'"``).
 
     Returns
     -------
     float
-
-    Raises
-    ------
-    ValueError
-        ``b`` is not finite, or not greater than 0.
     """
     b = float(b)
     if not np.isfinite(b):
@@ -173,11 +164,9 @@ def check_plausible_calibration(K, b, path, pose=None, pose_key="imu_T_cam", K_k
     Raises
     ------
     ValueError
-        ``fsu`` or ``fsv`` outside :data:`FOCAL_RANGE`, ``fsv / fsu`` outside
-        :data:`ASPECT_RANGE`, ``cu`` or ``cv`` not in ``(0, 20000]`` px
-        (:data:`PRINCIPAL_POINT_RANGE` without 0), ``b`` outside :data:`BASELINE_RANGE`, or the
-        extrinsic translation longer than :data:`MAX_EXTRINSIC_TRANSLATION` (checked in this
-        order; a length that would fit in millimetres says so).
+        A quantity outside its range in the module's table (:data:`FOCAL_RANGE`, :data:`ASPECT_RANGE`,
+        :data:`PRINCIPAL_POINT_RANGE` without 0, :data:`BASELINE_RANGE`, :data:`MAX_EXTRINSIC_TRANSLATION`;
+        checked in this order; a length that would fit in millimetres says so).
     """
     fsu, fsv, cu, cv = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     for name, value in (("fsu = K[0, 0]", fsu), ("fsv = K[1, 1]", fsv)):
@@ -261,7 +250,6 @@ def check_rigid(T, subject, tolerance=RIGID_TOL):
     T : ndarray, shape (4, 4)
         Finite.
     subject : str
-        Starts the message (``"path: key 'imu_T_cam'"``).
     tolerance : float
 
     Raises
@@ -293,14 +281,9 @@ def check_rigid_poses(poses, subject, tolerance=POSE_RIGID_TOL):
     poses : ndarray, shape (n, 4, 4)
         Finite.
     subject : str
-        Names the poses: the message is ``f"{subject} of frame {t} is not a rigid transform (...)"``
-        (e.g. ``"path: key 'ground_truth_world_T_imu': the pose"``).
+        Names the poses (``"path: key 'ground_truth_world_T_imu': the pose"``); the message is
+        ``f"{subject} of frame {t} is not a rigid transform ({rigid_detail})"`` for the first such ``t``.
     tolerance : float
-
-    Raises
-    ------
-    ValueError
-        Names the first frame whose pose is not rigid and what is wrong with it (:func:`rigid_detail`).
     """
     bad = np.flatnonzero(nonrigid_frames(poses, tolerance)[0])
     if bad.size:

@@ -1,6 +1,8 @@
 """Calibrated stereo camera: the stereo matrix Ks, projection, Jacobians, triangulation.
 
-Model (rectified stereo pair, left camera optical frame ``o``: x right, y down, z forward)::
+Model (rectified stereo pair: the right camera is the left one translated by ``+b`` along the
+left camera's x axis, with the same orientation; left camera optical frame ``o``: x right, y
+down, z forward)::
 
     q = cam_T_imu @ inv(world_T_imu) @ m          # homogeneous point in the left camera
     z = Ks @ pi(q) = [uL, vL, uR, vR]             # pixels, left then right image
@@ -15,10 +17,8 @@ With the right perturbation ``world_T_imu = mu @ exp(twist_hat(delta))`` (the co
 ``J_out_in`` names of :mod:`visla_edu.lie`) the pose Jacobian is
 ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` and the landmark Jacobian
 ``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` with ``P = [I 0]``. Both are computed in
-one place, :func:`project_points` (pixels of points moved by any transform, and the Jacobians
-with respect to the point and to the transform's right perturbation), which
-:func:`stereo_projection` (one pose, or one pose per landmark), the filters, the smoothers, the
-visual odometry and the capstone all call.
+one place, :func:`project_points`, which :func:`stereo_projection`, the filters, the smoothers,
+the visual odometry and the capstone all call.
 
 A rig may have two intrinsics (``K`` left, ``K_right`` right; rows 3 and 4 of ``Ks`` are the
 right camera's): see ``_intrinsics``. Its right camera can come from two extrinsics, read in

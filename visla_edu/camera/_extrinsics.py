@@ -1,12 +1,11 @@
 """A stereo rig from the two cameras' extrinsics, and the four ways a file's extrinsics can be read.
 
-visla-edu's rig is the left camera's pose ``imu_T_cam`` (optical frame: x right, y down, z
-forward) and a baseline ``b``: the right camera is the left one translated by ``+b`` along the
-left camera's x axis, with the same orientation (a rectified pair). Two extrinsics
-``imu_T_left``, ``imu_T_right`` give it when ``left_T_right = inv(imu_T_left) imu_T_right`` is
-such a translation: :func:`rig_geometry` measures how far it is from one (the rotation between
-the cameras, the offset off the x axis) and :func:`rectified_baseline` returns ``b = |offset|`` or
-refuses with the reason.
+visla-edu's rig is the left camera's pose ``imu_T_cam`` (optical frame) and a baseline ``b``
+(a rectified pair, :mod:`visla_edu.camera`). Two extrinsics ``imu_T_left``, ``imu_T_right``
+(both cameras' optical frames in the IMU frame) give it when
+``left_T_right = inv(imu_T_left) imu_T_right`` is a translation along x: :func:`rig_geometry`
+measures how far it is from one (the rotation between the cameras, the offset off the x axis)
+and :func:`rectified_baseline` returns ``b = |offset|`` or refuses with the reason.
 
 A file's extrinsic ``E`` may be written either way (``E = imu_T_cam``, "camera->IMU": it maps
 camera points into the IMU frame; or ``E = cam_T_imu``, "IMU->camera") and in either camera frame
@@ -49,7 +48,6 @@ def rig_geometry(imu_T_left, imu_T_right):
     Parameters
     ----------
     imu_T_left, imu_T_right : ndarray, shape (4, 4)
-        Both cameras' optical frames in the IMU frame.
 
     Returns
     -------
@@ -89,7 +87,7 @@ def _fmt(v):
 
 
 def rectified_baseline(imu_T_left, imu_T_right):
-    """The baseline ``b`` (m) of two extrinsics that form a rectified pair, else a ValueError saying why.
+    """The baseline ``b = |offset|`` (m) of :func:`rig_geometry`, or a ValueError with its ``problem``.
 
     Parameters
     ----------
@@ -98,13 +96,6 @@ def rectified_baseline(imu_T_left, imu_T_right):
     Returns
     -------
     float
-        ``|offset|`` of :func:`rig_geometry`.
-
-    Raises
-    ------
-    ValueError
-        The cameras are rotated against each other by more than :data:`MAX_RIG_ROTATION`, or
-        the right camera is not on the left camera's +x axis (within :data:`MAX_OFF_AXIS`).
     """
     _, _, offset, problem = rig_geometry(imu_T_left, imu_T_right)
     if problem:
@@ -132,13 +123,11 @@ class RigReading:
     direction, frame : str
         Of :data:`DIRECTIONS` and :data:`FRAMES`.
     imu_T_left, imu_T_right : ndarray, shape (4, 4)
-        The optical frames of both cameras in the IMU frame under this reading.
+        Under this reading.
     rotation : float
-        Angle between the cameras (rad).
     offset : ndarray, shape (3,)
-        The right camera in the left camera frame (m).
     problem : str
-        Why the pair is not rectified under this reading (``""`` when it is).
+        As in :func:`rig_geometry`.
     """
 
     name: str
@@ -152,7 +141,7 @@ class RigReading:
 
     @property
     def rectified(self):
-        """Whether the right camera is the left one translated along its x axis (:data:`MAX_OFF_AXIS`)."""
+        """Whether the right camera is the left one translated along its x axis (no ``problem``)."""
         return not self.problem
 
 
@@ -192,7 +181,6 @@ def write_extrinsic(imu_T_cam, direction, frame):
     Parameters
     ----------
     imu_T_cam : ndarray, shape (4, 4)
-        The camera's optical frame in the IMU frame.
     direction, frame : str
 
     Returns

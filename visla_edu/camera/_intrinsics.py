@@ -1,8 +1,7 @@
 """The intrinsics of a rectified stereo pair: the stereo matrix ``Ks``, its pixel geometry.
 
-A rectified pair may have two intrinsics: the left ``K`` and the right ``K_right``, the right
-camera being the left one translated by ``b`` along the left camera's x axis (same orientation).
-With ``K_right = [[fsu', 0, cu'], [0, fsv', cv'], [0, 0, 1]]`` the stereo matrix becomes::
+A rectified pair (:mod:`visla_edu.camera`) may have two intrinsics, the left ``K`` and the right
+``K_right = [[fsu', 0, cu'], [0, fsv', cv'], [0, 0, 1]]``; the stereo matrix becomes::
 
     Ks = [[fsu,  0,    cu,  0         ],
           [0,    fsv,  cv,  0         ],
@@ -34,7 +33,9 @@ def same_intrinsics(K, K_right):
 
 
 def single_intrinsics(Ks):
-    """Whether the right rows of ``Ks`` (3 and 4) repeat the left camera's but for the baseline term.
+    """Whether the right rows of ``Ks`` (4, 4) repeat the left camera's but for the baseline term.
+
+    True for a rig with one intrinsics: ``uR = uL + Ks[2, 3] / z`` and ``vR = vL`` exactly.
 
     Parameters
     ----------
@@ -43,27 +44,25 @@ def single_intrinsics(Ks):
     Returns
     -------
     bool
-        True for a rig with one intrinsics: ``uR = uL + Ks[2, 3] / z`` and ``vR = vL`` exactly.
     """
     return bool(Ks[2, 0] == Ks[0, 0] and Ks[2, 2] == Ks[0, 2] and Ks[3, 1] == Ks[1, 1] and Ks[3, 2] == Ks[1, 2])
 
 
 def stereo_matrix(K, b, K_right=None):
-    """The 4x4 stereo calibration matrix ``Ks`` from the intrinsics and the baseline ``b``.
+    """The 4x4 stereo calibration matrix ``Ks`` (module docstring) from the intrinsics and the baseline.
 
     Parameters
     ----------
     K : array_like, shape (3, 3)
         Left camera intrinsics ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]``.
     b : float
-        Stereo baseline in metres (right camera at ``+b`` along the left camera's x axis).
+        Stereo baseline (m).
     K_right : array_like, shape (3, 3), optional
-        Right camera intrinsics (default: ``K``); rows 3 and 4 of ``Ks`` use them.
+        Right camera intrinsics (default: ``K``).
 
     Returns
     -------
     ndarray, shape (4, 4)
-        See the module docstring.
     """
     K, b = check_stereo_calibration(K, b, "stereo_matrix")
     R = K if K_right is None else check_intrinsics(K_right, "stereo_matrix: K_right", "K_right")
@@ -87,7 +86,7 @@ def stereo_rows(Ks):
     ``g``. Rotating the pair orthonormally by ``(a, c) = (fsv, fsv') / hypot(fsv, fsv')`` keeps
     all of their information in ``a vL + c vR``; the other combination ``-c vL + a vR`` has a
     zero Jacobian, and with pixel noise ``sigma^2 I`` it is independent of the rest, so dropping
-    it changes no update. With ``fsv = fsv'`` this is :data:`STEREO_ROWS` itself.
+    it changes no update.
 
     Parameters
     ----------
@@ -107,13 +106,12 @@ def stereo_rows(Ks):
 def right_in_left_pixels(z, K, K_right=None):
     """Stereo pixels with the right image's ``[uR, vR]`` mapped into the left camera's intrinsics.
 
-    ``uR -> cu + fsu (uR - cu') / fsu'``, ``vR -> cv + fsv (vR - cv') / fsv'`` (the same normalised
-    image point seen through ``K``); ``z`` itself when ``K_right`` is None or equal to ``K``.
+    The map of the module docstring (the same normalised image point seen through ``K``); ``z``
+    itself when ``K_right`` is None or equal to ``K``.
 
     Parameters
     ----------
     z : ndarray, shape (..., 4)
-        ``[uL, vL, uR, vR]``.
     K, K_right : ndarray, shape (3, 3)
 
     Returns

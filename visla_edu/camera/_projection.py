@@ -10,9 +10,9 @@ into the left camera by a transform ``A = cam_T_x``::
 
 :func:`stereo_projection` is its use for landmarks ``m`` in the world seen from IMU poses
 ``T = world_T_imu`` (``A = cam_T_imu``, ``p = inv(T) m``): ``J_z_landmark = J_z_point R^T`` and,
-since ``inv(T exp(delta^)) m = exp(-delta^) inv(T) m``, ``J_z_pose = -J_z_transform``. The visual
-odometry uses :func:`project_points` with ``A`` the motion between two camera frames.
-Conventions (right perturbation, ``J_out_in`` names): :mod:`visla_edu.lie`.
+since ``inv(T exp(delta^)) m = exp(-delta^) inv(T) m``, ``J_z_pose = -J_z_transform`` (the
+formulas of :mod:`visla_edu.camera`). The visual odometry uses :func:`project_points` with ``A``
+the motion between two camera frames.
 """
 
 import numpy as np
@@ -67,31 +67,26 @@ def projection_jacobian(q):
 
 
 def project_points(Ks, A, p, jacobians=True):
-    """Stereo pixels ``z = Ks pi(A [p; 1])`` of points ``p`` moved by ``A``, and both Jacobians.
+    """Stereo pixels ``z = Ks pi(A [p; 1])`` of points ``p`` moved by ``A``, and the module's Jacobians.
 
     Parameters
     ----------
     Ks : ndarray, shape (4, 4)
-        Stereo matrix (:func:`visla_edu.camera.stereo_matrix`).
     A : ndarray, shape (..., 4, 4)
         ``cam_T_x``: one transform for all points (``cam_T_imu``), or one per batch entry (the
         odometry's frame-to-frame motions, ``(P, 4, 4)`` or ``(P, H, 4, 4)``).
     p : ndarray, shape (..., N, 3)
         The points in frame ``x``.
     jacobians : bool
-        Also return the Jacobians.
 
     Returns
     -------
     z : ndarray, shape (..., N, 4)
-        ``[uL, vL, uR, vR]``.
     q : ndarray, shape (..., N, 4)
         The homogeneous points in the left camera (``q[..., 2]`` is the depth).
     J_z_point : ndarray, shape (..., N, 4, 3)
-        ``Ks dpi/dq(q) A P^T`` (only if asked).
     J_z_transform : ndarray, shape (..., N, 4, 6)
-        ``Ks dpi/dq(q) A odot([p; 1]) = [J_z_point, -J_z_point hat(p)]`` for ``A <- A exp(delta^)``,
-        ``delta = [v; w]`` (only if asked).
+        Only if ``jacobians``.
     """
     A = np.asarray(A, dtype=float)
     q = p @ np.swapaxes(A[..., :, :3], -1, -2) + A[..., None, :, 3]
@@ -116,7 +111,6 @@ def stereo_projection(Ks, cam_T_imu, world_T_imu, p_world, jacobians=True):
     p_world : ndarray, shape (N, 3)
         The landmark ``m`` of each observation, world frame.
     jacobians : bool
-        Also return the Jacobians.
 
     Returns
     -------
@@ -124,10 +118,8 @@ def stereo_projection(Ks, cam_T_imu, world_T_imu, p_world, jacobians=True):
     depth : ndarray, shape (N,)
         ``q3``, the landmark's depth in the left camera.
     J_z_landmark : ndarray, shape (N, 4, 3)
-        ``Ks dpi/dq(q) cam_T_imu inv(T) P^T`` (only if asked).
     J_z_pose : ndarray, shape (N, 4, 6)
-        ``-Ks dpi/dq(q) cam_T_imu odot(inv(T) m)`` for the right perturbation ``T exp(delta^)``
-        (only if asked).
+        Only if ``jacobians``; ``J_z_pose`` for the right perturbation of ``T``.
     """
     imu_T_world = lie.se3_inv(world_T_imu)
     R_t = imu_T_world[..., :3, :3]

@@ -21,12 +21,16 @@ def _check_points(p_world, name):
 class StereoCamera:
     """A calibrated stereo rig mounted on the IMU (a rectified pair, one or two intrinsics).
 
+    The methods' ``world_T_imu`` (4, 4) is the pose mean ``mu`` (the IMU in the world) and
+    ``p_world`` (M, 3) the landmark positions ``m`` (world frame, m); other shapes raise a
+    ``ValueError``. The model and the Jacobians' formulas: :mod:`visla_edu.camera`.
+
     Parameters
     ----------
     K : array_like, shape (3, 3)
         Left camera intrinsics.
     b : float
-        Baseline in metres.
+        Baseline (m).
     imu_T_cam : array_like, shape (4, 4)
         Pose of the left camera (optical frame) in the IMU frame.
     K_right : array_like, shape (3, 3), optional
@@ -74,13 +78,8 @@ class StereoCamera:
         Returns
         -------
         StereoCamera
-            ``b = |inv(imu_T_left) imu_T_right|`` (:func:`~visla_edu.camera.rectified_baseline`).
-
-        Raises
-        ------
-        ValueError
-            The cameras are rotated against each other, or the right one is not on the left
-            one's x axis, beyond the tolerances (the message says which and by how much).
+            ``b = |inv(imu_T_left) imu_T_right|`` (:func:`~visla_edu.camera.rectified_baseline`, which
+            raises the ``ValueError`` of a pair that is not rectified).
         """
         return cls(K, rectified_baseline(imu_T_left, imu_T_right), imu_T_left, K_right)
 
@@ -89,7 +88,7 @@ class StereoCamera:
         return f"StereoCamera(fsu={self.K[0, 0]:.2f}, fsv={self.K[1, 1]:.2f}{right}, b={self.b:.4f} m)"
 
     def disparity(self, z):
-        """Disparity in the left camera's pixels (``uL - uR`` for one intrinsics), shape (...).
+        """Disparity ``uL - uR`` in the left camera's pixels (:func:`~visla_edu.camera.disparity`).
 
         Parameters
         ----------
@@ -98,7 +97,7 @@ class StereoCamera:
         Returns
         -------
         ndarray, shape (...)
-            ``fsu b / depth`` on noise-free pixels (:func:`~visla_edu.camera.disparity`).
+            ``fsu b / depth`` on noise-free pixels.
         """
         return disparity(z, self.K, None if self.same_intrinsics else self.K_right)
 
@@ -138,16 +137,15 @@ class StereoCamera:
         Parameters
         ----------
         world_T_imu : array_like, shape (4, 4)
-            Pose mean ``mu``.
         p_world : array_like, shape (M, 3)
 
         Returns
         -------
         z : ndarray, shape (M, 4)
         J_z_landmark : ndarray, shape (M, 4, 3)
-            ``Ks dpi/dq(q) cam_T_imu inv(mu) P^T``.
+            Pixels per metre of ``m``.
         J_z_pose : ndarray, shape (M, 4, 6)
-            ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` for the right perturbation.
+            For the right perturbation of ``world_T_imu``; columns 0-2 for ``v``, 3-5 for ``w``.
         """
         p_world = _check_points(p_world, "predict_with_jacobians")
         z, _, J_z_landmark, J_z_pose = stereo_projection(self.Ks, self.cam_T_imu, np.asarray(world_T_imu, float),
@@ -155,57 +153,35 @@ class StereoCamera:
         return z, J_z_landmark, J_z_pose
 
     def jacobian_landmark(self, world_T_imu, p_world):
-        """``J_z_landmark`` of :meth:`predict_with_jacobians`, shape (M, 4, 3).
-
-        ``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` with ``P = [I 0]``: the derivative of
-        the predicted pixels with respect to each landmark's world position.
+        """``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` of :meth:`predict_with_jacobians`.
 
         Parameters
         ----------
         world_T_imu : array_like, shape (4, 4)
-            Pose mean ``mu``, the IMU in the world frame.
         p_world : array_like, shape (M, 3)
-            Landmark positions ``m`` in the world frame, in metres.
 
         Returns
         -------
         ndarray, shape (M, 4, 3)
-            One 4x3 block per landmark, pixels per metre.
-
-        Raises
-        ------
-        ValueError
-            ``world_T_imu`` is not (4, 4) or ``p_world`` is not (M, 3).
         """
         return self.predict_with_jacobians(world_T_imu, p_world)[1]
 
     def jacobian_pose(self, world_T_imu, p_world):
-        """``J_z_pose`` of :meth:`predict_with_jacobians`, shape (M, 4, 6).
-
-        ``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``: the derivative of the predicted
-        pixels with respect to the right perturbation of ``world_T_imu`` (:mod:`visla_edu.lie`).
+        """``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` of :meth:`predict_with_jacobians`.
 
         Parameters
         ----------
         world_T_imu : array_like, shape (4, 4)
-            Pose mean ``mu``, the IMU in the world frame.
         p_world : array_like, shape (M, 3)
-            Landmark positions ``m`` in the world frame, in metres.
 
         Returns
         -------
         ndarray, shape (M, 4, 6)
-            One 4x6 block per landmark; columns 0-2 for ``v``, 3-5 for ``w``.
-
-        Raises
-        ------
-        ValueError
-            ``world_T_imu`` is not (4, 4) or ``p_world`` is not (M, 3).
         """
         return self.predict_with_jacobians(world_T_imu, p_world)[2]
 
     def triangulate(self, z, world_T_imu=None, method="disparity"):
-        """Landmark positions from stereo pixels.
+        """Landmark positions from stereo pixels (:mod:`visla_edu.camera._triangulation`).
 
         Parameters
         ----------
@@ -235,16 +211,16 @@ class StereoCamera:
         return triangulation_jacobian(z, self.K, self.b, self._right())
 
     def triangulation_covariance(self, z, noise_var, world_T_imu=None):
-        """Covariance of triangulated points from pixel noise ``noise_var I4``.
+        """Covariance ``J (noise_var I4) J^T`` of triangulated points, ``J`` of :meth:`triangulation_jacobian`.
 
-        ``J (noise_var I) J^T`` with ``J`` from :func:`triangulation_jacobian`, rotated into the
-        world frame (``R Sigma_cam R^T`` with ``R`` the rotation of ``world_T_imu @ imu_T_cam``)
-        when a pose is given.
+        With a pose it is rotated into the world frame: ``R Sigma_cam R^T``, ``R`` the rotation of
+        ``world_T_imu @ imu_T_cam``.
 
         Parameters
         ----------
         z : array_like, shape (M, 4)
         noise_var : float
+            Pixel noise variance (px^2).
         world_T_imu : array_like, shape (4, 4), optional
 
         Returns

@@ -1,8 +1,11 @@
 """Landmarks from stereo pixels: depth by disparity and by bearings, and the triangulation Jacobian.
 
-Each takes the right camera's intrinsics ``K_right`` too (default: the left ``K``): the right
-pixels are first mapped into the left camera's intrinsics
+Each function takes stereo pixels ``z`` (..., 4) ``[uL, vL, uR, vR]``, the left intrinsics ``K``
+(3, 3), the baseline ``b`` (m) and the right camera's intrinsics ``K_right`` (default: ``K``):
+the right pixels are first mapped into the left camera's intrinsics
 (:func:`~visla_edu.camera.right_in_left_pixels`), where the single-intrinsics formulas hold.
+Points are in the left camera frame. Raises ``ValueError`` unless ``K`` is a valid 3x3
+intrinsics matrix and ``b`` is positive.
 """
 
 import numpy as np
@@ -21,17 +24,13 @@ def _check_pixels(z, name):
 
 
 def triangulate_disparity(z, K, b, K_right=None):
-    """Points in the left camera frame from stereo pixels, by disparity.
+    """Points from stereo pixels by disparity; NaN rows where the disparity is not positive.
 
-    ``depth = fsu b / (uL - uR)``, ``x = (uL - cu) depth / fsu``, ``y = (vL - cv) depth / fsv``
-    (``uR`` in the left camera's intrinsics when ``K_right`` differs from ``K``).
-    Pixels with non-positive disparity have no finite depth: their rows are NaN.
-    Raises ValueError unless ``K`` is 3x3 and ``b`` is positive.
+    ``depth = fsu b / (uL - uR)``, ``x = (uL - cu) depth / fsu``, ``y = (vL - cv) depth / fsv``.
 
     Parameters
     ----------
     z : array_like, shape (..., 4)
-        ``[uL, vL, uR, vR]``.
     K : array_like, shape (3, 3)
     b : float
     K_right : array_like, shape (3, 3), optional
@@ -53,7 +52,7 @@ def triangulate_disparity(z, K, b, K_right=None):
 
 
 def triangulate_bearing(z, K, b, K_right=None):
-    """Points in the left camera frame by the course's bearing triangulation.
+    """Points by the course's bearing triangulation; NaN rows where ``lambda1`` is not positive.
 
     With normalised bearings ``z1 = K^-1 [uL, vL, 1]`` and ``z2 = K_right^-1 [uR, vR, 1]``,
     the right camera at ``p = [b, 0, 0]`` and ``R = I`` in the left frame,
@@ -61,8 +60,6 @@ def triangulate_bearing(z, K, b, K_right=None):
     ``lambda1 = a^T c / a^T a`` with ``a = R^T z1 - (e3^T R^T z1) z2`` and
     ``c = R^T p - (e3^T R^T p) z2``; then ``m = lambda1 z1``.
     On noise-free rectified pixels it equals :func:`triangulate_disparity`.
-    Rows with non-positive ``lambda1`` are NaN. Raises ValueError unless ``K`` is 3x3 and
-    ``b`` is positive.
 
     Parameters
     ----------
@@ -101,10 +98,9 @@ def triangulation_jacobian(z, K, b, K_right=None):
         dX/duL = Z/fsu - X/d       dX/duR = X/d
         dY/duL = -Y/d              dY/duR = Y/d        dY/dvL = Z/fsv
 
-    (``vR`` is not used by the disparity form.) With a right camera of its own intrinsics,
-    ``uR`` is first mapped to ``cu + fsu (uR - cu') / fsu'``: ``d`` is taken there and the
-    ``uR`` column is multiplied by ``fsu / fsu'``. Propagating pixel noise gives the
-    triangulation covariance ``J (sigma^2 I) J^T``, which grows with depth squared.
+    (``vR`` is not used.) With a right camera of its own intrinsics, ``d`` is taken after mapping
+    ``uR`` and the ``uR`` column is multiplied by ``fsu / fsu'``. The triangulation covariance
+    ``J (sigma^2 I) J^T`` grows with depth squared.
 
     Parameters
     ----------
@@ -117,8 +113,7 @@ def triangulation_jacobian(z, K, b, K_right=None):
     -------
     ndarray, shape (..., 3, 4)
         Where the disparity is not positive, every entry that depends on the depth is NaN
-        (the entries that are always zero, such as the ``vR`` column, stay 0), so the
-        covariance ``J J^T`` is NaN throughout.
+        (the entries that are always zero, such as the ``vR`` column, stay 0).
     """
     z = _check_pixels(z, "triangulation_jacobian")
     K = np.asarray(K, dtype=float)
