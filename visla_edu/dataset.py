@@ -4,8 +4,7 @@ Observations are stored sparse and frame-major (compressed sparse rows over fram
 frame ``t`` owns entries ``frame_ptr[t]:frame_ptr[t + 1]`` of ``obs_ids`` (landmark
 indices, increasing within a frame) and ``obs_z`` (pixels ``[uL, vL, uR, vR]``). About 1% of
 the course files' dense ``(4, M, T)`` array is valid, so this is ~100x smaller.
-:func:`frame_major_order` builds that layout from observations in any order (the loader, the
-simulator and :meth:`Dataset.from_dense` all use it).
+:func:`frame_major_order` builds the layout (the loader, the simulator, :meth:`Dataset.from_dense`).
 """
 
 from dataclasses import dataclass, field
@@ -23,30 +22,26 @@ __all__ = ["Dataset", "GroundTruth", "frame_major_order", "repeated_frames"]
 class GroundTruth:
     """True poses of a drive, and for simulated drives its true landmarks and velocities.
 
-    A simulated drive fills every field for all of its frames. A real drive's ground truth
-    (KITTI odometry poses, :func:`visla_edu.data.load_ground_truth`) has only the poses,
-    possibly for fewer frames than the dataset: it covers frames ``0 .. num_frames - 1``
-    (``0020.npz`` has 1104 frames, its KITTI poses 1101), so compare an estimate's first
-    :attr:`num_frames` poses, e.g. ``metrics.evaluate(est[:gt.num_frames], gt.world_T_imu)``
-    (:func:`visla_edu.metrics.evaluate` does this itself).
+    A real drive's ground truth (KITTI poses, :mod:`visla_edu.data._groundtruth`) has only the
+    poses, possibly of fewer frames than the dataset: compare an estimate's first
+    :attr:`num_frames` poses (:func:`visla_edu.metrics.evaluate` does this itself).
 
     Attributes
     ----------
     world_T_imu : ndarray, shape (n, 4, 4)
         True IMU poses of frames ``0 .. n - 1``, ``world`` = the IMU frame at the first time
-        stamp; ``n`` is the dataset's ``T`` for simulated drives, ``n <= T`` for real ones.
+        stamp; ``n = T`` for simulated drives, ``n <= T`` for real ones.
     landmarks : ndarray, shape (M, 3), or None
-        True landmark positions in the world frame (simulated drives only).
+        True landmark positions in the world frame.
     linear_velocity, angular_velocity : ndarray, shape (T, 3), or None
-        Noise-free body-frame velocities used to generate the drive (simulated drives only).
+        Noise-free body-frame velocities (m/s, rad/s) that generated the drive.
     outlier : ndarray of bool, shape (M,), or None
-        Landmarks whose tracks were corrupted on purpose (simulated drives only).
+        Landmarks whose tracks were corrupted on purpose.
     source : str
-        Where the poses came from (a file path, or ``""`` for a simulation).
+        The poses' file, or ``""`` for a simulation.
     file_rows : int or None
-        How many poses the source file holds (None for a simulation). A KITTI sequence longer
-        than the drive (``0042.npz`` is the first 500 of the 1101 frames of sequence 01) has
-        ``file_rows > num_frames``: rows ``0 .. num_frames - 1`` were used.
+        Poses in the source file (None for a simulation); more than :attr:`num_frames` when it is
+        a longer KITTI sequence (``0042.npz``), of which rows ``0 .. num_frames - 1`` were used.
     """
 
     world_T_imu: np.ndarray
@@ -96,13 +91,11 @@ class Dataset:
     imu_T_cam : ndarray, shape (4, 4)
         Pose of the left camera (optical frame) in the IMU frame.
     K_right : ndarray, shape (3, 3), or None
-        Right camera intrinsics when the file gives them (the 2025+ format; they may differ from
-        ``K``); None: the same as ``K``.
+        Right camera intrinsics when the file gives them (2025+; they may differ from ``K``);
+        None: the same as ``K``.
     extrinsic_readings : tuple of visla_edu.camera.RigReading, or None
-        When the file's extrinsics may be read four ways (the 2025+ format: camera->IMU or
-        IMU->camera, optical or regular frame), every reading and its rig geometry;
-        ``imu_T_cam`` is then the loader's choice by geometry, and
-        :func:`visla_edu.diagnostics.calibrate` decides from the data. None for the other formats.
+        A 2025+ file's four readings of its extrinsics (:mod:`visla_edu.data._format2025`), of
+        which ``imu_T_cam`` is the loader's choice by geometry; None for the other formats.
     num_landmarks : int
         M, the number of landmark tracks.
     frame_ptr : ndarray of int, shape (T + 1,)
@@ -115,11 +108,10 @@ class Dataset:
     label : str
         A human-readable description; stand-ins say so here.
     extra : dict
-        Metadata, empty by default and not written by :func:`visla_edu.data.save`. A loaded
-        course file has ``"sha256"``, ``"format"`` and ``"known_file"`` (a 2025+ file also
-        ``"extrinsic_reading"``, ``"ignored_keys"`` and, without features, ``"no_features"``: why,
-        in words); a simulated drive
-        ``"preset"``, ``"seed"`` and ``"config"`` (and ``"simulated_imu_T_cam"`` when the
+        Metadata, not written by :func:`visla_edu.data.save`. A loaded course file has
+        ``"sha256"``, ``"format"`` and ``"known_file"`` (a 2025+ file also ``"extrinsic_reading"``,
+        ``"ignored_keys"`` and, without features, ``"no_features"``: why, in words); a simulated
+        drive ``"preset"``, ``"seed"`` and ``"config"`` (and ``"simulated_imu_T_cam"`` when the
         reported calibration differs from the simulated rig's). Diagnostics keep results here
         (``"calibration"``, ``"visual_odometry"``).
     """
@@ -158,17 +150,16 @@ class Dataset:
         return self.stereo_camera()
 
     def stereo_camera(self, imu_T_cam=None):
-        """The drive's stereo rig, with ``imu_T_cam`` replaced if given (e.g. a corrected one).
+        """The drive's stereo rig (``K``, ``K_right``, ``b``), with ``imu_T_cam`` replaced if given.
 
         Parameters
         ----------
         imu_T_cam : array_like, shape (4, 4), optional
-            Pose of the left camera (optical frame) in the IMU frame; default :attr:`imu_T_cam`.
+            E.g. a corrected one; default :attr:`imu_T_cam`.
 
         Returns
         -------
         visla_edu.camera.StereoCamera
-            With both intrinsics (``K``, ``K_right``) and the baseline ``b``.
         """
         return StereoCamera(self.K, self.b, self.imu_T_cam if imu_T_cam is None else imu_T_cam, self.K_right)
 
@@ -187,18 +178,17 @@ class Dataset:
         return np.diff(self.time_stamps)
 
     def observations(self, t):
-        """Landmark ids and pixels observed at frame ``t``.
+        """Landmark ids and pixels observed at frame ``t`` (``0 <= t < T``, else ``IndexError``).
 
         Parameters
         ----------
         t : int
-            Frame index, ``0 <= t < T``.
 
         Returns
         -------
         ids : ndarray of int, shape (k,)
         z : ndarray, shape (k, 4)
-            ``[uL, vL, uR, vR]`` for each id (views into the dataset: do not modify).
+            ``[uL, vL, uR, vR]``; views into the dataset: do not modify.
         """
         if not 0 <= t < self.num_frames:
             raise IndexError(f"{self.name}: frame {t} out of range [0, {self.num_frames})")
@@ -229,29 +219,22 @@ class Dataset:
     def segment(self, start, stop):
         """Frames ``start .. stop - 1`` as a drive of their own, its world at the segment's first pose.
 
-        A shorter drive to iterate on quickly, or several independent drives with ground truth
-        from one long one (``benchmarks/bench_accuracy.py --only segments``).
+        For quick iterations, or several independent drives with ground truth from one long one
+        (``benchmarks/bench_accuracy.py --only segments``).
 
         Parameters
         ----------
         start, stop : int
-            ``0 <= start``, ``start + 2 <= stop <= T`` (a drive needs a step to move).
+            Integers, ``0 <= start``, ``start + 2 <= stop <= T`` (else ``ValueError``).
 
         Returns
         -------
         Dataset
-            ``name`` ``"<name>[start:stop]"``; the frames' time stamps, velocities and
-            observations; only the landmarks observed in the segment, renumbered in their
-            original order; ``extra`` empty (calibrations are measured on the segment anew).
-            The ground truth, where it covers frame ``start``, is re-expressed in the
-            segment's world (the true IMU frame at ``start``): ``seg_world_T_imu[k] =
-            inv(world_T_imu[start]) @ world_T_imu[start + k]``, the landmarks likewise; it
-            keeps only the poses it has (``None`` if it ends before ``start``).
-
-        Raises
-        ------
-        ValueError
-            ``start`` or ``stop`` is not an integer or lies outside that range.
+            Named ``"<name>[start:stop]"``, with only the landmarks observed in the segment
+            (renumbered in order) and ``extra`` empty (calibrations are measured anew). Ground truth
+            that covers frame ``start`` moves to the segment's world, ``seg_world_T_imu[k] =
+            inv(world_T_imu[start]) @ world_T_imu[start + k]``, the landmarks likewise, and keeps
+            only the poses it has (``None`` if it ends before ``start``).
         """
         start, stop = _segment_bounds(start, stop, self.num_frames, self.name)
         lo, hi = self.frame_ptr[start], self.frame_ptr[stop]
@@ -269,15 +252,13 @@ class Dataset:
             K_right=None if self.K_right is None else self.K_right.copy(), extrinsic_readings=self.extrinsic_readings)
 
     def to_dense_features(self, frames=None, landmarks=None):
-        """The course's dense layout: ``(4, M, T)`` with -1 where not observed.
+        """The course's dense layout: ``(4, M', T')`` with -1 where not observed.
 
         Parameters
         ----------
-        frames : slice or array of int, optional
-            Frames to include (default all). Dense arrays are large (dataset 10: 1.3 GB),
-            so exercises should select a window.
-        landmarks : slice or array of int, optional
-            Landmarks to include (default all).
+        frames, landmarks : slice or array of int, optional
+            Frames and landmarks to include (default all). Dense arrays are large (dataset 10:
+            1.3 GB), so exercises should select a window.
 
         Returns
         -------
@@ -297,26 +278,20 @@ class Dataset:
 
     @classmethod
     def from_dense(cls, features, **fields):
-        """Build a dataset from dense course features ``(4, M, T)`` (-1 = not observed).
+        """Build a dataset from dense course features (layout: :mod:`visla_edu.data`).
 
         Parameters
         ----------
         features : array_like, shape (4, M, T)
-            An entry ``(landmark m, frame t)`` is an observation where ``features[0, m, t] != -1``.
+            ``features[0, m, t] != -1`` marks an observation.
         **fields
-            All other :class:`Dataset` fields except the sparse ones and ``num_landmarks``.
+            The other :class:`Dataset` fields but the sparse ones and ``num_landmarks``; a missing,
+            unknown or repeated one is a ``TypeError``.
 
         Returns
         -------
         Dataset
-            ``num_landmarks = M``; ``frame_ptr``, ``obs_ids`` and ``obs_z`` hold the observed
-            entries in frame-major order (:func:`frame_major_order`), ``obs_z`` as float pixels
-            ``[uL, vL, uR, vR]``.
-
-        Raises
-        ------
-        TypeError
-            A required field is missing from ``fields``, or one is unknown or given twice.
+            ``num_landmarks = M``, the observed entries frame-major (:func:`frame_major_order`), float.
         """
         features = np.asarray(features, dtype=float)
         landmark_ids, frames = np.nonzero(features[0] != -1)
@@ -361,27 +336,21 @@ def _segment_ground_truth(truth, start, stop, kept):
 
 
 def frame_major_order(obs_ids, obs_frames, num_frames):
-    """The permutation to the frame-major sparse layout of :class:`Dataset`, and ``frame_ptr``.
-
-    Observations given in any order (e.g. landmark by landmark) are sorted by frame, and by
-    landmark id within a frame; ``frame_ptr`` is the prefix sum of the per-frame counts, so
-    frame ``t`` owns the sorted entries ``frame_ptr[t]:frame_ptr[t + 1]``.
+    """The permutation to the frame-major sparse layout of :class:`Dataset` (by frame, then id), and ``frame_ptr``.
 
     Parameters
     ----------
     obs_ids : array_like of int, shape (N,)
-        Landmark id of each observation.
     obs_frames : array_like of int, shape (N,)
-        Frame of each observation, ``0 <= frame < num_frames``; each ``(frame, id)`` pair once.
+        ``0 <= frame < num_frames``; each ``(frame, id)`` pair once.
     num_frames : int
-        T.
 
     Returns
     -------
     order : ndarray of int, shape (N,)
-        ``obs_ids[order]``, ``obs_frames[order]`` (and any per-observation array indexed by
-        ``order``) are frame-major with ids increasing within a frame.
+        Sorts ``obs_ids``, ``obs_frames`` and any per-observation array.
     frame_ptr : ndarray of int64, shape (T + 1,)
+        The prefix sum of the per-frame counts.
     """
     obs_ids, obs_frames = np.asarray(obs_ids), np.asarray(obs_frames)
     if obs_ids.shape != obs_frames.shape or obs_ids.ndim != 1:
@@ -396,10 +365,10 @@ def frame_major_order(obs_ids, obs_frames, num_frames):
     return order, frame_ptr
 
 def repeated_frames(dataset):
-    """Frames whose observations repeat the previous frame's exactly (same ids and pixels).
+    """Frames ``t >= 1`` with observations that repeat frame ``t - 1``'s exactly (ids and pixels).
 
-    A repeated frame usually means the camera frame was duplicated while the IMU kept
-    going: the filter then sees the landmarks "move" with the vehicle.
+    Usually a duplicated camera frame while the IMU kept going: the landmarks seem to move with
+    the vehicle.
 
     Parameters
     ----------
@@ -408,7 +377,6 @@ def repeated_frames(dataset):
     Returns
     -------
     list of int
-        Frame indices ``t >= 1`` with at least one observation, equal to frame ``t - 1``.
     """
     counts = np.diff(dataset.frame_ptr)
     candidates = np.flatnonzero((counts[1:] == counts[:-1]) & (counts[1:] > 0)) + 1

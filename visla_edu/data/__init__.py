@@ -14,24 +14,40 @@ Course files are never copied into the project: point ``VISLA_EDU_DATA`` at them
     >>> ds.ground_truth.num_frames          # the KITTI pose files are in the data dir
     1101
 
+Throughout, T is the number of frames, M of landmarks and N of observations.
+
 The two npz course formats (2019-2024)
 --------------------------------------
 Both store ``time_stamps`` (1, T), ``features`` (4, M, T) with ``[uL, vL, uR, vR]``
-pixels (all four -1 where landmark i is not seen at frame t), ``linear_velocity``
+pixels (all four -1 where landmark m is not seen at frame t), ``linear_velocity``
 (3, T), ``K`` (3, 3) and ``b`` (). The 2021+ format adds ``angular_velocity`` (3, T)
 and ``imu_T_cam`` (4, 4); the 2019/2020 format has ``rotational_velocity`` (3, T)
-and ``cam_T_imu`` (4, 4), the inverse transform. :func:`load` converts both to the
-time-major :class:`~visla_edu.dataset.Dataset` once, and keeps the features sparse:
-the dense array is streamed from the file in chunks of landmark rows (dataset 10's
-is 1.3 GB), never held in memory as a whole.
+and ``cam_T_imu`` (4, 4), the inverse transform. :func:`save` writes the 2021+ format,
+plus the ground truth of a simulated drive (:data:`GROUND_TRUTH_KEYS`) and the
+:data:`TEXT_KEYS` ``name`` and ``label``. :func:`load` converts both to the time-major
+:class:`~visla_edu.dataset.Dataset` once, and keeps the features sparse: the dense array
+is streamed from the file in chunks (dataset 10's is 1.3 GB), never held whole.
 
 The 2025+ format
 ----------------
-The current edition ships ``datasetNN/datasetNN.npy``: ``np.save`` of a dict of arrays, two
-intrinsics and two extrinsics whose direction and camera frame the data decide (its keys and
-shapes: module ``_format2025``, :func:`load_course2025`; read without unpickling anything but
-plain arrays, module ``_pickle``). :func:`save_course2025` writes a drive in it (module
-``_save2025``).
+The current edition ships ``datasetNN/datasetNN.npy``, ``np.save`` of a dict that its student
+code reads with ``np.load(path, allow_pickle=True).item()``:
+
+==============================  ===========================================================
+key                             value
+==============================  ===========================================================
+``timestamps``                  (T,) UNIX seconds (also (1, T) or (T, 1))
+``v_t``, ``w_t``                linear and angular velocity, (T, 3) or (3, T)
+``features``                    (4, M, T) pixels ``[uL, vL, uR, vR]``, -1 where unobserved;
+                                absent or None in a dataset shipped with images
+                                (``datasetNN_imgs.npy``), whose features students track
+``K_l``, ``K_r``                the two cameras' intrinsics (3, 3)
+``extL_T_imu``, ``extR_T_imu``  the two cameras' extrinsics (4, 4)
+==============================  ===========================================================
+
+It is read without unpickling anything but plain arrays (module ``_pickle``); the velocity
+layout and the extrinsics' direction and camera frame are decided from the data (module
+``_format2025``, :func:`load_course2025`). :func:`save_course2025` writes a drive in it.
 
 When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
 dataset 10's real IMU drive with simulated stereo tracks. :func:`course_standin10` builds
@@ -44,22 +60,20 @@ KITTI odometry poses (``poses/NN.txt``, left-camera poses, 12 or 13 columns) and
 ``world_T_imu`` by :func:`load_ground_truth` / :func:`attach_ground_truth` (module
 ``_groundtruth``); a registered drive (``"0020"``) gets its own automatically.
 
+Errors
+------
 Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError`` (or,
 for a folder or an unreadable file, ``IsADirectoryError`` or ``PermissionError``) whose
-message names the file, the key, and the expected and actual shape or value. Besides the
-format, a file must be plausible: calibration, time stamps and velocities within the ranges
-of :mod:`visla_edu.validation` and :mod:`~visla_edu.data._plausible` (each with its reason),
-and the declared array sizes bounded, checked from the headers before any data is read.
+message names the file, the key, and the expected and actual shape or value; the functions
+that read files list only what is particular to them. Besides the format, a file must be
+plausible (:mod:`visla_edu.validation`, :mod:`~visla_edu.data._plausible`: each range with its
+reason), and the declared array sizes are bounded from the headers before any data is read.
+In the private modules ``path`` (pathlib.Path or str) is the file and ``key`` an array's key
+in it, both only named in messages.
 
-Modules (private; everything public is re-exported here): ``_registry`` (data directory,
-names, known files), ``_format`` (the keys of the course formats and the checks of the small
-arrays), ``_features`` (the dense features streamed into the sparse layout), ``_npz`` (the
-one ``.npz`` reader: course files to Datasets, named arrays of any archive), ``_standin``
-(the dataset-10 stand-in), ``_load`` (:func:`load`), ``_save`` (:func:`save`), ``_summary``
-(:func:`summarize`, :func:`format_summary`), ``_groundtruth`` (KITTI ground truth), ``_zip`` (zip
-members and ``.npy`` headers, read before any data), ``_plausible`` (plausible time stamps,
-velocities and pixels, :func:`dataset_problems`), ``_pickle`` (the restricted unpickler of the
-2025+ files), ``_format2025`` (:func:`load_course2025`), ``_save2025`` (:func:`save_course2025`).
+Modules (private; everything public is re-exported here): ``_load``, ``_registry``, ``_npz``,
+``_zip``, ``_format``, ``_features``, ``_plausible``, ``_format2025``, ``_pickle`` (reading);
+``_standin``, ``_groundtruth``; ``_save``, ``_save2025`` (writing); ``_summary``.
 """
 
 from visla_edu.data._format import FORMAT_2019, FORMAT_2021, FORMAT_KEYS, GROUND_TRUTH_KEYS, TEXT_KEYS

@@ -1,13 +1,11 @@
-"""The ``features`` key of a course file, streamed into the sparse layout of the Dataset.
+"""The ``features`` key of a course file (:mod:`visla_edu.data`), streamed into the sparse Dataset layout.
 
-``features`` is a dense ``(4, M, T)`` array of pixels ``[uL, vL, uR, vR]``, all four -1 where
-landmark m is not seen at frame t. Dataset 10's is 1.3 GB, of which about 1% is observations,
-so it is decoded in chunks straight from the zip member (never held whole), checked (finite,
-each observation complete) and collected into frame-major sparse arrays
-(:func:`visla_edu.dataset.frame_major_order`). An array stored in C order is decoded in
-chunks of landmark rows of one plane at a time; one stored in Fortran order (its bytes are
-those of a C-order ``(T, M, 4)`` array) in chunks of whole frames. Either way the memory is
-one chunk plus the observations.
+Dataset 10's is 1.3 GB, of which about 1% is observations, so it is decoded in chunks straight
+from the zip member, checked (finite; each observation all -1 or none, ``uL`` deciding; at most
+:data:`MAX_OBSERVATIONS`) and collected frame-major (:func:`visla_edu.dataset.frame_major_order`).
+A C-order array is decoded in chunks of landmark rows of one plane; a Fortran-order one (the
+bytes of a C-order ``(T, M, 4)`` array) in chunks of whole frames. The memory is one chunk plus
+the observations.
 """
 
 import numpy as np
@@ -25,22 +23,10 @@ _PLANES = ("uL", "vL", "uR", "vR")
 
 
 def features_streamed(fp, header, path):
-    """Sparse features decoded chunk by chunk from an open ``.npy`` stream.
+    """Sparse ``(frame_ptr (T+1,), obs_ids (N,), obs_z (N, 4))``, frame-major, decoded chunk by chunk.
 
-    Parameters
-    ----------
-    fp : file-like
-        The ``features`` member of the archive, positioned at the start of its array data
-        (after the ``.npy`` header).
-    header : visla_edu.data._zip.NpyHeader
-        Its header, already checked: shape ``(4, M, T)``, a float or signed integer dtype.
-    path : pathlib.Path
-        The file, for messages.
-
-    Returns
-    -------
-    tuple
-        ``(frame_ptr (T+1,), obs_ids (N,), obs_z (N, 4))``.
+    ``fp`` is the ``features`` zip member positioned after its ``.npy`` header, ``header`` its
+    checked :class:`~visla_edu.data._zip.NpyHeader` (``(4, M, T)``, float or signed integer).
     """
     _, M, T = header.shape
     if header.fortran_order:
@@ -66,29 +52,7 @@ def _drain(fp, block=2**22):
 
 
 def features_in_memory(dense, path):
-    """Like :func:`features_streamed` for the whole dense array ``(4, M, T)`` already read.
-
-    The array is scanned in chunks of landmark rows of one plane at a time, as a C-order file
-    is streamed.
-
-    Parameters
-    ----------
-    dense : ndarray, shape (4, M, T)
-        Pixels ``[uL, vL, uR, vR]``, all four -1 where a landmark is not observed.
-    path : pathlib.Path or str
-        The file, for messages.
-
-    Returns
-    -------
-    tuple
-        ``(frame_ptr (T+1,), obs_ids (N,), obs_z (N, 4))``, frame-major.
-
-    Raises
-    ------
-    ValueError
-        A value is not finite, an observation is partly -1 (``uL`` decides what is observed),
-        or there are more than :data:`MAX_OBSERVATIONS` observations.
-    """
+    """:func:`features_streamed` for the whole dense array ``(4, M, T)``, scanned as a C-order file is streamed."""
     _, M, T = dense.shape
     return _collect_observations(_array_chunks(dense, M, T), T, path)
 
@@ -98,7 +62,7 @@ def _rows_per_chunk(row_items, itemsize):
 
 
 def _stream_chunks(fp, dtype, M, T, path):
-    """Yield ``(plane, first_row, block)`` with block (rows, T) of ``features[plane]``, in file order."""
+    """Yield ``(plane, first_row, block)``, block (rows, T) of ``features[plane]``, in file order."""
     step = _rows_per_chunk(T, dtype.itemsize)
     for plane in range(4):
         for first in range(0, M, step):
@@ -108,7 +72,7 @@ def _stream_chunks(fp, dtype, M, T, path):
 
 
 def _stream_frame_chunks(fp, dtype, M, T, path):
-    """Fortran order: yield ``(first_frame, block)`` with block (frames, M, 4) = ``features[:, :, frames]`` moved."""
+    """Fortran order: yield ``(first_frame, block)``, block (frames, M, 4) = ``features[:, :, frames]`` moved."""
     step = _rows_per_chunk(4 * M, dtype.itemsize)
     for first in range(0, T, step):
         frames = min(step, T - first)
@@ -136,11 +100,7 @@ def _read_exact(fp, size, path):
 
 
 def _collect_observations(chunks, T, path):
-    """Sparse frame-major observations ``(frame_ptr, obs_ids, obs_z)`` from feature blocks.
-
-    Plane 0 (``uL``) decides which entries are observations; planes 1-3 must be -1
-    exactly where ``uL`` is -1, and their values are taken at the observed entries.
-    """
+    """Frame-major ``(frame_ptr, obs_ids, obs_z)`` from blocks; ``uL`` decides what is observed."""
     found, z = [], None
     for plane, first, block in chunks:
         _check_finite_block(block, plane, first, path)

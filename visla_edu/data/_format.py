@@ -1,15 +1,12 @@
 """The course file format: its keys, and the checks of every array but the features.
 
-The keys and shapes of both npz course formats: :mod:`visla_edu.data` ("The two npz course
-formats"). Files written by :func:`~visla_edu.data.save` may add ground truth and a name and
-label. Every check raises ``ValueError``, as :mod:`visla_edu.data` says.
-
-The checks come in two passes. :func:`check_course_headers` runs on the ``.npy`` headers
-alone (:class:`~visla_edu.data._zip.NpyHeader`: dtype and shape, before any data is read) and
-bounds what reading the file will cost: at most :data:`MAX_FRAMES` frames and
-:data:`MAX_FEATURES_BYTES` of dense features. :func:`check_course_arrays` then checks the values
-of the small arrays, including their plausibility (:mod:`visla_edu.data._plausible`; the
-calibration's validity and plausibility are :mod:`visla_edu.validation`'s).
+Keys and shapes: :mod:`visla_edu.data`. :func:`check_course_headers` runs on the ``.npy``
+headers alone (:class:`~visla_edu.data._zip.NpyHeader`), before any data is read, and bounds
+the cost of reading (:data:`MAX_FRAMES`, :data:`MAX_FEATURES_BYTES`); :func:`check_course_arrays`
+then checks the small arrays' values and plausibility (:mod:`visla_edu.data._plausible`,
+:mod:`visla_edu.validation`). Every check raises ``ValueError`` at the first failure, naming
+``path`` and ``key`` (:mod:`visla_edu.data`); an ``NpyHeader`` works where only ``dtype`` and
+``shape`` are read.
 """
 
 import numpy as np
@@ -73,21 +70,7 @@ _MAX_TEXT = 10_000
 
 
 def check_course_headers(headers, fmt, path):
-    """Check the dtype and shape of every key from its ``.npy`` header, before reading any data.
-
-    Parameters
-    ----------
-    headers : dict of str to NpyHeader
-        Every key of the file (anything with ``shape``, ``ndim`` and ``dtype`` works).
-    fmt : str
-        :data:`FORMAT_2021` or :data:`FORMAT_2019`.
-    path : pathlib.Path
-
-    Returns
-    -------
-    T, M : int
-        Frames and landmarks.
-    """
+    """Check every key's dtype and shape from its ``.npy`` header (key -> NpyHeader); return ``(T, M)``."""
     velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
     for key in ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key):
         check_numeric(headers[key], key, path)
@@ -104,32 +87,8 @@ def check_course_headers(headers, fmt, path):
 def check_course_arrays(arrays, fmt, path):
     """Check dtypes, shapes, finiteness, meaning and plausibility of the non-feature keys; return T.
 
-    The keys ``time_stamps`` (1, T), ``linear_velocity`` and the angular velocity (3, T),
-    ``K`` (3, 3), ``b`` () and the extrinsics (4, 4) of format ``fmt`` must hold real numbers
-    (:func:`check_numeric`), have these shapes (``1 <= T <= MAX_FRAMES``) and be finite
-    (:func:`check_finite`); the time stamps must increase (:func:`check_increasing`) at a
-    camera's rate (:func:`~._plausible.check_time_stamps`), the velocities be plausible
-    (:func:`~._plausible.check_velocities`), and ``K``, ``b`` and the extrinsics be valid
-    and plausible (:func:`check_calibration_keys`).
-
-    Parameters
-    ----------
-    arrays : dict of str to ndarray
-        The file's arrays (at least the keys of ``fmt`` but ``features``).
-    fmt : str
-        :data:`FORMAT_2021` or :data:`FORMAT_2019`.
-    path : pathlib.Path or str
-        The file, for messages.
-
-    Returns
-    -------
-    int
-        T, the number of frames.
-
-    Raises
-    ------
-    ValueError
-        The first check that fails, naming the file and the key.
+    Shapes as in :mod:`visla_edu.data` (``T <=`` :data:`MAX_FRAMES`); time stamps increasing at a
+    camera's rate, plausible velocities (:mod:`~._plausible`), :func:`check_calibration_keys`.
     """
     velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
     keys = ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key)
@@ -150,24 +109,9 @@ def check_course_arrays(arrays, fmt, path):
 
 
 def check_calibration_keys(arrays, path, pose_key=None):
-    """``K``, ``b`` and (with ``pose_key``) the extrinsics of a file: valid, then plausible.
+    """``K`` (3, 3), ``b`` () and, unless ``pose_key`` is None, the extrinsics (4, 4): valid, then plausible.
 
-    :func:`~visla_edu.validation.check_intrinsics`, :func:`~visla_edu.validation.check_baseline`,
-    :func:`~visla_edu.validation.check_rigid`, then
-    :func:`~visla_edu.validation.check_plausible_calibration`.
-
-    Parameters
-    ----------
-    arrays : dict of str to ndarray
-        ``K`` (3, 3), ``b`` () and ``pose_key`` (4, 4), finite (checked before).
-    path : pathlib.Path or str
-    pose_key : str, optional
-        The extrinsics' key; None leaves them out.
-
-    Raises
-    ------
-    ValueError
-        The first check that fails, naming the file and the key.
+    :mod:`visla_edu.validation`'s checks; the arrays are finite (checked before).
     """
     check_intrinsics(arrays["K"], f"{path}: key 'K'")
     check_baseline(arrays["b"], f"{path}: key 'b'")
@@ -178,30 +122,9 @@ def check_calibration_keys(arrays, path, pose_key=None):
 
 
 def check_features_header(header, T, path, stamps_key="time_stamps"):
-    """Shape ``(4, M, T)``, a dtype that can hold -1 and pixels, and a bounded size; return M.
+    """Shape ``(4, M, T)``, a dtype that can hold -1 and pixels, at most :data:`MAX_FEATURES_BYTES`; return M.
 
-    Parameters
-    ----------
-    header : visla_edu.data._zip.NpyHeader
-        The ``features`` member's header (anything with ``shape``, ``dtype`` and ``nbytes``).
-    T : int
-        Frames, from ``time_stamps``.
-    path : pathlib.Path or str
-        The file, for messages.
-    stamps_key : str
-        The key T comes from, for messages.
-
-    Returns
-    -------
-    int
-        M, the number of landmarks.
-
-    Raises
-    ------
-    ValueError
-        The shape is not ``(4, M, T)`` (the message suggests a transpose for ``(4, T, M)``), the
-        dtype is unsigned or boolean (cannot hold -1) or not real, or the array would exceed
-        :data:`MAX_FEATURES_BYTES`.
+    T comes from the key ``stamps_key``; a ``(4, T, M)`` shape gets a transpose hint in the message.
     """
     shape, dtype = header.shape, header.dtype
     if len(shape) != 3 or shape[0] != 4 or shape[2] != T:
@@ -225,23 +148,7 @@ def check_features_header(header, T, path, stamps_key="time_stamps"):
 
 
 def check_numeric(arr, key, path, kinds="fiu"):
-    """``arr`` (any shape) has a dtype kind in ``kinds`` (``"fiu"``: real numbers, ``"b"``: boolean).
-
-    Parameters
-    ----------
-    arr : ndarray or NpyHeader
-        Anything with a ``dtype``.
-    key : str
-        Its key in the file, for the message.
-    path : pathlib.Path or str
-    kinds : str
-        Allowed ``dtype.kind`` letters.
-
-    Raises
-    ------
-    ValueError
-        ``arr.dtype.kind`` is not in ``kinds``.
-    """
+    """``arr`` (any shape) has a dtype kind in ``kinds`` (``"fiu"``: real numbers, ``"b"``: boolean)."""
     if arr.dtype.kind not in kinds:
         want = "boolean" if kinds == "b" else "real numbers"
         raise ValueError(f"{path}: key '{key}' must hold {want}, got dtype {arr.dtype}")
@@ -259,44 +166,14 @@ def _frame_count(time_stamps, path):
 
 
 def check_shape(arr, expected, key, path, T=None):
-    """``arr.shape == expected``; ``T`` (if given) is named as coming from ``time_stamps``.
-
-    Parameters
-    ----------
-    arr : ndarray or NpyHeader
-        Anything with a ``shape``.
-    expected : tuple of int
-    key : str
-        Its key in the file, for the message.
-    path : pathlib.Path or str
-    T : int, optional
-        Mentioned in the message when given.
-
-    Raises
-    ------
-    ValueError
-        The shapes differ.
-    """
+    """``arr.shape == expected``; ``T`` (if given) is named in the message as coming from ``time_stamps``."""
     if arr.shape != tuple(expected):
         note = f" (T = {T} from time_stamps)" if T is not None else ""
         raise ValueError(f"{path}: key '{key}' expected shape {tuple(expected)}{note}, got {arr.shape}")
 
 
 def check_finite(arr, key, path):
-    """No NaN or inf in ``arr`` (any shape); the message gives the index of the first one.
-
-    Parameters
-    ----------
-    arr : ndarray
-    key : str
-        Its key in the file, for the message.
-    path : pathlib.Path or str
-
-    Raises
-    ------
-    ValueError
-        ``arr`` has a NaN or infinite entry.
-    """
+    """No NaN or inf in ``arr`` (any shape); the message gives the index of the first one."""
     bad = ~np.isfinite(arr)
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
@@ -304,22 +181,9 @@ def check_finite(arr, key, path):
 
 
 def check_increasing(stamps, path, key="time_stamps", index="[0, {}]"):
-    """``stamps`` (T,) strictly increasing; indices are reported as in the file's (1, T) key.
+    """``stamps`` (T,) strictly increasing; the message names the first pair that is not.
 
-    Parameters
-    ----------
-    stamps : ndarray, shape (T,)
-        ``time_stamps[0]``.
-    path : pathlib.Path or str
-    key : str
-        The key of the stamps in the file, for the message.
-    index : str
-        How an entry ``i`` is written after the key (``"[0, {}]"``: the (1, T) layout).
-
-    Raises
-    ------
-    ValueError
-        A stamp is not after the one before it (names the first such pair).
+    ``index`` writes entry ``i`` after ``key`` (``"[0, {}]"``: the file's (1, T) layout).
     """
     bad = np.flatnonzero(np.diff(stamps) <= 0)
     if bad.size:
@@ -331,28 +195,12 @@ def check_increasing(stamps, path, key="time_stamps", index="[0, {}]"):
 
 
 def check_extras(arrays, T, M, path):
-    """Check the ground-truth keys (all or none; shapes from T and M, finite) and the text keys.
+    """Check the ground-truth keys (all or none) and the text keys, as :func:`~visla_edu.data.save` writes them.
 
-    Both are written by :func:`~visla_edu.data.save`.
-
-    Parameters
-    ----------
-    arrays : dict of str to ndarray
-        The file's arrays; keys other than :data:`GROUND_TRUTH_KEYS` and :data:`TEXT_KEYS` are
-        ignored.
-    T, M : int
-        Frames and landmarks of the file.
-    path : pathlib.Path or str
-
-    Raises
-    ------
-    ValueError
-        Some ground-truth keys are present but not all; one is not numeric (boolean for
-        ``ground_truth_outlier``), has the wrong shape (``(T, 4, 4)``, ``(M, 3)``, ``(T, 3)``,
-        ``(T, 3)``, ``(M,)``) or a non-finite entry; a ground-truth pose is not rigid
-        (:func:`~visla_edu.validation.check_rigid_poses`) or lies farther from the first than the drive can go
-        (:func:`~._plausible.check_ground_truth_reach`, which needs ``arrays["time_stamps"]``);
-        or ``name`` or ``label`` is not a single string of at most 10,000 characters.
+    Ground truth: numeric (``ground_truth_outlier`` boolean), the shapes of
+    :class:`~visla_edu.dataset.GroundTruth` from T and M, finite, rigid poses within the drive's
+    reach (:func:`~._plausible.check_ground_truth_reach`, which needs ``time_stamps``); ``name``
+    and ``label``: one string of at most 10,000 characters. Other keys are ignored.
     """
     _check_extras_layout(arrays, T, M, path)
     for key in GROUND_TRUTH_KEYS:

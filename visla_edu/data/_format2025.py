@@ -1,18 +1,4 @@
-"""The 2025+ course format: a pickled dict in ``datasetNN/datasetNN.npy``, checked and converted.
-
-The current edition's student code loads ``np.load(path, allow_pickle=True).item()``: a dict with
-
-==============================  ===========================================================
-key                             value
-==============================  ===========================================================
-``timestamps``                  (T,) UNIX seconds (also (1, T) or (T, 1))
-``v_t``, ``w_t``                linear and angular velocity, (T, 3) or (3, T)
-``features``                    (4, M, T) pixels ``[uL, vL, uR, vR]``, -1 where unobserved;
-                                absent or None in a dataset shipped with images
-                                (``datasetNN_imgs.npy``), whose features students track
-``K_l``, ``K_r``                the two cameras' intrinsics (3, 3)
-``extL_T_imu``, ``extR_T_imu``  the two cameras' extrinsics (4, 4)
-==============================  ===========================================================
+"""The 2025+ course format (its keys: :mod:`visla_edu.data`): ``datasetNN.npy`` checked and converted.
 
 The file is read without unpickling anything but plain arrays (:mod:`visla_edu.data._pickle`).
 Two things the format leaves open are decided from evidence, not assumed:
@@ -26,8 +12,6 @@ Two things the format leaves open are decided from evidence, not assumed:
   from the first rectified one in :data:`READING_ORDER` (a file rectified under none is refused
   with the reason); :func:`visla_edu.diagnostics.calibrate` then decides with the motion the IMU
   and the camera see, and ``visla-edu info`` shows the evidence.
-
-Every check raises a one-line ``ValueError``, as :mod:`visla_edu.data` says.
 """
 
 import numpy as np
@@ -67,18 +51,8 @@ def load_course2025(path):
     -------
     Dataset
         ``K`` = ``K_l``, ``K_right`` = ``K_r``, ``b`` from the extrinsics, ``imu_T_cam`` the
-        loader's reading, ``extrinsic_readings`` all four; ``extra`` = ``{"sha256", "format",
-        "known_file", "extrinsic_reading", "ignored_keys"}`` and, without features,
-        :data:`NO_FEATURES` (the reason, in words).
-
-    Raises
-    ------
-    FileNotFoundError, IsADirectoryError, PermissionError
-        No such file, a folder, or not readable.
-    ValueError
-        A pickle that is not plain arrays (refused before anything runs), a missing key, a
-        wrong shape, dtype or value, implausible units or ranges, or extrinsics that are a
-        rectified stereo pair under no reading (the message names the file and the key).
+        loader's reading, ``extrinsic_readings`` all four, ``extra`` as listed for a 2025+ file
+        in :class:`~visla_edu.dataset.Dataset` (:data:`NO_FEATURES`: why there are no tracks).
     """
     path, contents = read_pickled_dict(path)
     _check_keys(contents, path)

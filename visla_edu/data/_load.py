@@ -20,36 +20,26 @@ def load(name_or_path, data_dir=None):
     Parameters
     ----------
     name_or_path : str or os.PathLike
-        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"10"``: the file ``<data dir>/<name>.npz``;
-        ``"datasetNN"``: the 2025+ file ``<data dir>/datasetNN/datasetNN.npy``, else
-        ``<data dir>/datasetNN.npy``), ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated
-        with seed 0), or a path to an ``.npz`` file in either 2019-2024 course format or written
-        by :func:`~visla_edu.data.save`, or to a 2025+ ``.npy`` file
-        (:func:`~visla_edu.data.load_course2025`).
-        ``"10"`` falls back to a stand-in when ``10.npz`` is absent: simulated stereo
-        tracks on dataset 10's real IMU drive (``10_imu_only.npz`` + ``03.npz``'s rig).
+        A course name (``"03"``, ``"0022"``, ``"0020"``, ``"0042"``, ``"10"``: ``<data dir>/<name>.npz``;
+        ``"datasetNN"``: ``<data dir>/datasetNN/datasetNN.npy``, else ``<data dir>/datasetNN.npy``),
+        ``"sim"``, ``"sim-small"`` or ``"sim-tiny"`` (simulated with seed 0), or the path of a file
+        in a course format of :mod:`visla_edu.data` (``.npy``: 2025+) or written by
+        :func:`~visla_edu.data.save`. ``"10"`` without ``10.npz`` is the stand-in
+        (:func:`~visla_edu.data.course_standin10` with seed 0).
     data_dir : str or os.PathLike, optional
-        Folder of the course files, see :func:`~visla_edu.data.data_dir`.
+        See :func:`~visla_edu.data.data_dir`.
 
     Returns
     -------
     Dataset
-        Time-major arrays, sparse observations; ``source`` is the absolute file path and
-        ``label`` describes known files (recognised by sha256). A drive whose KITTI ground
-        truth the registry names (``"0020"``) gets it as ``ground_truth`` when its poses file
-        is beside the npz (:func:`~visla_edu.data.attach_registered_ground_truth`).
+        ``source`` is the absolute file path, ``label`` describes known files (recognised by
+        sha256); a registered drive gets its KITTI ground truth when the files are beside it
+        (:func:`~visla_edu.data.attach_registered_ground_truth`).
 
     Raises
     ------
-    FileNotFoundError
-        The file is not there (the message says where it looked).
-    IsADirectoryError, NotADirectoryError, PermissionError
-        The path is a folder, the data directory is not one, or the file is not readable.
-    ValueError
-        The file is not a valid course file (the message names key, expected and actual), or
-        not a regular file (a FIFO, a device), or the name is empty.
-    TypeError
-        ``name_or_path`` is neither a string nor a path.
+    NotADirectoryError, TypeError, ValueError
+        The data directory is not a folder; ``name_or_path`` is neither a string nor a path, or empty.
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
         return _load_file(_find_file(name_or_path, data_dir))
@@ -81,19 +71,15 @@ def _load_file(path):
 
 
 def input_files(name_or_path, data_dir=None):
-    """The existing files :func:`load` would read for ``name_or_path`` (none for simulated drives).
-
-    Lets a caller refuse to write over an input before loading anything.
+    """The existing files :func:`load` would read, so that a caller can refuse to write over them first.
 
     Parameters
     ----------
     name_or_path : str or os.PathLike
-        As in :func:`load`. A relative path counts both as given and under the data
-        directory; a course name gives ``<data dir>/<name>.npz`` (and for ``"10"`` the
-        stand-in's inputs, ``10_imu_only.npz`` and ``03.npz``; for ``"datasetNN"`` both places of
-        its ``.npy``); anything else gives no files.
+        As in :func:`load`. A relative path counts both as given and under the data directory;
+        ``"10"`` adds the stand-in's inputs, ``"datasetNN"`` both places of its ``.npy``; a
+        simulated drive or anything else gives no files.
     data_dir : str or os.PathLike, optional
-        Folder of the course files, see :func:`~visla_edu.data.data_dir`.
 
     Returns
     -------
@@ -120,12 +106,7 @@ def input_files(name_or_path, data_dir=None):
 
 
 def _registered_ground_truth_beside(npz):
-    """Every registered ground-truth file in the folder of ``npz``.
-
-    A registered drive is recognised by its content, not its name (``drive20.npz`` may be
-    ``0020``), and its ground truth is then read from the same folder: so every registered
-    ground-truth file found there counts as an input, whatever the npz is called.
-    """
+    """Every registered ground-truth file beside ``npz`` (a drive is recognised by content, not name)."""
     found = []
     for name in REGISTRY:
         found.extend(f for f in ground_truth_files(name, npz.parent) or () if f is not None)

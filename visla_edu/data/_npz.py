@@ -1,20 +1,15 @@
 """The one reader of ``.npz`` files in visla-edu: course files, and named arrays of any archive.
 
-:func:`load_npz` reads a course file (either format, or one written by
-:func:`~visla_edu.data.save`), checks it and converts it to the time-major
-:class:`~visla_edu.dataset.Dataset` once; :func:`read_arrays` reads named arrays of any
-archive (the dataset-10 stand-in reads its IMU drive and calibration with it). Both read the
-zip members themselves (``allow_pickle=False``) so a damaged, truncated or foreign file is
-reported as a ``ValueError`` naming the file, never as a zipfile or numpy traceback.
+:func:`load_npz` reads a course file into a :class:`~visla_edu.dataset.Dataset`;
+:func:`read_arrays` reads named arrays of any archive (the dataset-10 stand-in's inputs).
+Both read the zip members themselves (``allow_pickle=False``), so a damaged, truncated or
+foreign file is a ``ValueError`` naming the file, never a zipfile or numpy traceback.
 
 Reading goes in passes, each bounded before the next starts: the zip directory and every
-member's ``.npy`` header (:mod:`visla_edu.data._zip`: duplicates, declared sizes), the dtypes
-and shapes (:func:`~visla_edu.data._format.check_course_headers`: at most
-:data:`~visla_edu.data._format.MAX_FRAMES` frames and
-:data:`~visla_edu.data._format.MAX_FEATURES_BYTES` of features), the small arrays and their
-values and plausibility, then the features, streamed, and the checks that need the
-observations (:func:`~visla_edu.data._plausible.check_observations`,
-:func:`~visla_edu.data._plausible.check_track_layout`).
+member's ``.npy`` header (:mod:`visla_edu.data._zip`), the dtypes and shapes
+(:func:`~visla_edu.data._format.check_course_headers`), the small arrays' values and
+plausibility, then the features, streamed, and the checks that need the observations
+(:func:`~visla_edu.data._plausible.check_observations`, :func:`~._plausible.check_track_layout`).
 """
 
 import hashlib
@@ -48,26 +43,10 @@ MAX_ARRAY_BYTES = 2**30
 
 
 def load_npz(path):
-    """Read, check and convert one course ``.npz`` file (see :func:`visla_edu.data.load`).
+    """Read, check and convert one course ``.npz`` file (see :func:`visla_edu.data.load`) to a Dataset.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        An existing file.
-
-    Returns
-    -------
-    Dataset
-        ``source`` is the absolute path; ``name`` and ``label`` from
-        :func:`~visla_edu.data._registry.identify`; ``extra = {"sha256", "format", "known_file"}``.
-
-    Raises
-    ------
-    FileNotFoundError, IsADirectoryError, PermissionError
-        No such file, a folder, or not readable (:func:`visla_edu._files.check_input_file`).
-    ValueError
-        The file is not a valid course file (the message names key, expected and actual), or
-        it is a FIFO or device.
+    ``source`` is the absolute path, ``name`` and ``label`` come from
+    :func:`~visla_edu.data._registry.identify`, ``extra = {"sha256", "format", "known_file"}``.
     """
     path = check_input_file(path, "course file")
     sha = file_sha256(path)
@@ -84,26 +63,9 @@ def load_npz(path):
 
 
 def read_arrays(path, keys):
-    """The named arrays of an ``.npz`` archive, each read whole (no pickles).
+    """The arrays of ``keys`` (each present once, at most :data:`MAX_ARRAY_BYTES`) of an ``.npz``, read whole.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    keys : sequence of str
-        Keys that must be present; others in the file are ignored.
-
-    Returns
-    -------
-    dict of str to ndarray
-        As stored (dtype and shape unchecked: the caller checks them).
-
-    Raises
-    ------
-    FileNotFoundError, IsADirectoryError, PermissionError
-        No such file, a folder, or not readable (:func:`visla_edu._files.check_input_file`).
-    ValueError
-        Not an ``.npz`` archive, damaged, a key missing or twice, a member not a plain numpy
-        array, or one larger than :data:`MAX_ARRAY_BYTES`.
+    No pickles; other keys are ignored; dtype and shape are the caller's to check.
     """
     path = check_input_file(path)
     try:
@@ -124,24 +86,7 @@ def read_arrays(path, keys):
 
 
 def file_sha256(path, block=2**20):
-    """Hex sha256 of a file, read in blocks of ``block`` bytes.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-    block : int
-        Bytes read at a time (1 MiB by default), so memory stays bounded for any file size.
-
-    Returns
-    -------
-    str
-        64 lowercase hex digits (what :func:`~visla_edu.data._registry.identify` compares).
-
-    Raises
-    ------
-    OSError
-        The file cannot be opened or read (e.g. ``FileNotFoundError``, ``PermissionError``).
-    """
+    """Hex sha256 (64 lowercase digits) of a file, read ``block`` bytes at a time (bounded memory)."""
     digest = hashlib.sha256()
     with open(path, "rb") as f:
         while chunk := f.read(block):
@@ -160,10 +105,7 @@ def _corrupt_message(path, exc):
 
 
 def _read_course_members(zf, path):
-    """Format, checked small arrays, and sparse features ``(frame_ptr, ids, z, M)``.
-
-    Nothing is read before every header is checked; the features are read last, streamed.
-    """
+    """Format, checked small arrays, and sparse features ``(frame_ptr, ids, z, M)``, read last, streamed."""
     members = member_infos(zf, path)
     fmt = _detect_format(members, path)
     _reject_unexpected(members, fmt, path)
@@ -217,18 +159,7 @@ def _reject_unexpected(members, fmt, path):
 
 
 def time_major(arr):
-    """``(k, T)`` file layout -> ``(T, k)`` float64, C-contiguous.
-
-    Parameters
-    ----------
-    arr : array_like, shape (k, T)
-        Rows of the course file, e.g. ``linear_velocity`` (3, T).
-
-    Returns
-    -------
-    ndarray, shape (T, k)
-        The transpose as float64; a copy unless ``arr.T`` already is C-contiguous float64.
-    """
+    """``(k, T)`` file layout -> ``(T, k)`` float64, C-contiguous (a copy unless ``arr.T`` already is)."""
     return np.ascontiguousarray(arr.T, dtype=float)
 
 

@@ -1,28 +1,14 @@
 """A dict of numpy arrays from a pickled ``.npy`` file, read without running any code from it.
 
-The 2025+ course files are written with ``np.save(path, dict)``: an ``.npy`` file whose header
-declares a 0-d object array, followed by a pickle of that array. ``np.load(path,
-allow_pickle=True)`` would unpickle it with every class of every installed module available, so
-a crafted file could run code (``os.system``) on load. Here the header is parsed as numpy's
-reader does (:func:`numpy.lib.format.read_array_header_1_0`: a Python literal, never evaluated),
-and the payload is read by :class:`ArrayUnpickler`, which resolves only the few globals that
-numpy's own pickles of plain arrays use, each through a wrapper that checks its arguments:
-
-=======================================  ======================================================
-global                                   allowed as
-=======================================  ======================================================
-``numpy(._)core.multiarray._reconstruct``  an empty ``ndarray`` (numpy's form: shape ``(0,)``,
-                                         typecode ``b'b'``), filled by ``ndarray.__setstate__``
-``numpy.ndarray``                        a marker for ``_reconstruct`` only (not callable)
-``numpy.dtype``                          ``dtype(spec)`` for booleans, integers, floats and
-                                         objects (no structured or void dtypes)
-``numpy(._)core.multiarray.scalar``      a numeric numpy scalar from its bytes
-``numpy(._)core.numeric._frombuffer``    an array from an in-band buffer (protocol 5)
-=======================================  ======================================================
-
-Python's own containers (dict, list, tuple, str, bytes, numbers, None) need no global.
-Anything else (``os.system``, ``builtins.eval``, a class's ``__reduce__``...) is refused before
-it is looked up, so nothing from the file is ever called but these wrappers.
+The 2025+ course files are ``np.save(path, dict)``: an ``.npy`` header declaring a 0-d object
+array, then a pickle of it. ``np.load(path, allow_pickle=True)`` would unpickle it with every
+installed class available, so a crafted file could run code (``os.system``) on load. Here the
+header is parsed as numpy's reader does (a Python literal, never evaluated) and
+:class:`ArrayUnpickler` resolves only the globals numpy's own pickles of plain arrays use
+(``numpy.ndarray``, ``numpy.dtype`` and ``numpy(._)core``'s ``_reconstruct``, ``scalar`` and
+``_frombuffer``), each through a wrapper below that checks its arguments. Python's containers
+(dict, list, tuple, str, bytes, numbers, None) need no global; anything else (``os.system``,
+``builtins.eval``, a class's ``__reduce__``...) is refused before it is looked up.
 """
 
 import pickle
@@ -61,7 +47,7 @@ def _reconstruct(cls, shape, typecode):
 
 
 def _dtype(spec, align=False, copy=True):
-    """``numpy.dtype(spec)`` for plain specs only (``'f8'``, ``'i4'``, ``'O8'``...)."""
+    """``numpy.dtype(spec)`` for booleans, integers, floats and objects only (no structured or void dtypes)."""
     if not isinstance(spec, str) or not _DTYPE_SPEC.match(spec) or align not in (False, 0):
         raise pickle.UnpicklingError(f"dtype {spec!r} is not a plain number or object dtype")
     return np.dtype(spec)
@@ -76,7 +62,7 @@ def _scalar(dtype, data):
 
 
 def _frombuffer(buffer, dtype, shape, order):
-    """numpy's ``_frombuffer`` (pickle protocol 5, in-band buffers) for numeric dtypes."""
+    """numpy's ``_frombuffer`` (pickle protocol 5, an in-band buffer) for numeric dtypes."""
     if not isinstance(dtype, np.dtype) or dtype.kind not in "biuf" or order not in ("C", "F"):
         raise pickle.UnpicklingError("unexpected array buffer")
     return np.frombuffer(buffer, dtype=dtype).reshape(shape, order=order).copy()
@@ -107,28 +93,11 @@ class ArrayUnpickler(pickle.Unpickler):
 
 
 def read_pickled_dict(path):
-    """The dict stored by ``np.save(path, dict)``, read with :class:`ArrayUnpickler`.
+    """``(absolute path, dict)`` stored by ``np.save(path, dict)``, read with :class:`ArrayUnpickler`.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        An ``.npy`` file.
-
-    Returns
-    -------
-    path : pathlib.Path
-        Absolute.
-    contents : dict
-        Its keys (strings) and values (arrays, ``None``, numbers, ...), as stored.
-
-    Raises
-    ------
-    FileNotFoundError, IsADirectoryError, PermissionError
-        No such file, a folder, or not readable.
-    ValueError
-        Larger than :data:`MAX_PICKLE_BYTES`, not an ``.npy`` file, its header not a 0-d object
-        array, its pickle damaged or naming anything but plain numpy arrays (one line naming the
-        file: nothing from it was run), or not a dict with string keys.
+    Refused (``ValueError``: nothing from the file was run): over :data:`MAX_PICKLE_BYTES`, not a
+    0-d object ``.npy``, a pickle damaged or naming anything but plain arrays, or not a dict with
+    string keys.
     """
     path = check_input_file(path, "course file")
     size = path.stat().st_size

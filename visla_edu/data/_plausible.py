@@ -2,8 +2,7 @@
 
 The drive's counterpart of the calibration's plausible ranges (:mod:`visla_edu.validation`
 says what *plausible* means and why it is checked): a well-formed file with time stamps in
-nanoseconds, a gap of 1e6 s, velocities in km/h or a 'missing' marker other than -1 is refused
-at load time.
+nanoseconds, a gap of 1e6 s, velocities in km/h or a 'missing' marker other than -1 is refused.
 
 ========================  ====================  ============================================
 quantity                  plausible             why
@@ -22,10 +21,10 @@ ground-truth position     <= 343 m/s x elapsed  the drive cannot outrun sound ei
                           time + 20 m           slack for the camera-IMU lever arm)
 ========================  ====================  ============================================
 
-Every check raises ``ValueError`` naming the file, the key, the value and the plausible range;
-:func:`dataset_problems` runs them on an in-memory Dataset and returns the messages (the
-filter driver refuses a dataset with :func:`calibration_problems`, which the filter would
-silently turn into a garbage map, and names the others when a run diverges).
+Every check raises ``ValueError`` naming the file, the key, the value and the plausible range.
+:func:`dataset_problems` returns the messages for an in-memory Dataset; the filter driver
+refuses a dataset that fails :func:`calibration_problems` (the filter would silently turn it
+into a garbage map) and names the other problems when a run diverges.
 """
 
 import numpy as np
@@ -76,24 +75,10 @@ _TIME_UNITS = ((1e-3, "milliseconds", "/ 1e3"), (1e-6, "microseconds", "/ 1e6"),
 def check_time_stamps(stamps, path, key="time_stamps", index="[0, {}]"):
     """Seconds, at a camera's frame rate, without long gaps (``stamps`` (T,), increasing).
 
-    The median step must lie in :data:`FRAME_STEP_RANGE` (else the stamps are probably in
-    other units, and the message says which); no step may exceed ``max(MAX_GAP_SECONDS,
-    MAX_GAP_STEPS * median)``. Fewer than 2 stamps pass.
-
-    Parameters
-    ----------
-    stamps : ndarray, shape (T,)
-    path : pathlib.Path or str
-        The file (or dataset name), for messages.
-    key, index : str
-        The stamps' key in the file and how its entry ``i`` is written (the (1, T) layout by default).
-
-    Raises
-    ------
-    ValueError
-        The median step is outside :data:`FRAME_STEP_RANGE` (the message suggests the unit,
-        milliseconds to hours, that would give a plausible step), or a step is a gap longer
-        than allowed (the message names the frames).
+    The median step must lie in :data:`FRAME_STEP_RANGE` (else the message suggests the unit,
+    milliseconds to hours, that would fit); no step may exceed ``max(MAX_GAP_SECONDS,
+    MAX_GAP_STEPS * median)``. Fewer than 2 stamps pass. ``path`` may be a dataset's name;
+    ``key`` and ``index`` as in :func:`~visla_edu.data._format.check_increasing`.
     """
     if len(stamps) < 2:
         return
@@ -120,21 +105,7 @@ def check_time_stamps(stamps, path, key="time_stamps", index="[0, {}]"):
 
 
 def check_velocities(linear, angular, keys, path):
-    """Speeds at most :data:`MAX_SPEED` and angular rates at most :data:`MAX_ANGULAR_RATE` (``(3, T)`` each).
-
-    Parameters
-    ----------
-    linear, angular : array_like, shape (3, T)
-        Linear (m/s) and angular (rad/s) velocities, one column per frame.
-    keys : (str, str)
-        Their keys in the file, for messages.
-    path : pathlib.Path or str
-
-    Raises
-    ------
-    ValueError
-        The norm (:func:`~visla_edu.validation.magnitude`) of a column exceeds its limit; names the first such frame.
-    """
+    """Speeds <= :data:`MAX_SPEED`, angular rates <= :data:`MAX_ANGULAR_RATE` (``(3, T)`` each, m/s and rad/s)."""
     for values, key, limit, unit, hint in (
         (linear, keys[0], MAX_SPEED, "m/s", "the speed of sound; are they in km/h, mm/s or another unit?"),
         (angular, keys[1], MAX_ANGULAR_RATE, "rad/s", "2000 deg/s, a gyro's full range; are they in deg/s?"),
@@ -148,26 +119,11 @@ def check_velocities(linear, angular, keys, path):
 
 
 def check_ground_truth_reach(world_T_imu, time_stamps, what, path):
-    """Each ground-truth position no farther from the first than :data:`MAX_SPEED` could carry it.
+    """Each ground-truth position within ``MAX_SPEED * (t_i - t_0) + MAX_EXTRINSIC_TRANSLATION`` of the first.
 
-    Refuses poses in another unit (millimetres) or overflowing ones (1e200 m), which would
-    otherwise give an ATE of inf or nonsense after the whole run.
-
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (n, 4, 4)
-        Finite poses of frames ``0 .. n - 1``.
-    time_stamps : ndarray, shape (T,)
-        The drive's time stamps (s), ``T >= n``.
-    what : str
-        The key or file the poses came from, for the message.
-    path : pathlib.Path or str
-
-    Raises
-    ------
-    ValueError
-        The first frame whose distance from frame 0 exceeds ``MAX_SPEED * (t_i - t_0) +``
-        :data:`~visla_edu.validation.MAX_EXTRINSIC_TRANSLATION` (a length that would fit in millimetres says so).
+    ``world_T_imu`` (n, 4, 4), finite; ``time_stamps`` (T,) in s, ``T >= n``; ``what`` names the
+    poses' key or file. Refuses poses in another unit (the message says when millimetres would fit)
+    or overflowing ones (1e200 m), which would give an ATE of inf or nonsense after the whole run.
     """
     positions = np.asarray(world_T_imu, dtype=float)[:, :3, 3]
     distance = magnitude(positions - positions[:1])
@@ -185,19 +141,10 @@ def check_ground_truth_reach(world_T_imu, time_stamps, what, path):
 
 
 def check_observations(K, obs_z, path, K_right=None, K_key="K"):
-    """The observed pixels fit the intrinsics: principal point among them, angles below :data:`MAX_OFF_AXIS_DEG`.
+    """The pixels ``obs_z`` (N, 4) fit ``K``: principal point among them, angles below :data:`MAX_OFF_AXIS_DEG`.
 
-    Parameters
-    ----------
-    K : ndarray, shape (3, 3)
-    obs_z : ndarray, shape (N, 4)
-        ``[uL, vL, uR, vR]`` of every observation.
-    path : pathlib.Path or str
-    K_right : ndarray, shape (3, 3), optional
-        The right camera's intrinsics when they differ from ``K``: the right pixels are checked in
-        the left camera's (:func:`visla_edu.camera.right_in_left_pixels`).
-    K_key : str
-        The key of ``K`` in the file, for messages.
+    With ``K_right`` (when it differs from ``K``) the right pixels are checked in the left camera's
+    (:func:`visla_edu.camera.right_in_left_pixels`).
     """
     if len(obs_z) == 0:
         return
@@ -248,11 +195,7 @@ def _check_marker(obs_z, path):
 
 
 def _check_disparity_sign(obs_z, path):
-    """Refuse features whose disparity ``uL - uR`` is mostly <= 0: the left and right columns are swapped.
-
-    A few such observations are a known quirk (about 1% in dataset 03: no depth); most of them
-    mean the file stores ``[uR, vR, uL, vL]``.
-    """
+    """Refuse features whose disparity ``uL - uR`` is mostly <= 0: the file stores ``[uR, vR, uL, vL]``."""
     nonpositive = np.count_nonzero(obs_z[:, 0] - obs_z[:, 2] <= 0)
     if len(obs_z) >= _SWAP_MIN_OBSERVATIONS and nonpositive > _SWAP_SHARE * len(obs_z):
         raise ValueError(
@@ -262,23 +205,12 @@ def _check_disparity_sign(obs_z, path):
 
 
 def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
-    """When M = T, refuse features whose landmark and frame axes are swapped, if the data says so.
+    """When M = T, refuse features whose landmark and frame axes are swapped, if the tracks say so.
 
-    The shape cannot tell ``(4, M, T)`` from ``(4, T, M)`` when M = T. The tracks can: a
-    feature tracker follows each landmark over one contiguous run of frames, so in the right
-    layout most landmarks' frames are contiguous. Swapped, each "landmark" is a frame and its
-    "frames" are the landmarks seen then, rarely contiguous, while each "frame" (a landmark)
-    is one contiguous run of ids. The file is refused when every frame's ids are contiguous
-    and more than half of the landmarks (seen at least twice) have gaps; otherwise it loads
-    (tracks with gaps are allowed).
-
-    Parameters
-    ----------
-    frame_ptr : ndarray of int, shape (T + 1,)
-    obs_ids : ndarray of int, shape (N,)
-        Frame-major (sorted by frame, then id).
-    num_landmarks : int
-    path : pathlib.Path or str
+    A tracker follows each landmark over one contiguous run of frames; swapped, every "frame" (a
+    landmark) sees one contiguous run of ids while the "landmarks" (frames) have gaps. The file is
+    refused when every frame's ids are contiguous and more than half of the landmarks seen at
+    least twice have gaps (tracks with gaps alone are allowed). ``obs_ids`` (N,) is frame-major.
     """
     T = len(frame_ptr) - 1
     if num_landmarks != T or len(obs_ids) == 0:
@@ -315,7 +247,6 @@ def calibration_problems(dataset):
     Returns
     -------
     list of str
-        Empty when the calibration is plausible.
     """
     checks = [lambda: check_plausible_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
                                                   np.asarray(dataset.imu_T_cam, dtype=float))]
@@ -326,9 +257,7 @@ def calibration_problems(dataset):
 
 
 def dataset_problems(dataset):
-    """Messages of every plausibility check an in-memory Dataset fails (empty when none).
-
-    Calibration, time stamps, velocities and the observed pixels, as the loader checks a file.
+    """Messages of the plausibility checks (calibration, time stamps, velocities, pixels) a Dataset fails.
 
     Parameters
     ----------

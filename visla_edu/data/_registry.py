@@ -1,7 +1,6 @@
-"""Where the course files are and which ones visla-edu knows.
+"""Where the course files are and which ones visla-edu knows (recognised by sha256), and their labels.
 
-The data directory, the names :func:`~visla_edu.data.load` answers, the known course files
-(recognised by sha256) and the label a loaded file gets. Nothing here reads a file.
+Nothing here reads a file.
 """
 
 import os
@@ -88,19 +87,9 @@ COURSE2025_NAME = re.compile(r"^dataset\d+$")
 
 
 def resolve_dir(path=None):
-    """The data directory and a phrase saying where it came from.
+    """``(directory, how)``: the data directory of :func:`data_dir` and where it came from, for messages.
 
-    Parameters
-    ----------
-    path : str or os.PathLike, optional
-        See :func:`data_dir`.
-
-    Returns
-    -------
-    directory : pathlib.Path
-        Absolute; not checked to exist.
-    how : str
-        E.g. ``"VISLA_EDU_DATA=/data"``, for error messages.
+    ``how`` is e.g. ``"VISLA_EDU_DATA=/data"``.
     """
     if path is not None:
         return expand_user(path).resolve(), "the data_dir argument"
@@ -111,36 +100,33 @@ def resolve_dir(path=None):
 
 
 def data_dir(path=None):
-    """The folder with the course files, as an absolute path.
+    """The folder with the course files, absolute and not checked to exist.
 
     Parameters
     ----------
     path : str or os.PathLike, optional
-        Use this folder. Otherwise the environment variable ``VISLA_EDU_DATA``, and if
-        that is unset or empty, ``./data`` under the current working directory.
+        This folder; else ``VISLA_EDU_DATA`` if set and not empty, else ``./data`` under the
+        current working directory.
 
     Returns
     -------
     pathlib.Path
-        Absolute; it is not checked to exist.
     """
     return resolve_dir(path)[0]
 
 
 def available(data_dir=None):
-    """Names :func:`~visla_edu.data.load` can answer right now, for menus in the CLI and widgets.
+    """Names :func:`~visla_edu.data.load` can answer now, for menus in the CLI and widgets.
 
     Parameters
     ----------
     data_dir : str or os.PathLike, optional
-        See :func:`data_dir`.
 
     Returns
     -------
     list of str
-        Course names whose files exist (``"10"`` also when only the stand-in inputs
-        ``10_imu_only.npz`` and ``03.npz`` exist), the 2025+ files ``datasetNN`` found (either
-        layout of :func:`course2025_files`), then ``"sim"``.
+        Course names whose files exist (``"10"`` also with only the stand-in inputs), the 2025+
+        ``datasetNN`` found (either place of :func:`course2025_files`), then ``"sim"``.
     """
     directory, _ = resolve_dir(data_dir)
     names = []
@@ -155,76 +141,26 @@ def available(data_dir=None):
 
 
 def course2025_files(name, directory):
-    """Where a 2025+ course name ``datasetNN`` is looked for, in order (see :data:`COURSE2025_NAME`).
-
-    Parameters
-    ----------
-    name : str
-        ``datasetNN``.
-    directory : pathlib.Path
-        The data directory.
-
-    Returns
-    -------
-    list of pathlib.Path
-        ``[<directory>/datasetNN/datasetNN.npy, <directory>/datasetNN.npy]`` (not checked to exist).
-    """
+    """``[<directory>/datasetNN/datasetNN.npy, <directory>/datasetNN.npy]``: where ``datasetNN`` is looked for."""
     return [directory / name / f"{name}.npy", directory / f"{name}.npy"]
 
 
 def missing_standin_inputs(directory):
-    """The :data:`STANDIN_INPUTS` that are not files in ``directory`` (a pathlib.Path), in order.
-
-    Parameters
-    ----------
-    directory : pathlib.Path
-
-    Returns
-    -------
-    list of str
-        File names of :data:`STANDIN_INPUTS` (``"10_imu_only.npz"``, ``"03.npz"``) that are not
-        regular files (after following links) in ``directory``.
-    """
+    """The :data:`STANDIN_INPUTS` that are not regular files (links followed) in ``directory``, in order."""
     return [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
 
 
 def has_standin_inputs(directory):
-    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path).
-
-    Parameters
-    ----------
-    directory : pathlib.Path
-
-    Returns
-    -------
-    bool
-        True when :func:`missing_standin_inputs` is empty.
-    """
+    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path)."""
     return not missing_standin_inputs(directory)
 
 
 def identify(path, sha, stored_name=None, stored_label=None):
-    """Name, label and registry entry of a loaded file.
+    """``(name, label, known)`` of a loaded file; ``known`` is its :data:`REGISTRY` name, or None.
 
-    A file whose sha256 is in :data:`REGISTRY` gets that entry's name and description. Other
-    files keep the name and label :func:`~visla_edu.data.save` stored in them, else are named
+    A file whose sha256 (hex) is registered gets that entry's name and description. Other files
+    keep the ``stored_name`` and ``stored_label`` :func:`~visla_edu.data.save` wrote, else are named
     after the file; a file named like a known one but with another hash says so in its label.
-
-    Parameters
-    ----------
-    path : pathlib.Path
-        The file (absolute).
-    sha : str
-        Its sha256, hex.
-    stored_name, stored_label : str, optional
-        The ``name`` and ``label`` keys of the file, if it has them.
-
-    Returns
-    -------
-    name : str
-    label : str
-    known : str or None
-        The :data:`REGISTRY` name when recognised by sha256.
     """
     known = next((n for n, entry in REGISTRY.items() if entry["sha256"] == sha), None)
     if known is not None:
@@ -246,15 +182,15 @@ def ground_truth_files(name, directory):
     Parameters
     ----------
     name : str
-        A :data:`REGISTRY` name (others have no ground truth: the answer is None).
+        A :data:`REGISTRY` name.
     directory : pathlib.Path
-        Where to look (the folder of the drive's ``.npz``).
+        The folder of the drive's ``.npz``.
 
     Returns
     -------
     (pathlib.Path, pathlib.Path or None) or None
-        The poses file and the times file (None when absent: the times are then not checked),
-        or None when the drive has no registered ground truth or its poses file is absent.
+        The poses and the times file (None when absent: the times are then not checked), or
+        None when the drive has no registered ground truth or its poses file is absent.
     """
     files = REGISTRY.get(name, {}).get("ground_truth")
     if files is None or not (directory / files["poses"]).is_file():

@@ -1,7 +1,7 @@
-"""Write a Dataset as a 2025+ course file: the dict of ``datasetNN.npy``, extrinsics in a chosen reading.
+"""Write a Dataset as a 2025+ course file, the extrinsics in a chosen reading.
 
-The inverse of :func:`~visla_edu.data._format2025.load_course2025` for drives we make ourselves (the
-simulated ones): it lets the tests exercise every direction and frame the format may use.
+The inverse of :func:`~visla_edu.data._format2025.load_course2025` for the drives we simulate:
+it lets the tests exercise every direction and frame the format may use.
 """
 
 import numpy as np
@@ -17,21 +17,20 @@ VELOCITY_LAYOUTS = ("T x 3", "3 x T")
 
 def save_course2025(dataset, path, direction=DIRECTIONS[0], frame=FRAMES[1], velocity_layout=VELOCITY_LAYOUTS[0],
                     features=True):
-    """Write ``dataset`` as a 2025+ course file (``np.save`` of a dict, see :mod:`visla_edu.data._format2025`).
+    """Write ``dataset`` as a 2025+ course file (``np.save`` of the dict of :mod:`visla_edu.data`).
 
     The right camera is the left one (``imu_T_cam``) moved by ``b`` along its x axis; both
-    extrinsics are written in the reading ``(direction, frame)``
-    (:func:`visla_edu.camera.write_extrinsic`): ``direction="camera->IMU"`` stores ``imu_T_cam``,
-    ``"IMU->camera"`` its inverse; ``frame="regular"`` uses the x-forward, y-left, z-up camera
-    frame, ``"optical"`` the x-right, y-down, z-forward one.
+    extrinsics are written in the reading ``(direction, frame)`` (:func:`visla_edu.camera.write_extrinsic`).
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     path : str or os.PathLike
-        Target file; ``.npy`` is appended if missing. Written atomically.
+        ``.npy`` is appended if missing. Written atomically.
     direction : {"camera->IMU", "IMU->camera"}
+        ``imu_T_cam`` as stored, or its inverse.
     frame : {"regular", "optical"}
+        The x-forward, y-left, z-up camera frame, or the x-right, y-down, z-forward one.
     velocity_layout : {"T x 3", "3 x T"}
     features : bool
         False writes ``features = None`` (a dataset shipped with images).
@@ -40,11 +39,6 @@ def save_course2025(dataset, path, direction=DIRECTIONS[0], frame=FRAMES[1], vel
     -------
     pathlib.Path
         The absolute path written.
-
-    Raises
-    ------
-    ValueError
-        An unknown direction, frame or velocity layout.
     """
     reading_name(direction, frame)  # checks both
     if velocity_layout not in VELOCITY_LAYOUTS:

@@ -1,11 +1,9 @@
 """The STAND-IN for course dataset 10: its real IMU drive with simulated stereo tracks.
 
-The real feature file ``10.npz`` is not available, only ``10_imu_only.npz`` (its time
-stamps and IMU velocities). :func:`standin_dataset10` takes that drive as the true motion
-and simulates landmarks, stereo tracks and IMU noise along it
-(:func:`visla_edu.simulate.simulate_along_drive`) with the rig of dataset 3, which comes from
-the same vehicle. Both input files are read with the package's one ``.npz`` reader and checked
-like course files. :func:`load_dataset10` is what ``load("10")`` does.
+``10.npz`` is not available, only ``10_imu_only.npz`` (its time stamps and IMU velocities).
+:func:`standin_dataset10` simulates landmarks, stereo tracks and IMU noise along that drive
+with the rig of dataset 3 (the same vehicle), both inputs read and checked like course files;
+:func:`load_dataset10` is what ``load("10")`` does.
 """
 
 import os
@@ -31,23 +29,9 @@ _IMU_KEYS = ("time_stamps", "linear_velocity", "angular_velocity")
 
 
 def load_dataset10(directory, how):
-    """The real ``10.npz`` if present, else the stand-in built from its IMU drive.
+    """The real ``10.npz`` in ``directory`` if there, else the stand-in (:func:`course_standin10`, seed 0).
 
-    Parameters
-    ----------
-    directory : pathlib.Path
-        The data directory.
-    how : str
-        Where the directory came from (for the error message).
-
-    Returns
-    -------
-    Dataset
-
-    Raises
-    ------
-    FileNotFoundError
-        Neither ``10.npz`` nor both stand-in inputs are in ``directory``.
+    ``how`` (where the directory came from) goes into the ``FileNotFoundError`` when neither is there.
     """
     full = directory / "10.npz"
     if os.path.lexists(full):
@@ -64,42 +48,30 @@ def load_dataset10(directory, how):
 
 
 def course_standin10(data_dir=None, seed=0, **overrides):
-    """The dataset-10 stand-in as ``load("10")`` builds it, with its seed and simulation changed.
+    """The dataset-10 stand-in as ``load("10")`` builds it (seed 0), with its seed and simulation changed.
 
-    ``load("10")`` (without ``10.npz``) returns ``course_standin10(seed=0)``. Other seeds and
-    :class:`~visla_edu.simulate.SimulationConfig` fields give harder or easier full-size
-    drives with the course file's calibration quirk, e.g. 5% gross outlier tracks and
-    dataset 3's IMU lag::
-
-        course_standin10(outlier_share=0.05, imu_lag=1)
-
-    Dataset 3 comes from the same vehicle. Its file's ``imu_T_cam`` has axes that disagree
-    with its IMU (found by :func:`visla_edu.diagnostics.check_extrinsics`), and the real
-    ``10.npz`` carries the same calibration. So the stand-in's cameras are simulated with the
-    corrected extrinsic (the physical rig), and the dataset reports the file's uncorrected
-    one, exactly as a user holding the real ``10.npz`` would see it.
+    E.g. 5% gross outlier tracks and dataset 3's IMU lag: ``course_standin10(outlier_share=0.05, imu_lag=1)``.
+    Dataset 3's ``imu_T_cam`` disagrees with its IMU (:func:`visla_edu.diagnostics.check_extrinsics`)
+    and the real ``10.npz`` has the same one, so the tracks are simulated with the corrected
+    extrinsic (the physical rig) and the dataset reports the file's, as the real ``10.npz`` would.
 
     Parameters
     ----------
     data_dir : str or os.PathLike, optional
-        The folder with ``10_imu_only.npz`` and ``03.npz`` (see :func:`visla_edu.data.data_dir`).
+        The folder with the stand-in inputs (:func:`visla_edu.data.data_dir`).
     seed : int
     **overrides
-        :class:`~visla_edu.simulate.SimulationConfig` fields, as in :func:`standin_dataset10`
-        (``imu_T_cam`` is the physical rig's and cannot be overridden here).
+        As in :func:`standin_dataset10`, but not ``imu_T_cam``.
 
     Returns
     -------
     Dataset
-        As :func:`standin_dataset10`; ``extra["simulated_imu_T_cam"]`` is the extrinsic the
-        tracks were simulated with.
+        As :func:`standin_dataset10`; ``extra["simulated_imu_T_cam"]`` is the simulated extrinsic.
 
     Raises
     ------
-    FileNotFoundError
-        ``10_imu_only.npz`` or ``03.npz`` is not in the data directory.
     ValueError
-        A file is unreadable or wrong, or an override is unknown or out of range.
+        Also for an override that is unknown or out of range.
     """
     from visla_edu import diagnostics  # lazy: only the stand-in needs it
 
@@ -129,47 +101,33 @@ PHYSICAL_RIG_NOTE = ("tracks simulated with 03's corrected imu_T_cam (the physic
 def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, extrinsic_note=None, **overrides):
     """The STAND-IN for course dataset 10: its real IMU drive with simulated stereo tracks.
 
-    The real feature file ``10.npz`` is not available. The measured velocities of
-    ``10_imu_only.npz`` define the true drive, landmarks are placed along that path and
-    tracked as in :func:`visla_edu.simulate.simulate_drive` (about
-    :data:`STANDIN_NUM_LANDMARKS` landmarks), and the measured IMU is the real velocities plus
-    the simulation noise.
-
-    The real gyro has biases of about 0.01 rad/s: integrating it as it is would make the
-    "true" car climb over a kilometre and roll over. The true angular velocity is therefore
-    the real one minus its mean roll and pitch rates (a car ends about as level as it
-    started); that mean is kept in the measurement as a constant gyro bias
-    (``config.gyro_bias``, also in ``extra["level_gyro_bias"]``), so the measured velocities
-    are still the real ones plus noise.
+    The velocities of ``10_imu_only.npz`` define the true drive; landmarks along it are tracked as
+    in :func:`visla_edu.simulate.simulate_drive`, and the measured IMU is the real velocities plus
+    the simulation noise. The real gyro's biases (about 0.01 rad/s) would make the "true" car climb
+    over a kilometre and roll over, so the true angular velocity is the real one minus its mean
+    roll and pitch rates (a car ends about as level as it started), which the measurement keeps as
+    a constant gyro bias (``config.gyro_bias``, ``extra["level_gyro_bias"]``).
 
     Parameters
     ----------
     imu_only_path : str or Path
-        ``10_imu_only.npz``: ``time_stamps`` (1, T) or (T,), ``linear_velocity`` (3, T),
-        ``angular_velocity`` (3, T).
+        ``time_stamps`` (1, T) or (T,), ``linear_velocity`` and ``angular_velocity`` (3, T).
     calibration_path : str or Path
-        A 2021+ course file of the same rig (``03.npz``): ``K`` (3, 3), ``b``, ``imu_T_cam``.
+        A 2021+ course file of the same rig (``03.npz``): ``K``, ``b``, ``imu_T_cam``.
     seed : int
     imu_T_cam : array_like, shape (4, 4), optional
-        Use this extrinsic instead of the file's (e.g. a corrected one).
+        Instead of the file's (e.g. a corrected one).
     extrinsic_note : str, optional
         What the source line says of ``imu_T_cam`` (default: "imu_T_cam given by the caller").
     **overrides
-        :class:`~visla_edu.simulate.SimulationConfig` fields (``K``, ``b`` too); the motion
-        fields and ``num_frames`` do not apply (the file decides).
+        :class:`~visla_edu.simulate.SimulationConfig` fields (``K``, ``b`` too; ``num_landmarks``
+        defaults to :data:`STANDIN_NUM_LANDMARKS`); the file decides the motion and ``num_frames``.
 
     Returns
     -------
     Dataset
-        Named ``"10-standin"``, labelled :data:`STANDIN_LABEL`, time stamps identical to
-        the file's, with ``ground_truth``.
-
-    Raises
-    ------
-    FileNotFoundError
-        A file does not exist.
-    ValueError
-        A file is not a readable ``.npz``, or a key is missing or has a wrong shape or value.
+        Named ``"10-standin"``, labelled :data:`STANDIN_LABEL`, the file's time stamps, with
+        ``ground_truth``.
     """
     from visla_edu import simulate  # lazy: loading course files needs no simulation (nor scipy.ndimage)
 

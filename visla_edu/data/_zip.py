@@ -1,15 +1,10 @@
 """The archive layer of the ``.npz`` reader: zip members and ``.npy`` headers, read before any data.
 
-An ``.npz`` file is a zip archive with one ``.npy`` member per key. Before any array data is
-read, :func:`member_infos` lists the members (refusing a key that appears twice, encrypted
-members and unknown compression), and :func:`read_header` reads each member's ``.npy``
-header (shape, dtype, memory order: the first few hundred bytes, decompressing no more) and
-checks that the size it declares is the member's uncompressed size in the zip directory.
-So a header that declares a 7 TiB array, or a member whose zip entry inflates to 1 GB, is
-refused from the headers alone; the caller checks the declared shapes against what the
-format allows (:func:`visla_edu.data._format.check_course_headers`) before reading.
-
-Every problem is a ``ValueError`` naming the file and the key.
+:func:`member_infos` lists the members and :func:`read_header` reads each ``.npy`` header (a few
+hundred bytes) and checks the size it declares against the zip directory's uncompressed size. So
+a header that declares a 7 TiB array, or a member whose entry inflates to 1 GB, is refused from
+the headers alone; the caller bounds the declared shapes
+(:func:`visla_edu.data._format.check_course_headers`) before reading.
 """
 
 import io
@@ -43,7 +38,6 @@ class NpyHeader:
     shape : tuple of int
     dtype : numpy.dtype
     fortran_order : bool
-        The data is stored in Fortran (column-major) order.
     data_offset : int
         Bytes of magic and header before the data.
     """
@@ -65,27 +59,11 @@ class NpyHeader:
 
 
 def member_infos(zf, path):
-    """Key -> ``ZipInfo`` of every member (``np.savez`` stores key ``k`` as ``k.npy``).
+    """Key -> ``ZipInfo`` of every member, in the archive's order (``np.savez`` stores key ``k`` as ``k.npy``).
 
-    Folder entries are skipped; a member not ending in ``.npy`` keeps its whole name as key.
-
-    Parameters
-    ----------
-    zf : zipfile.ZipFile
-        The open archive.
-    path : pathlib.Path or str
-        The file, for messages.
-
-    Returns
-    -------
-    dict of str to zipfile.ZipInfo
-        In the archive's order.
-
-    Raises
-    ------
-    ValueError
-        A key appears twice (e.g. a second ``K.npy`` appended to the archive: which one would
-        win is an accident of the reader), a member is encrypted, or its compression is unknown.
+    Folder entries are skipped; a member not ending in ``.npy`` keeps its whole name as key. Refused:
+    a key twice (e.g. a second ``K.npy`` appended: which one wins would be an accident of the
+    reader), an encrypted member, an unknown compression.
     """
     members, seen = {}, {}
     for index, info in enumerate(zf.infolist()):
@@ -108,32 +86,11 @@ def member_infos(zf, path):
 
 
 def read_header(zf, info, key, path):
-    """The :class:`NpyHeader` of one member, checked against the member's zip entry.
+    """The :class:`NpyHeader` of one member, checked against its zip entry; decompresses only the header.
 
-    Reads only the magic string and the header (decompressing a few hundred bytes).
-
-    Parameters
-    ----------
-    zf : zipfile.ZipFile
-    info : zipfile.ZipInfo
-        The member (:func:`member_infos`).
-    key : str
-        Its key, for messages.
-    path : pathlib.Path or str
-        The file, for messages.
-
-    Returns
-    -------
-    NpyHeader
-
-    Raises
-    ------
-    ValueError
-        Not an ``.npy`` member, an ``.npy`` version other than 1.0 or 2.0, an object dtype
-        (needs pickle, refused), a negative dimension, or a declared size that differs from the
-        zip entry's uncompressed size (a damaged, truncated or forged member).
-    zipfile.BadZipFile, zlib.error
-        The archive itself is damaged (passed on for the caller to report).
+    Refused: not ``.npy``, a version other than 1.0 or 2.0, an object dtype (pickle), a negative
+    dimension, or a declared size other than the entry's uncompressed size (damaged or forged).
+    ``zipfile.BadZipFile`` and ``zlib.error`` (the archive itself damaged) pass to the caller.
     """
     with zf.open(info) as fp:
         header = _parse_header(fp, key, path)
@@ -174,28 +131,7 @@ def _size_mismatch(header, actual, declared, key, path):
 
 
 def read_member(zf, info, key, path):
-    """One whole member as an array (its size already checked; CRC-checked by ``zf.read``).
-
-    Parameters
-    ----------
-    zf : zipfile.ZipFile
-    info : zipfile.ZipInfo
-    key : str
-        Its key, for messages.
-    path : pathlib.Path or str
-        The file, for messages.
-
-    Returns
-    -------
-    ndarray
-
-    Raises
-    ------
-    ValueError
-        numpy cannot read the member as an array (pickles refused).
-    zipfile.BadZipFile
-        ``zf.read`` finds a CRC mismatch (a damaged member).
-    """
+    """One whole member as an array (size already checked, pickles refused; a CRC mismatch raises ``BadZipFile``)."""
     raw = zf.read(info)
     try:
         return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
