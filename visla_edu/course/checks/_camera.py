@@ -27,18 +27,15 @@ def _calibrations(generator, hidden=False):
 def check_stereo_matrix(stereo_matrix, hidden=False):
     """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``.
 
-    Compares with :func:`visla_edu.camera.stereo_matrix` (default tolerances of
-    :func:`~visla_edu.course.checks._core.compare`) for 4 calibrations: the simulator's rig, a
-    KITTI-like one and 2 random ones (hidden: 4 random ones). Recognises a flipped or
-    unscaled baseline term and a transposed ``Ks``. Hides ``camera.stereo_matrix``.
+    Compares with :func:`visla_edu.camera.stereo_matrix` for the simulator's rig, a KITTI-like one
+    and random ones (hidden: random ones only). Hides ``camera.stereo_matrix``.
 
     Parameters
     ----------
     stereo_matrix : callable
-        The student's function: intrinsics ``K`` (3, 3) and baseline ``b`` (m) to the stereo
-        matrix ``Ks`` (4, 4).
+        Intrinsics ``K`` (3, 3) and the baseline ``b`` (m) to the stereo matrix.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "stereo_matrix"
     call = student(stereo_matrix, name, hide=[cam.stereo_matrix])
@@ -78,22 +75,18 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
 def check_project(project, hidden=False):
     """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``.
 
-    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
-    (hidden: 5), 12 points in view at depths of 2 to 60 m (up to 300 m at the fourth pose;
-    hidden: a single point at the second); compares with
-    :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``, ``atol=1e-6`` px). Recognises
-    ``world_T_imu`` used without its inverse, ``imu_T_cam`` for ``cam_T_imu``, a division by
-    ``q4`` and a transposed rotation. Hides ``StereoCamera.predict``, ``predict_with_jacobians``
-    and ``points_in_camera``, and the same computation in ``capstone.library_parts()`` and
-    ``camera.stereo_projection`` / ``camera.project_points`` (the smoother's reprojection).
+    Compares with :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``, ``atol=1e-6`` px)
+    at the identity and random poses, for points in view from 2 m to 300 m. Hides the
+    ``StereoCamera`` methods ``predict``, ``predict_with_jacobians`` and ``points_in_camera``,
+    ``camera.stereo_projection``, ``camera.project_points`` and the ``project`` of
+    ``capstone.library_parts()``.
 
     Parameters
     ----------
     project : callable
-        The student's function: stereo matrix ``Ks`` (4, 4), ``cam_T_imu`` (4, 4),
-        ``world_T_imu`` (4, 4) and world points (M, 3) to pixels ``[uL, vL, uR, vR]`` (M, 4).
+        ``Ks``, ``cam_T_imu``, ``world_T_imu`` (4, 4 each) and world points to ``[uL, vL, uR, vR]``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "project"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -118,19 +111,16 @@ def check_project(project, hidden=False):
 def check_triangulate(triangulate, hidden=False):
     """Exercise 02: ``triangulate(z (M, 4), K, b) -> (M, 3)`` points in the left camera (disparity form).
 
-    For the calibrations of :func:`check_stereo_matrix`, 10 points at depths of 1.5 to 120 m
-    (hidden: up to 400 m) whose exact pixels are given; compares with the true points
-    (``rtol=atol=1e-6``). Recognises a flipped disparity, a wrong focal length or unit for the
-    depth, x and y not scaled by the depth, and ``fsu`` used for y. Hides
+    From the exact pixels of points at 1.5 to 120 m (hidden: to 400 m), for the calibrations of
+    :func:`check_stereo_matrix`; compares with the true points (``rtol=atol=1e-6``). Hides
     ``camera.triangulate_disparity`` and ``camera.triangulate_bearing``.
 
     Parameters
     ----------
     triangulate : callable
-        The student's function: pixels ``z`` (M, 4), intrinsics ``K`` (3, 3) and baseline ``b`` (m)
-        to points in the left camera frame (M, 3).
+        Pixels ``[uL, vL, uR, vR]``, intrinsics ``K`` (3, 3) and the baseline ``b`` (m).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "triangulate"
     generator = rng(hidden)
@@ -173,20 +163,17 @@ def _init_variants(p_cam, imu_T_cam, T):
 def check_init_landmark(init_landmark, hidden=False):
     """Exercise 05: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point.
 
-    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
-    (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m) observed without noise;
-    compares with the true landmark (``rtol=atol=1e-6``). Recognises a point left in the camera
-    or IMU frame, ``cam_T_imu`` or ``inv(world_T_imu)`` used, and a transposed rotation. Hides
+    From one noise-free observation of a landmark at 2 to 60 m (hidden: to 200 m), at the identity
+    and random poses; compares with the true landmark (``rtol=atol=1e-6``). Hides
     ``StereoCamera.triangulate``, ``ekf.initialize_landmarks`` and the ``init_landmark`` of
     ``capstone.library_parts()``.
 
     Parameters
     ----------
     init_landmark : callable
-        The student's function: one observation ``z`` (4,), ``K`` (3, 3), ``b`` (m),
-        ``imu_T_cam`` (4, 4) and ``world_T_imu`` (4, 4) to the landmark in the world frame (3,).
+        One observation, ``K`` (3, 3), the baseline ``b`` (m), ``imu_T_cam`` and ``world_T_imu``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "init_landmark"
     generator, (K, b, imu_T_cam), camera = rng(hidden), rig(hidden), stereo_camera(hidden)

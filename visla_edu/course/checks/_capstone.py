@@ -1,10 +1,10 @@
 """Checks of notebook 12 (the capstone): the three assembly functions and the loops they drive.
 
-Each check first tests the student's function on random states (naming the usual mistakes),
-with spy parts that record which of the notebooks' functions it calls (the assembly must go
-through ``parts``), then runs :class:`visla_edu.course.capstone.CapstoneFilter` on a fixed
-simulated drive (the hidden cases: another seed) with the student's function in place and
-compares the trajectory with the reference (for SLAM: the library's ``slam_error="right"``
+Each check tests the student's function on random states through spy parts that record which
+of the notebooks' functions it calls (the assembly must go through ``parts``). ``predict`` and
+``slam_update`` then drive :func:`visla_edu.course.capstone.run_capstone` on ``sim-tiny``
+(hidden: a ``"tiny"`` drive of another seed): every position must stay within
+:data:`LOOP_TOLERANCE` of the reference's (for SLAM: the library's ``slam_error="right"``
 joint filter, which a correct assembly reproduces to rounding error).
 """
 
@@ -91,8 +91,8 @@ REFERENCE = capstone.Steps(_reference_predict, _reference_add_landmarks, _refere
 def reference_capstone_steps():
     """The checks' reference assembly as :class:`visla_edu.course.capstone.Steps` (nothing printed).
 
-    Notebook 07 runs the capstone's VIO loop with the student's ``pose_update`` before the
-    capstone's own exercises exist; the loop's prediction is this reference.
+    Notebook 07 runs the capstone's VIO loop with it and the student's ``pose_update``, before the
+    capstone's exercises exist.
 
     Returns
     -------
@@ -125,10 +125,7 @@ class _Spy:
 
 
 def _drive(hidden):
-    """The fixed simulated drive of the loop checks (hidden: another seed) and its resolved config.
-
-    The hidden drive uses the settings measured on the visible one (same simulator, same noise).
-    """
+    """The drive of the loop checks (hidden: another seed) and its config, resolved on the visible one (same noise)."""
     from visla_edu import data, simulate
 
     visible = data.load("sim-tiny")
@@ -185,30 +182,18 @@ _PREDICT_HIDDEN = (motion.predict_pose, motion.predict_pose_covariance, motion.p
 def check_capstone_predict(predict, hidden=False):
     """Exercise 12.1: ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W) -> (world_T_imu, Sigma)``.
 
-    Then the VIO loop (``parts.pose_update`` with the student's prediction) on a simulated drive.
-
-    First on random states with 0 and 2 landmarks (hidden: 0, 3 and 1), a random ``u``,
-    ``tau = 0.1`` s and a random diagonal ``W``: the result must be a tuple, and is compared
-    with ``(world_T_imu @ parts.se3_exp(tau u), Sigma')`` where ``Sigma'`` has the pose rows
-    and columns moved by ``F = parts.pose_transition(u, tau)`` and ``W`` added to the pose
-    block (``rtol=1e-9``; ``atol=1e-9`` for the pose, 1e-12 for the covariance). Recognises the
-    step on the left, a twist not scaled by ``tau``, a missing ``W``, the cross-covariance left
-    alone and ``F`` on the wrong side. The function must call ``parts.pose_transition`` and
-    ``parts.se3_exp``. Then :func:`visla_edu.course.capstone.run_capstone` (VIO) on ``sim-tiny``
-    (hidden: a ``"tiny"`` drive simulated with another seed) with the student's ``predict``:
-    every position must stay within :data:`LOOP_TOLERANCE` of the same loop with the
-    reference assembly. Hides the library's ``motion.predict_pose``,
-    ``predict_pose_covariance``, ``predict_joint_covariance``, ``imu_step`` and the
-    reference's ``predict``.
+    A tuple equal to ``(world_T_imu @ parts.se3_exp(tau u), Sigma')``, ``Sigma'`` with the pose rows
+    and columns moved by ``F = parts.pose_transition(u, tau)`` and ``W`` added to the pose block
+    (``rtol=1e-9``; ``atol=1e-9`` for the pose, 1e-12 for the covariance), through those two
+    parts; then the VIO loop (``parts.pose_update``). Hides ``motion.predict_pose``,
+    ``predict_pose_covariance``, ``predict_joint_covariance``, ``imu_step`` and the reference's.
 
     Parameters
     ----------
     predict : callable
-        The student's function: ``parts``, the pose ``world_T_imu`` (4, 4), the joint covariance
-        ``Sigma`` (D, D), the twist ``u = [v; w]`` (6,), the step ``tau`` (s) and the motion noise
-        ``W`` (6, 6) to the predicted pair.
+        ``parts``, the pose mean, the joint covariance, the twist ``[v; w]``, ``tau`` (s) and ``W``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "predict"
     generator, spy = rng(hidden), _Spy()
@@ -279,27 +264,19 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
     """Exercise 12.2: ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
     -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``.
 
-    With the simulator's rig (hidden: another one), for 3 states (``n`` landmarks in the state,
-    ``k`` new ones): (0, 2), (3, 1) and (2, 3) (hidden: (0, 1), (4, 3) and (1, 2)), the new
-    observations with 0.5 px noise. The result must be a tuple; the means must be
-    ``parts.init_landmark`` of each observation and the covariance ``Sigma`` augmented with the
-    new block ``G Sigma_pp G^T + C_pixels`` (one (3k, 3k) block) and the cross-covariance ``G
-    Sigma_px``, where ``G = (world_T_imu @ parts.odot(s))[:3]`` for the new point ``s`` in the
-    IMU frame (``rtol=1e-8``; ``atol=1e-8`` for the means, 1e-12 for the covariance). Recognises
-    the means not triangulated at ``world_T_imu``, a missing cross-covariance, independent new
-    landmarks, the left perturbation's or an unrotated ``G``, and a missing pixel or pose part.
-    The function must call ``parts.init_landmark`` and ``parts.odot``. No loop is run. Hides
-    ``ekf.initialize_landmarks`` and the reference's helpers.
+    A tuple: the means ``parts.init_landmark`` of each observation and ``Sigma`` augmented with the
+    new block ``G Sigma_pp G^T + C_pixels`` (one (3k, 3k) block) and the cross-covariance
+    ``G Sigma_px``, ``G = (world_T_imu @ parts.odot(s))[:3]`` for the new point ``s`` in the IMU
+    frame (``rtol=1e-8``; ``atol=1e-8`` for the means, 1e-12 for the covariance), through those
+    two parts. No loop is run. Hides ``ekf.initialize_landmarks`` and the reference's helpers.
 
     Parameters
     ----------
     add_landmarks : callable
-        The student's function: ``parts``, ``world_T_imu`` (4, 4), the joint covariance
-        ``Sigma`` (D, D), the new observations ``z`` (k, 4), ``K`` (3, 3), ``b`` (m),
-        ``imu_T_cam`` (4, 4) and the pixel part of the new covariances ``C_pixels`` (k, 3, 3) to
-        the new means and the augmented covariance.
+        ``parts``, the pose mean, the joint covariance, the new observations, ``K``, ``b`` (m),
+        ``imu_T_cam`` and the new covariances' pixel part.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "add_landmarks"
     generator, spy = rng(hidden), _Spy()
@@ -346,32 +323,21 @@ def check_capstone_slam(slam_update, hidden=False):
     """Exercise 12.3: ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks,
     cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``.
 
-    Then the joint SLAM loop with it, against the library's ``slam_error="right"`` filter.
-
-    With the simulator's rig (hidden: another one), for states of 4 landmarks with 2 observed
-    and 6 with all 6 observed (hidden: 2 of 5, 1 of 1 and 5 of 8), ``noise_var = 4``. The result
-    must be a tuple of three; compared with the joint EKF update through ``parts`` (``H`` from
+    A tuple of three equal to the joint EKF update through ``parts`` (``H`` from
     ``parts.slam_jacobian``, ``L = Sigma H^T S^-1``, the pose corrected on the right by
     ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - L H) Sigma``
-    symmetrised): pose ``rtol=1e-7``, ``atol=1e-8``; covariance ``rtol=1e-6``, ``atol=1e-10``;
-    landmarks ``rtol=1e-7``, ``atol=1e-8``. Recognises the correction on the left, its sign, a
-    covariance that does not change, and the landmarks left in place. The function must call
-    ``parts.project``, ``parts.pose_jacobian``, ``parts.landmark_jacobian``,
-    ``parts.slam_jacobian`` and ``parts.se3_exp``. Then :func:`visla_edu.course.capstone.run_capstone`
-    (joint SLAM) on the drive of :func:`check_capstone_predict` must stay within
-    :data:`LOOP_TOLERANCE` of ``run.run_filter(ds, "slam", config)`` with
-    ``slam_error="right"``. Hides the library's joint and pose updates, the camera's Jacobians
-    and the reference's update.
+    symmetrised; pose and landmarks ``rtol=1e-7``, ``atol=1e-8``, covariance ``rtol=1e-6``,
+    ``atol=1e-10``), using ``parts.project``, ``pose_jacobian`` and ``landmark_jacobian`` too;
+    then the SLAM loop against ``run.run_filter(ds, "slam", config)``. Hides the library's joint
+    and pose updates, the camera's Jacobians and the reference's update.
 
     Parameters
     ----------
     slam_update : callable
-        The student's function: ``parts``, ``world_T_imu`` (4, 4), the joint covariance
-        ``Sigma`` (6 + 3n, 6 + 3n), the landmark means in slot order ``p_active`` (n, 3), the
-        slots of the observed landmarks (k,), their observations ``z`` (k, 4), ``Ks`` (4, 4),
-        ``cam_T_imu`` (4, 4) and the pixel noise variance to the updated triple.
+        ``parts``, the pose mean, the joint covariance, the landmark means in slot order, the slots
+        and observations of the observed ones, ``Ks``, ``cam_T_imu`` and the pixel variance (px^2).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "slam_update"
     generator, spy = rng(hidden), _Spy()
@@ -420,24 +386,19 @@ def _check_slam_loop(name, call, hidden):
 def capstone_steps(predict, add_landmarks, slam_update):
     """:class:`visla_edu.course.capstone.Steps` of the student's functions, the reference for any unfinished one.
 
-    A function is used if it runs and agrees with the reference on a small case (one line is
-    printed per function), so the notebook's later cells run before every exercise is done.
-
-    Each function is called once, with the library's parts and nothing hidden, on a fixed
-    probe (seed 9: a state of 3 landmarks, 2 of them observed, and 2 new observations); it
-    agrees when each of its outputs is ``numpy.allclose`` to the reference's (``rtol=1e-6``,
-    ``atol=1e-8``). Any exception counts as disagreement.
+    So that the notebook's later cells run before every exercise is done (one line printed per
+    function). Each is called once, with the library's parts and nothing hidden, on a fixed probe
+    (seed 9: 3 landmarks, 2 observed, and 2 new observations) and used if it runs (no exception)
+    and each output is ``numpy.allclose`` to the reference's (``rtol=1e-6``, ``atol=1e-8``).
 
     Parameters
     ----------
     predict, add_landmarks, slam_update : callable
-        The student's assembly functions, with the signatures of
-        :class:`visla_edu.course.capstone.Steps`.
+        The student's assembly functions (signatures of :class:`visla_edu.course.capstone.Steps`).
 
     Returns
     -------
     visla_edu.course.capstone.Steps
-        Each student function that agrees, else the checks' reference assembly for it.
     """
     generator, library = np.random.default_rng(9), capstone.library_parts()
     c, T, Sigma, p_active, slots, z = _slam_case(generator, 3, 2)

@@ -13,20 +13,16 @@ __all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds", "che
 def check_motion_noise(motion_noise, hidden=False):
     """Exercise 10: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``.
 
-    ``W = tau^2 diag(sigma_v^2, sigma_v^2, sigma_v^2, sigma_w^2, sigma_w^2, sigma_w^2)``:
-    compares with :func:`visla_edu.motion.motion_noise` (``rtol=1e-9``, ``atol=1e-15``) for 3
-    fixed ``(tau, sigma_v, sigma_w)`` (hidden: 4 edge cases, zero sigmas among them, and 3
-    random ones), each sigma one number. Recognises the angular variances first, a missing
-    ``tau^2``, ``tau`` instead of ``tau^2``, and standard deviations instead of variances.
-    Hides ``motion.motion_noise``.
+    ``W = tau^2 diag(sigma_v^2 I3, sigma_w^2 I3)``, each sigma one number: compares with
+    :func:`visla_edu.motion.motion_noise` (``rtol=1e-9``, ``atol=1e-15``) for fixed cases (hidden:
+    edge cases, zero sigmas among them, and random ones). Hides ``motion.motion_noise``.
 
     Parameters
     ----------
     motion_noise : callable
-        The student's function: the step ``tau`` (s) and the velocity noise ``sigma_v`` (m/s)
-        and ``sigma_w`` (rad/s) to the twist noise covariance (6, 6).
+        The step ``tau`` (s) and the velocity noise ``sigma_v`` (m/s) and ``sigma_w`` (rad/s).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "motion_noise"
     cases = [(0.1, 0.5, 0.02), (0.104, 1.0, 0.05), (0.5, 0.2, 0.3)]
@@ -55,18 +51,15 @@ def check_motion_noise(motion_noise, hidden=False):
 def check_nees(nees, hidden=False):
     """Exercise 10: ``nees(error (n,), cov (n, n)) -> float`` = ``e^T cov^-1 e``.
 
-    For random errors of dimension 3, 6 and 6 (hidden: 1, 4, 6 and 15) drawn from random
-    covariances; the result must be one number (an array of one entry fails). Compares with
-    :func:`visla_edu.metrics.nees` (``rtol=1e-7``). Recognises ``e^T cov e``, the square root,
-    a division by ``n`` and ``e^T e``. Hides ``metrics.nees`` and ``ekf.mahalanobis_squared``.
+    For errors drawn from random covariances; the result must be one number (an array of one entry
+    fails). Compares with :func:`visla_edu.metrics.nees` (``rtol=1e-7``). Hides ``metrics.nees``
+    and ``ekf.mahalanobis_squared``.
 
     Parameters
     ----------
     nees : callable
-        The student's function: an error ``e`` (n,) and its covariance (n, n) to the normalised
-        estimation error squared.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "nees"
     generator = rng(hidden)
@@ -92,19 +85,16 @@ def check_nees(nees, hidden=False):
 def check_average_nees_bounds(average_nees_bounds, hidden=False):
     """Exercise 10: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES.
 
-    The two-sided chi-square quantiles of ``n dof`` degrees of freedom at ``(1 - p) / 2`` and
-    ``1 - (1 - p) / 2``, divided by ``n``: compares (``rtol=1e-6``) for 4 fixed ``(dof, n, p)``
-    (hidden: 3 edge cases and 3 random ones); the result must have 2 entries. Recognises the
-    quantiles of ``dof`` degrees of freedom, quantiles not divided by ``n``, and a one-sided
-    split. Hides ``metrics.average_nees_bounds`` and ``metrics.chi2_bounds``.
+    The chi-square quantiles of ``n dof`` degrees of freedom at ``(1 - p) / 2`` and
+    ``1 - (1 - p) / 2``, divided by ``n``: compares both (``rtol=1e-6``). Hides
+    ``metrics.average_nees_bounds`` and ``metrics.chi2_bounds``.
 
     Parameters
     ----------
     average_nees_bounds : callable
-        The student's function: the degrees of freedom of one NEES, the number ``n`` of values
-        averaged and the probability ``p`` to the bounds ``(lo, hi)``.
+        One NEES's degrees of freedom, the number of values averaged and the probability.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "average_nees_bounds"
     cases = [(6, 1, 0.95), (6, 50, 0.95), (4, 200, 0.99), (3, 10, 0.9)]
@@ -168,21 +158,16 @@ def _gate_variants(r, S, probability):
 def check_gate(gate, hidden=False):
     """Exercise 11: ``gate(innovations (k, 4), S (k, 4, 4), probability) -> (k,) bool``, inside the gate.
 
-    ``r_i^T S_i^-1 r_i <= chi2.ppf(probability, 4)`` for each observation. On 2 batches (50 and 30
-    observations, probabilities 0.99 and 0.95; hidden: 3 other batches) of random innovation
-    covariances with squared distances spread from 0 to 2.5 times the threshold; compares with
-    :func:`visla_edu.ekf.mahalanobis_squared` and :func:`visla_edu.metrics.chi2_quantile` (the
-    masks must agree exactly). Recognises the quantile at ``1 - p``, the distance not squared,
-    ``S`` not inverted, 2 degrees of freedom, the rejected ones returned, and ``|r|^2``. Hides
-    :func:`visla_edu.ekf.mahalanobis_squared`.
+    ``r_i^T S_i^-1 r_i <= chi2.ppf(probability, 4)`` per observation: the mask must equal the
+    library's (:func:`visla_edu.ekf.mahalanobis_squared`, :func:`visla_edu.metrics.chi2_quantile`)
+    exactly. Hides :func:`visla_edu.ekf.mahalanobis_squared`.
 
     Parameters
     ----------
     gate : callable
-        The student's function: innovations ``z - z_pred`` (k, 4), their covariances (k, 4, 4)
-        and the gate probability to a boolean mask (k,), True for the observations to use.
+        Innovations ``z - z_pred`` (px), their covariances and the probability; True: use it.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "gate"
     call = student(gate, name, hide=[ekf.mahalanobis_squared])
@@ -248,22 +233,18 @@ def _align_cases(generator, hidden):
 def check_align_rigid(align_rigid, hidden=False):
     """Exercise 11: ``align_rigid(p_est (N, 3), p_gt (N, 3)) -> gt_T_est (4, 4)``, the best rigid alignment.
 
-    The rotation ``R`` and translation ``p`` minimising ``sum |p_gt - (R p_est + p)|^2`` (Kabsch,
-    no scale): ``R = Q diag(1, 1, det(Q U^T)) U^T`` from ``U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt -
-    c_gt)^T)`` and ``p = c_gt - R c_est``. On 2 noisy drives moved by a random rigid motion (200 and
-    12 positions; hidden: 300, 40 and 8) and on a flat set of points compared with its mirror image
-    (the SVD then gives a reflection); compares with :func:`visla_edu.metrics.align_se3`
-    (``rtol=1e-7``, ``atol=1e-8``). Recognises the transposed rotation, the reflection not fixed,
-    the centroid not rotated, the centroids not removed and the inverse transform. Hides
-    :func:`visla_edu.metrics.align_se3` and :func:`visla_edu.metrics.ate`.
+    The ``R``, ``p`` minimising ``sum |p_gt - (R p_est + p)|^2`` (Kabsch, no scale):
+    ``R = Q diag(1, 1, det(Q U^T)) U^T`` from ``U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt -
+    c_gt)^T)`` and ``p = c_gt - R c_est``, also for flat points against their mirror image (an SVD
+    reflection); compares with :func:`visla_edu.metrics.align_se3` (``rtol=1e-7``, ``atol=1e-8``).
+    Hides it and :func:`visla_edu.metrics.ate`.
 
     Parameters
     ----------
     align_rigid : callable
-        The student's function: estimated and true positions (N, 3), row ``i`` the same frame, to
-        the pose ``gt_T_est`` (4, 4) that best maps the estimate onto the truth.
+        Estimated and true positions, row ``i`` the same frame.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "align_rigid"
     call = student(align_rigid, name, hide=[metrics.align_se3, metrics.ate])

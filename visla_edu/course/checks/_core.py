@@ -1,10 +1,8 @@
 """The machinery every check shares: calling the student's code, comparing, failure messages.
 
-A failure is an ``AssertionError`` whose **first line** (at most 79 characters) names the
-mistake in its first words; the input, the explanation and the numbers follow on later lines,
-wrapped at 79 characters. (``nbgrader validate`` indents each line of a traceback by 4 and cuts
-it at 87 characters, ``AssertionError: `` included, so the later lines show whole and the first
-one shows its first 67 characters.)
+A failure message's first line has at most 79 characters, the later ones are wrapped at 79:
+``nbgrader validate`` indents each line of a traceback by 4 and cuts it at 87 characters,
+``AssertionError: `` included, so the later lines show whole and the first its first 67.
 """
 
 import functools
@@ -41,24 +39,11 @@ _DEFAULT_HIDDEN_SEED = 1827
 def exercise_check(check):
     """Decorator of the public checks: failures show the message, not the checks' own frames.
 
-    A failure found by a comparison is re-raised from the check itself, so a notebook (and
-    ``nbgrader validate``) shows the student's cell and the message, not the lines of the
-    checks. A crash of the student's code keeps its chained traceback (where it crashed).
-
-    Parameters
-    ----------
-    check : callable
-        ``check(fn, hidden=False)``, raising ``AssertionError`` or ``NotImplementedError`` when
-        the student's function ``fn`` fails.
-
-    Returns
-    -------
-    callable
-        ``run(fn, hidden=False)`` with ``check``'s name and docstring (:func:`functools.wraps`):
-        it returns what ``check`` returns; an ``AssertionError`` or ``NotImplementedError``
-        without a ``__cause__`` is raised again as a new exception of the same type, its message
-        wrapped by :func:`wrap_message` (``from None``); one with a cause, and any other
-        exception, propagates unchanged.
+    ``run(fn, hidden=False)`` (:func:`functools.wraps` of ``check``) raises an ``AssertionError`` or
+    ``NotImplementedError`` without a ``__cause__`` again from itself, with the message wrapped by
+    :func:`wrap_message` (``from None``), so a notebook shows the student's cell and the message;
+    one with a cause (a crash of the student's code, with its traceback) and any other exception
+    propagate unchanged.
     """
 
     @functools.wraps(check)
@@ -88,37 +73,16 @@ def _hidden_seed():
 
 
 def rng(hidden=False):
-    """The random generator of a check's visible (fixed seed) or hidden cases.
+    """The random generator (new at each call) of a check's visible or hidden cases.
 
-    Parameters
-    ----------
-    hidden : bool
-        False: seeded with :data:`SEED`. True: with the integer in the environment variable
-        :data:`HIDDEN_SEED_VARIABLE`, or a built-in hidden seed when it is unset or empty.
-
-    Returns
-    -------
-    numpy.random.Generator
-        A new generator, so every call starts the same sequence.
-
-    Raises
-    ------
-    ValueError
-        ``hidden`` is True and the environment variable is not a non-negative integer.
+    Seeded with :data:`SEED`, or if ``hidden`` with the integer in :data:`HIDDEN_SEED_VARIABLE`
+    (a built-in seed if it is unset or empty; ``ValueError`` if it is not a non-negative integer).
     """
     return np.random.default_rng(_hidden_seed() if hidden else SEED)
 
 
 def ok(message, hidden=False):
-    """Print the success line of a check (hidden cases pass silently).
-
-    Parameters
-    ----------
-    message : str
-        What passed; printed after a check mark, ``"\u2713 {message}"``.
-    hidden : bool
-        True prints nothing.
-    """
+    """Print the success line ``"\u2713 {message}"`` of a check; nothing if ``hidden``."""
     if not hidden:
         print(f"\u2713 {message}")
 
@@ -126,17 +90,8 @@ def ok(message, hidden=False):
 def fmt(x):
     """Short text for an input in a failure message.
 
-    Parameters
-    ----------
-    x : object
-        A function, a number, an array or anything else.
-
-    Returns
-    -------
-    str
-        A function's ``__name__`` (or ``"a function"``), the ``repr`` of a non-numeric value,
-        the values of an array of at most 8 entries on one line (6 digits), else
-        ``"an array of shape (...)"``.
+    A function's ``__name__`` (or ``"a function"``), the ``repr`` of a non-numeric value, an
+    array's values on one line (6 digits) if it has at most 8, else ``"an array of shape (...)"``.
     """
     if callable(x):
         return getattr(x, "__name__", "a function")
@@ -162,16 +117,7 @@ def _split_first_line(text):
 def wrap_message(text):
     """``text`` with its first line at most 79 characters and every later line wrapped at 79.
 
-    The shape of every failure message (see the module docstring); a message already in that
-    shape is returned unchanged.
-
-    Parameters
-    ----------
-    text : str
-
-    Returns
-    -------
-    str
+    A message already in that shape is returned unchanged.
     """
     first, rest = _split_first_line(text)
     lines = [first]
@@ -182,21 +128,11 @@ def wrap_message(text):
 
 
 def fail(name, hint, *details):
-    """An ``AssertionError``: ``"{name}: {first line of hint}"``, then the details.
+    """An ``AssertionError`` (to be raised): ``"{name}: {first line of hint}"``, then the details.
 
-    Parameters
-    ----------
-    name : str
-        The student's function ("" if ``hint`` names it already).
-    hint : str
-        First line: the mistake in a few words; later lines: the explanation.
-    details : str
-        Further lines (the input, expected and actual values...); empty ones are skipped.
-
-    Returns
-    -------
-    AssertionError
-        To be raised by the caller.
+    ``name`` is the student's function ("" if ``hint`` names it already); ``hint``'s first line is
+    the mistake in a few words, its later lines the explanation; ``details`` are further lines (the
+    input, expected and actual values...), empty ones skipped. Wrapped as by :func:`wrap_message`.
     """
     first, rest = _split_first_line(f"{name}: {hint}" if name else hint)
     lines = [first]
@@ -208,10 +144,7 @@ def fail(name, hint, *details):
 
 
 def _materialize(out, name):
-    """The student's output as plain float arrays (tuples stay tuples), computed now.
-
-    Converting inside the guarded call means a lazy object cannot call the library later.
-    """
+    """The student's output as float arrays (tuples stay tuples), converted while guarded: nothing lazy runs later."""
     if isinstance(out, tuple):
         return tuple(_materialize(item, name) for item in out)
     try:
@@ -225,11 +158,7 @@ def _materialize(out, name):
 
 
 def _float64(arr, name):
-    """``arr`` as float64, or a failure if it is complex (not rounding noise) or single precision.
-
-    ``np.array(out, dtype=float)`` alone would drop imaginary parts (with a warning only) and
-    would hide that a float32 result kept 7 digits, which the checks then blame on the math.
-    """
+    """``arr`` as float64, failing if complex (beyond rounding) or single precision, which ``dtype=float`` hides."""
     if arr.dtype.kind in "fc" and np.finfo(arr.dtype).eps > np.finfo(float).eps:
         raise fail(name, f"the result is {arr.dtype} (single precision): compute in float64",
                    f"{arr.dtype} keeps about {np.finfo(arr.dtype).precision} digits; the checks compare "
@@ -245,11 +174,7 @@ def _float64(arr, name):
 
 
 def _raised_elsewhere(fn, err):
-    """Name of the function that raised ``err``, if it is not ``fn`` itself (else None).
-
-    A student's answer that calls another of their functions still a stub (``pose_jacobian``
-    calling their unfinished ``odot``) is not itself unfinished: the message must name the stub.
-    """
+    """Name of the function that raised ``err`` if not ``fn`` (a stub that ``fn`` calls), else None."""
     code = getattr(getattr(fn, "__func__", fn), "__code__", None)
     tb = err.__traceback__
     if code is None or tb is None:
@@ -295,12 +220,7 @@ class _Student:
 
 
 def _private_copy(value):
-    """``value`` with every array (also inside tuples, lists and dicts) copied.
-
-    The student's function gets its own copies: code that updates its inputs in place
-    (``m += K @ r``) is then judged by its result, and the check's reference, computed from the
-    same inputs afterwards, is not changed under it.
-    """
+    """``value`` with its arrays copied (also in tuples, lists, dicts): in-place updates leave the reference alone."""
     if isinstance(value, np.ndarray):
         return value.copy()
     if isinstance(value, tuple) and hasattr(value, "_fields"):  # a namedtuple
@@ -319,40 +239,17 @@ def _shown(args):
 def student(fn, name, hide=()):
     """Wrap the student's ``fn``: calls hide ``hide`` (library functions) and guard the library.
 
-    Returns
-    -------
-    callable
-        Same arguments as ``fn``; returns its output as float arrays; raises
-        ``NotImplementedError`` for a stub and ``AssertionError`` (a short first line) for a
-        crash, a call to a hidden function or a change to visla_edu.
+    The wrapper takes ``fn``'s arguments (and copies them), returns its output as float arrays,
+    and raises ``NotImplementedError`` for a stub and ``AssertionError`` for a crash, a call to a
+    hidden function or a change to visla_edu.
     """
     return _Student(fn, name, hide)
 
 
 def as_array(out, name, shape, what="result"):
-    """The student's output as a float array of the expected shape, or a failure with a hint.
+    """``out`` as a float array of ``shape``, or a failure naming ``name`` and ``what`` (e.g. ``"pose"``).
 
-    Parameters
-    ----------
-    out : array_like
-        The student's output.
-    name : str
-        The student's function, first word of a failure.
-    shape : tuple of int
-        The expected shape.
-    what : str
-        What ``out`` is, for the message (e.g. ``"pose"``, ``"covariance"``).
-
-    Returns
-    -------
-    ndarray, shape ``shape``
-        ``out`` as float.
-
-    Raises
-    ------
-    AssertionError
-        ``out`` is not numeric, or has another shape (the hint says when it is the transpose,
-        or has the right number of entries).
+    Its hint says when ``out`` is not numeric, is the transpose or has the right number of entries.
     """
     try:
         arr = np.asarray(out, dtype=float)
@@ -371,27 +268,7 @@ def as_array(out, name, shape, what="result"):
 
 
 def close(a, b, rtol, atol):
-    """True if ``a`` and ``b`` have one shape and agree (NaN equal to NaN).
-
-    Agreement is ``numpy.allclose``: ``|a - b| <= atol + rtol |b|`` entry by entry.
-
-    Parameters
-    ----------
-    a, b : array_like
-        Converted to float arrays.
-    rtol, atol : float
-        Relative and absolute tolerance.
-
-    Returns
-    -------
-    bool
-        False when the shapes differ (no broadcasting).
-
-    Raises
-    ------
-    TypeError, ValueError
-        ``a`` or ``b`` cannot be converted to a float array.
-    """
+    """True if ``a`` and ``b`` have one shape and ``|a - b| <= atol + rtol |b|`` (NaN equal to NaN)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=rtol, atol=atol, equal_nan=True))
 
@@ -406,12 +283,9 @@ def _distance(a, b):
 
 
 def _matching_variant(got, variants, rtol, atol, expected=None):
-    """The hint of the deliberate mistake whose output equals ``got`` (or None).
+    """The hint of the variant closest to ``got`` among those matching it, or None (see :func:`compare`).
 
-    Where several mistakes nearly coincide (at a tiny angle ``R^T``, ``V^T v`` and ``v`` are all
-    within the matching tolerance of one another and of the right answer), the first match is
-    not the mistake: the variant closest to ``got`` wins (the first of equally close ones), and
-    only if ``got`` is closer to it than to ``expected``.
+    Not the first: at a tiny angle ``R^T``, ``V^T v`` and ``v`` all match each other and the answer.
     """
     best, best_distance = None, np.inf
     for hint, variant in variants:
@@ -431,41 +305,30 @@ def _matching_variant(got, variants, rtol, atol, expected=None):
 def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_hint="", extra=None):
     """Fail with the most specific message if ``got`` differs from ``expected``.
 
-    The checks, in order: ``got`` agrees with ``expected`` (:func:`close`: same shape,
-    ``|got - expected| <= atol + rtol |expected|``, NaN equal to NaN), then NaN or inf where
-    ``expected`` is finite, then the variants, then ``extra``; else the message shows both
-    arrays.
+    In order: ``got`` agrees (:func:`close`) and nothing happens; NaN or inf where ``expected`` is
+    finite; a matching variant; ``extra``; else the message shows both arrays.
 
     Parameters
     ----------
-    name : str
-        The student's function, first word of the message.
-    got : array_like
-        The student's output (numeric).
-    expected : array_like
-        The reference output.
-    where : str
-        The input, e.g. ``"for w = [1, 2, 3]"`` (second line of the message).
+    name, where : str
+        The message's first word (the student's function) and its second line (the input).
+    got, expected : array_like
+        The student's output (numeric) and the reference.
     variants : sequence of (hint, callable)
-        Each callable returns the output of one deliberate mistake on the same input; a
-        variant that matches ``got`` names the mistake (of several, the closest to ``got``,
-        and only if ``got`` is closer to it than to ``expected``). A hint's first line is
-        short. A variant that raises is skipped; the match uses at least ``rtol = 1e-6`` and
-        ``atol = 1e-8``.
-    rtol : float
-        Relative tolerance of the agreement.
-    atol : float
-        Absolute tolerance of the agreement.
+        Each callable returns the output of one deliberate mistake on the same input (one that
+        raises is skipped). Of those matching ``got`` to at least ``rtol = 1e-6``, ``atol = 1e-8``,
+        the closest names the mistake, if ``got`` is closer to it than to ``expected``. A hint's
+        first line is short.
+    rtol, atol : float
     nan_hint : str
         Hint when ``got`` has NaN or inf and ``expected`` has not.
     extra : callable, optional
-        ``extra(got)`` returns a hint (or "") for mistakes found by a property of the
-        output (e.g. "not a rotation").
+        ``extra(got)`` returns a hint (or "") from a property of the output (e.g. "not a rotation").
 
     Raises
     ------
     AssertionError
-        ``got`` differs from ``expected``; nothing happens when they agree.
+        ``got`` differs from ``expected``.
     """
     if close(got, expected, rtol, atol):
         return
@@ -491,20 +354,16 @@ def _close_nested(got, expected, rtol=1e-5, atol=1e-7):
 def student_or_reference(student_fn, reference_fn, *probe_args, name=None):
     """The student's function if it runs on ``probe_args`` and agrees with the reference.
 
-    Later cells of a notebook use this so that an unfinished exercise never blocks them.
-    It prints which function it uses: ``"using your {name}"``, or ``"using the library's
-    {name} (yours is not finished or disagrees)"``.
+    So that an unfinished exercise never blocks a notebook's later cells. Prints ``"using your
+    {name}"``, or ``"using the library's {name} (yours is not finished or disagrees)"``.
 
     Parameters
     ----------
-    student_fn : callable
-        The student's function.
-    reference_fn : callable
-        The library's version, same arguments and outputs.
+    student_fn, reference_fn : callable
+        The student's function and the library's, with the same arguments and outputs.
     *probe_args
         One input for both; the outputs (arrays, or tuples and lists of them) must agree to
-        ``rtol = 1e-5``, ``atol = 1e-7``. Any exception (e.g. ``NotImplementedError`` of a
-        stub) counts as disagreement.
+        ``rtol = 1e-5``, ``atol = 1e-7``. Any exception (e.g. a stub's) counts as disagreement.
     name : str, optional
         Shown in the printed line; default ``student_fn.__name__``.
 

@@ -70,21 +70,16 @@ def _check_frame(call, name, features, t):
 def check_observations_at(observations_at, hidden=False):
     """Exercise 00: ``observations_at(features, t) -> (ids (k,), z (k, 4))`` from dense features.
 
-    At every frame of a random dense array (4, 40, 25) with contiguous tracks, landmarks that
-    are never seen and an empty frame 5 (hidden: arrays of 60 landmarks x 30 frames, 1 x 8 and
-    12 x 1). The result must be a tuple; ``ids`` are the landmarks with
-    ``features[0, i, t] != -1``, increasing, and ``z[j] = features[:, ids[j], t]``. Recognises
-    all landmarks returned and the pixel columns out of order. Hides
-    :meth:`visla_edu.dataset.Dataset.observations`.
+    At every frame of random dense arrays (unseen landmarks, an empty frame among them): a tuple,
+    ``ids`` the landmarks with ``features[0, i, t] != -1``, increasing, and
+    ``z[j] = features[:, ids[j], t]``. Hides :meth:`visla_edu.dataset.Dataset.observations`.
 
     Parameters
     ----------
     observations_at : callable
-        The student's function: the dense course array ``features`` (4, M, T) (-1 where not
-        observed) and a frame index ``t`` to the observed landmark ids and their pixels
-        ``[uL, vL, uR, vR]``.
+        The dense course array (4, M, T) (:mod:`visla_edu.data`) and a frame index.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "observations_at"
     call = student(observations_at, name, hide=[Dataset.observations])
@@ -127,18 +122,15 @@ def _check_spans(call, name, features):
 def check_track_spans(track_spans, hidden=False):
     """Exercise 00: ``track_spans(features) -> (M, 2)`` first and last frame, -1 if never seen.
 
-    On the dense arrays of :func:`check_observations_at`; the result must equal ``[first,
-    last]`` (the last frame inclusive) of every landmark exactly, ``[-1, -1]`` for one never
-    seen. Recognises unseen landmarks not marked -1, a last frame one too far, and the columns
-    swapped. Hides :meth:`visla_edu.dataset.Dataset.track_spans`.
+    On the arrays of :func:`check_observations_at`, must equal ``[first, last]`` (inclusive) of
+    every landmark, ``[-1, -1]`` if never seen. Hides :meth:`visla_edu.dataset.Dataset.track_spans`.
 
     Parameters
     ----------
     track_spans : callable
-        The student's function: the dense course array ``features`` (4, M, T) to the first and
-        last frame (M, 2) of each landmark.
+        The dense course array (4, M, T) (:mod:`visla_edu.data`).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "track_spans"
     call = student(track_spans, name, hide=[Dataset.track_spans])

@@ -54,20 +54,16 @@ def _white_cases(generator, hidden):
 def check_white_noise(white_noise, hidden=False):
     """Exercise 04: ``white_noise(twists (T, 6)) -> (6,)``, the white noise of each velocity axis.
 
-    ``s = 1.4826 MAD(x[t+1] - 2 x[t] + x[t-1]) / sqrt(6)`` per axis, the MAD about the median: the
-    ``white`` part of :func:`visla_edu.diagnostics.imu_noise`. On 2 random records (400 and 150
-    samples; hidden: 3 others) of a smooth drive plus per-axis white noise and a few glitched
-    samples; compares with ``rtol=1e-9``. Recognises the standard deviation instead of the MAD,
-    ``sqrt(6)`` left out or replaced by 6, the 1.4826 left out and first differences. Hides
-    :func:`visla_edu.diagnostics.imu_noise`.
+    ``1.4826 MAD(x[t+1] - 2 x[t] + x[t-1]) / sqrt(6)`` per axis, the MAD about the median, on a
+    smooth drive plus white noise and a few glitches: compares with the ``white`` part of
+    :func:`visla_edu.diagnostics.imu_noise` (``rtol=1e-9``, ``atol=1e-12``), which it hides.
 
     Parameters
     ----------
     white_noise : callable
-        The student's function: velocity samples ``[v; w]`` (T, 6) to the standard deviation of
-        the white noise of each axis (6,).
+        Velocity samples ``[v; w]`` (m/s, rad/s).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "white_noise"
     call = student(white_noise, name, hide=[diagnostics.imu_noise])

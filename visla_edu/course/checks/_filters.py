@@ -80,24 +80,16 @@ def _pair(out, name, what):
 def check_landmark_update(landmark_update, hidden=False):
     """Exercise 05: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``.
 
-    With the simulator's rig (hidden: another one), 4 cases (hidden: 6): a random pose, a
-    landmark at 4 to 40 m observed with 2 px noise per coordinate, a prior mean 1 m off (normal)
-    and a random prior covariance; ``noise_var = 4`` (hidden: 1). Compares with
+    A landmark at 4 to 40 m seen with 2 px noise, a prior mean 1 m off: the tuple must agree with
     :func:`visla_edu.ekf.landmark_update` (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``,
-    ``atol=1e-8``). Recognises a flipped innovation, a mean or covariance that does not change,
-    ``(I + L H) Sigma``, the pixel noise missing from ``S`` or squared (``noise_var^2``) and
-    transposed rotations. Hides
-    ``ekf.landmark_update``, ``ekf.joint_update``, ``ekf.cholesky_update`` and
-    ``kalman.update``.
+    ``atol=1e-8``). Hides it, ``ekf.joint_update``, ``ekf.cholesky_update`` and ``kalman.update``.
 
     Parameters
     ----------
     landmark_update : callable
-        The student's function: landmark mean ``m`` (3,) and covariance ``Sigma`` (3, 3), one
-        observation ``z`` (4,), ``world_T_imu`` (4, 4), ``Ks`` (4, 4), ``cam_T_imu`` (4, 4) and the
-        pixel noise variance to the tuple ``(m_new (3,), Sigma_new (3, 3))``.
+        Mean (3,), covariance (3, 3), one observation (4,), the transforms and the variance (px^2).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -125,10 +117,9 @@ def check_landmark_update(landmark_update, hidden=False):
 
 def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_world=None, side="right", sign=1.0,
                       swap=False, order="C"):
-    """The visual pose update from its formula; ``imu_T_world`` replaces ``inv(mu)`` (for mistakes).
+    """The visual pose update from its formula (the reference); its keywords make the mistakes.
 
-    ``order="F"`` stacks the innovation column by column (all uL, then all vL, ...) while ``H``
-    stacks the observations one after the other: a mismatch (for mistakes).
+    ``order="F"`` stacks the innovation column by column (all uL first), unlike ``H``.
     """
     imu_T_world = lie.se3_inv(mu) if imu_T_world is None else imu_T_world
     s = np.c_[p_world, np.ones(len(p_world))] @ imu_T_world.T  # (k, 4) landmarks in the IMU frame
@@ -178,29 +169,19 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
 def check_pose_update(pose_update, hidden=False):
     """Exercise 07: ``pose_update(mu, Sigma, z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)``.
 
-    With the simulator's rig (hidden: another one), 3 cases (hidden: 5, the first with a single
-    observation): 8 landmarks in view at 4 to 40 m observed with 1 px noise, a random pose
-    covariance and a mean drawn from it around the true pose; ``noise_var`` 4, 1 and 9 (hidden:
-    then 2.25 and 0.25), so a function that ignores it fails. Compares with the EKF update
-    written out in the checks (``H`` stacked over the observations, ``L = Sigma H^T (H Sigma H^T
-    + noise_var I)^-1``, ``mu exp(L r)``, ``(I - L H) Sigma``; mean ``rtol=1e-6``,
-    ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``). Recognises the correction applied
-    on the left, its sign, a pose that does not move, the twist order, an innovation stacked
-    column by column (unlike ``H``), transposed rotations, a
-    noise variance other than ``noise_var`` (squared, its square root or a fixed 4), a result
-    that is not a pose and a covariance that does not change. Hides ``ekf.pose_update``,
-    ``ekf.joint_update``, ``ekf.cholesky_update``, ``kalman.update`` and the ``pose_update`` of
-    ``capstone.library_parts()``.
+    Compares with the update written out here (``H`` stacked over the observations, ``L = Sigma
+    H^T (H Sigma H^T + noise_var I)^-1``, ``mu exp(L r)``, ``(I - L H) Sigma``; mean ``rtol=1e-6``,
+    ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``), ``noise_var`` changing from case to
+    case. Hides ``ekf.pose_update``, ``ekf.joint_update``, ``ekf.cholesky_update``,
+    ``kalman.update`` and the ``pose_update`` of ``capstone.library_parts()``.
 
     Parameters
     ----------
     pose_update : callable
-        The student's function: pose mean ``mu`` (4, 4) and covariance ``Sigma`` (6, 6) of the
-        right perturbation ``[v; w]``, observations ``z`` (k, 4) of the known landmarks
-        ``p_world`` (k, 3), ``Ks``, ``cam_T_imu`` and the pixel noise variance to the tuple
-        ``(mu_new (4, 4), Sigma_new (6, 6))``.
+        Pose mean and right-perturbation covariance (6, 6), observations of known world points,
+        ``Ks``, ``cam_T_imu`` and the pixel noise variance (px^2).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -262,23 +243,16 @@ def _observation_noise_variants(J, Sigma, noise_var):
 def check_landmark_observation_noise(landmark_observation_noise, hidden=False):
     """Exercise 07: ``landmark_observation_noise(J_landmark (k, 4, 3), Sigma_landmark (k, 3, 3), noise_var) -> (k, 4, 4)``.
 
-    The noise of observation ``i`` of an uncertain landmark: ``noise_var I4 + H_i Sigma_i H_i^T``
-    (the pixel noise plus the landmark's uncertainty seen in the image). With landmark Jacobians
-    of the simulator's rig (hidden: another one) at random poses and random landmark covariances,
-    ``k`` = 5 and 2 (hidden: 1, 6, 3) and ``noise_var`` 1 and 4 (hidden: 2.25, 0.25, 4); compares
-    with :func:`visla_edu.ekf.innovation_covariances` (``rtol=1e-9``, ``atol=1e-12``). Recognises
-    the pixel noise alone (landmarks exact), the landmark part alone, ``noise_var`` squared or
-    square-rooted and the inverse of the landmark covariance. Hides
-    :func:`visla_edu.ekf.innovation_covariances` and :func:`visla_edu.ekf.pose_update`.
+    ``noise_var I4 + H_i Sigma_i H_i^T`` per observation, the pixel noise plus the landmark's
+    uncertainty seen in the image: compares with :func:`visla_edu.ekf.innovation_covariances`
+    (``rtol=1e-9``, ``atol=1e-12``). Hides it and :func:`visla_edu.ekf.pose_update`.
 
     Parameters
     ----------
     landmark_observation_noise : callable
-        The student's function: the landmark Jacobians of ``k`` observations (k, 4, 3), their
-        landmarks' covariances (k, 3, 3) and the pixel noise variance (px^2) to the noise
-        covariance of each observation (k, 4, 4).
+        Landmark Jacobians, the landmarks' covariances and the pixel noise variance (px^2).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "landmark_observation_noise"
     call = student(landmark_observation_noise, name, hide=[ekf.innovation_covariances, ekf.pose_update])
@@ -308,19 +282,16 @@ def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=
 def check_slam_jacobian(slam_jacobian, hidden=False):
     """Exercise 08: ``slam_jacobian(J_pose (k,4,6), J_landmark (k,4,3), slots (k,), n) -> H (4k, 6+3n)``.
 
-    For random blocks and 3 fixed ``(n, slots)`` cases (hidden: 3 others); ``H`` must equal
-    exactly the matrix with rows ``4 i .. 4 i + 3`` holding ``J_pose[i]`` in columns 0-5 and
-    ``J_landmark[i]`` in columns ``6 + 3 slots[i] .. 6 + 3 slots[i] + 2``, zero elsewhere.
-    Recognises the state ordered ``[landmarks; pose]`` and landmark columns without the
-    offset 6. Hides ``ekf.slot_columns`` and the ``slam_jacobian`` of ``capstone.library_parts()``.
+    ``H`` must equal exactly the matrix with rows ``4 i .. 4 i + 3`` holding ``J_pose[i]`` in
+    columns 0-5 and ``J_landmark[i]`` in columns ``6 + 3 slots[i] .. 6 + 3 slots[i] + 2``, zero
+    elsewhere. Hides ``ekf.slot_columns`` and the ``slam_jacobian`` of ``capstone.library_parts()``.
 
     Parameters
     ----------
     slam_jacobian : callable
-        The student's function: pose and landmark Jacobians of ``k`` observations, their slots in
-        the state and the number ``n`` of landmarks in the state to the joint Jacobian.
+        Pose and landmark Jacobians, the observed landmarks' slots and the landmarks in the state.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "slam_jacobian"
     generator = rng(hidden)
@@ -345,17 +316,14 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
 
 
 def reference_dense_covariance_bytes(num_landmarks, stride=1):
-    """Bytes of the dense float64 joint covariance of the pose and every ``stride``-th landmark.
+    """Bytes ``(6 + 3 n)^2 * 8`` of the dense float64 joint covariance, ``n = ceil(num_landmarks / stride)``.
 
-    ``(6 + 3 n)^2 * 8`` with ``n = ceil(num_landmarks / stride)``: notebook 09's fallback when
-    the exercise is not finished (hidden while its check runs the student's version).
+    Notebook 09's fallback when the exercise is not finished (hidden while its check runs).
 
     Parameters
     ----------
-    num_landmarks : int
-        M, the landmarks of the drive.
-    stride : int
-        Landmarks ``0, stride, 2 stride, ...`` are kept (positive).
+    num_landmarks, stride : int
+        M, the landmarks of the drive; landmarks ``0, stride, 2 stride, ...`` are kept.
 
     Returns
     -------
@@ -379,20 +347,15 @@ def reference_dense_covariance_bytes(num_landmarks, stride=1):
 def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
     """Exercise 09: ``dense_covariance_bytes(num_landmarks, stride=1) -> int`` for float64.
 
-    For 6 fixed ``(num_landmarks, stride)`` cases (hidden: 6 edge cases, 0 landmarks among
-    them, and 3 random ones); compares with :func:`reference_dense_covariance_bytes` to within
-    half a byte. Recognises the pose's 6 dimensions left out, 4-byte floats, a dimension not
-    squared, ``M // stride`` landmarks and one coordinate per landmark. Hides
-    :func:`reference_dense_covariance_bytes`. The success line prints the sizes for 5105 and
-    13289 landmarks.
+    Compares with :func:`reference_dense_covariance_bytes` (hidden) to within half a byte. The
+    success line prints the sizes for 5105 and 13289 landmarks.
 
     Parameters
     ----------
     dense_covariance_bytes : callable
-        The student's function: the number of landmarks and the stride to the bytes of the dense
-        joint covariance.
+        As :func:`reference_dense_covariance_bytes`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "dense_covariance_bytes"
     cases = [(5105, 1), (13289, 1), (5105, 10), (13289, 20), (7, 3), (1, 1)]
@@ -427,19 +390,14 @@ def _marginal_cases(hidden):
 def check_marginalize(marginalize, hidden=False):
     """Exercise 09: ``marginalize(Sigma (D, D), keep (indices)) -> Sigma[keep][:, keep]``.
 
-    For 3 random covariances and index sets (hidden: 4); compares with
-    ``Sigma[np.ix_(keep, keep)]`` (default tolerances of
-    :func:`~visla_edu.course.checks._core.compare`). Recognises the Schur complement (the conditional,
-    not the marginal) and a detour through the information matrix. Hides the ``marginalize`` of
-    ``capstone.library_parts()``.
+    Compares with ``Sigma[np.ix_(keep, keep)]`` for random covariances. Hides the ``marginalize``
+    of ``capstone.library_parts()``.
 
     Parameters
     ----------
     marginalize : callable
-        The student's function: a covariance (D, D) and the indices to keep (k,) to the marginal
-        covariance (k, k).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "marginalize"
     generator = rng(hidden)

@@ -1,17 +1,14 @@
 """What a check guards while it runs the student's code: hidden library functions, intact state.
 
-While a check calls the student's function:
-
-* the library's own version of the exercise (and the functions that would make it trivial)
-  is **hidden**: its ``__code__`` is swapped for a stub that raises
-  :class:`LibraryFunctionHidden`, so every alias fails alike (``lie.hat``,
-  ``visla_edu.lie.hat``, a ``from visla_edu.lie import hat`` binding, and every library
-  function that calls it); the real code comes back in a ``finally``;
-* the **library and the checks must stay as shipped**: before and after each call every
-  function of every loaded ``visla_edu`` module is checked to come from the package's files
-  (not from a notebook cell), and a module attribute the call reassigned (``importlib.reload``,
-  ``checks._core.compare = ...``) is put back and reported;
-* so must **what the checks' verdicts rest on**: numpy's and numpy.linalg's functions (an
+* The library's own version of the exercise (and the functions that would make it trivial)
+  is **hidden**: its ``__code__`` is swapped for a stub raising :class:`LibraryFunctionHidden`,
+  so every alias fails alike (``lie.hat``, ``visla_edu.lie.hat``, a ``from visla_edu.lie
+  import hat`` binding, every library function calling it); a ``finally`` puts it back.
+* The **library and the checks must stay as shipped**: before and after each call every
+  function of every loaded ``visla_edu`` module must come from the package's files (not a
+  notebook cell), and a module attribute the call reassigned (``importlib.reload``,
+  ``checks._core.compare = ...``) is put back and reported.
+* So must **what the verdicts rest on**: numpy's and numpy.linalg's functions (an
   ``np.allclose = lambda *a, **k: True`` would pass every wrong answer) and the builtins the
   checks call (``bool``, ``float``...), checked and restored the same way.
 
@@ -43,10 +40,9 @@ MAX_FIRST_LINE = 79
 
 
 class LibraryFunctionHidden(RuntimeError):
-    """Raised by a library function that a check hides while it runs the student's code.
+    """Raised by a library function that a check hides (:func:`hide`) while it runs the student's code.
 
-    :func:`hide` swaps the hidden function's ``__code__`` for a stub that raises this with the
-    text of :func:`hidden_message`; the checks turn it into an ``AssertionError`` whose first
+    Its text is :func:`hidden_message`'s; the checks turn it into an ``AssertionError`` whose first
     line asks the student to write their own version.
     """
 
@@ -54,9 +50,9 @@ class LibraryFunctionHidden(RuntimeError):
 def function_label(fn):
     """Short dotted name of a function: ``lie.hat``, ``camera.StereoCamera.predict``, ``scipy.linalg.expm``.
 
-    visla_edu's own functions drop the package name, and course scaffolding its ``course``
-    package too (``numdiff.central_jacobian``, as a notebook imports it); others (scipy's) keep
-    it. Private module names (a leading underscore) are left out.
+    The module path without ``visla_edu`` (for course scaffolding also without ``course``:
+    ``numdiff.central_jacobian``, as a notebook imports it) and without private module names,
+    then ``fn.__qualname__``; other packages (scipy) keep their name.
 
     Parameters
     ----------
@@ -66,8 +62,6 @@ def function_label(fn):
     Returns
     -------
     str
-        The module path without ``visla_edu`` (and ``course``) and private parts, then ``fn.__qualname__``,
-        joined by dots.
     """
     package, *rest = fn.__module__.split(".")
     if package == "visla_edu" and rest[:1] == ["course"]:
@@ -77,24 +71,10 @@ def function_label(fn):
 
 
 def hidden_message(exercise, fn):
-    """The error text of a hidden function: a short first line, the details after it.
+    """The error text of hiding ``fn`` from ``exercise`` (the student's function): a short line, then why.
 
-    Parameters
-    ----------
-    exercise : str
-        The student's function the check runs (e.g. ``"hat"``).
-    fn : function
-        The hidden library function, named by :func:`function_label`.
-
-    Returns
-    -------
-    str
-        First line: the first of four phrasings, from the most to the least explicit ("write
-        your own {exercise}; the library's {label} is not available inside this check", ...,
-        "write your own {exercise}: the library's version is hidden here"), that has at most
-        :data:`MAX_FIRST_LINE` characters, or else just "write your own {exercise}" (longer
-        than :data:`MAX_FIRST_LINE` only if ``exercise`` has more than 64 characters: the name
-        is never cut); second line: why the check hides it, naming {label}.
+    Its first line is the most explicit of four phrasings within :data:`MAX_FIRST_LINE` characters,
+    else "write your own {exercise}" (never cut); ``fn`` is named by :func:`function_label`.
     """
     name = function_label(fn)
     first = next((line for line in (
@@ -121,12 +101,8 @@ def _stub_code(fn, message):
 def hide(functions, exercise):
     """Within the block, calling any of ``functions`` raises :class:`LibraryFunctionHidden`.
 
-    Parameters
-    ----------
-    functions : iterable of function
-        Plain Python functions without closures (module functions or methods).
-    exercise : str
-        The student's function, named in the error message.
+    ``functions`` are plain Python functions without closures (module functions or methods);
+    ``exercise``, the student's function, is named in the error message.
     """
     saved = []
     try:
@@ -148,11 +124,7 @@ def _visla_modules(include_checks=True):
 
 
 def _functions_of(module):
-    """``(short name, function)`` for the functions and methods defined in ``module``'s namespace.
-
-    The short name leaves out ``visla_edu`` and private module names, as :func:`function_label` does
-    (``camera.StereoCamera.predict``, whether found in ``visla_edu.camera`` or ``visla_edu.camera._rig``).
-    """
+    """``(short name, function)`` of the functions and methods in ``module``, named as :func:`function_label` does."""
     short = ".".join(part for part in module.__name__.split(".")[1:] if not part.startswith("_")) or module.__name__
     for attr, value in list(vars(module).items()):
         if isinstance(value, types.FunctionType):
@@ -186,15 +158,8 @@ def _in_package(filename):
 def verify_library(modules=None):
     """Fail if a function of a loaded library module was replaced by notebook code.
 
-    Parameters
-    ----------
-    modules : list of module, optional
-        The library modules to verify; all loaded ``visla_edu`` modules but the checks by default.
-
-    Raises
-    ------
-    AssertionError
-        Naming the first replaced function.
+    ``AssertionError`` naming the first one; ``modules`` default to all loaded ``visla_edu``
+    modules but the checks.
     """
     if modules is None:
         modules = [module for _, module in _visla_modules(include_checks=False)]
@@ -224,13 +189,8 @@ def verify_foundations():
     """Fail if a numpy function or a builtin the checks use was replaced (e.g. by notebook code).
 
     Every callable attribute of ``numpy`` and ``numpy.linalg`` must come from numpy (its
-    ``__module__`` starts with ``numpy``), and each of :data:`TRUSTED_BUILTINS` must be Python's
-    own type or built-in function of that name.
-
-    Raises
-    ------
-    AssertionError
-        Naming the first replaced function.
+    ``__module__`` starts with ``numpy``), each of :data:`TRUSTED_BUILTINS` be Python's own type
+    or built-in function of that name; else ``AssertionError`` naming the first replaced one.
     """
     for module in (numpy, numpy.linalg):
         for attr, value in list(vars(module).items()):
@@ -270,29 +230,15 @@ def _restore_changes(snapshot):
 
 @contextmanager
 def guard(functions, exercise):
-    """Verify the library, hide ``functions``, run the block, restore and verify again.
+    """Verify the library, hide ``functions`` (:func:`hide`), run the block, restore and verify again.
 
-    Before the block every ``visla_edu`` module but the checks must hold only the package's own
-    functions (:func:`verify_library`), numpy and the builtins the checks use must be their own
-    (:func:`verify_foundations`), and the namespaces of all loaded ``visla_edu`` modules (the
-    checks included), of numpy and numpy.linalg and those builtins are copied. Within the block
-    ``functions`` are hidden (:func:`hide`). After it, whatever the block reassigned in those
-    namespaces (or in ``sys.modules``) is put back, and the library is verified again.
-
-    Parameters
-    ----------
-    functions : iterable of function
-        The library functions to hide.
-    exercise : str
-        The student's function, named in the messages.
-
-    Raises
-    ------
-    AssertionError
-        The library, numpy or a trusted builtin was replaced before the block (or the library
-        after it, when the block completed), or the block reassigned an attribute of a
-        ``visla_edu`` module, of numpy or a trusted builtin (put back first; this error replaces
-        any exception of the block).
+    Before the block: :func:`verify_library` (the checks excepted), :func:`verify_foundations`,
+    and a copy of the namespaces of all loaded ``visla_edu`` modules (the checks included), of
+    numpy, numpy.linalg and the trusted builtins. After it, whatever the block reassigned there
+    (or in ``sys.modules``) is put back and the library verified again. ``AssertionError`` if the
+    library, numpy or a trusted builtin was replaced before the block (or the library after it,
+    when the block completed), or the block reassigned a copied attribute (put back first; this
+    error replaces any exception of the block); ``exercise``, the student's function, is named.
     """
     modules = _visla_modules()
     library = [module for name, module in modules if not name.startswith("visla_edu.course.checks")]

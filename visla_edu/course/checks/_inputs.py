@@ -1,4 +1,7 @@
-"""Inputs the checks draw (rotations, twists, poses, points in view, rigs) and shared mistakes."""
+"""Inputs the checks draw (rotations, twists, poses, points in view, rigs) and shared mistakes.
+
+``rng`` is a :class:`numpy.random.Generator`; ``hidden`` selects the hidden cases' inputs.
+"""
 
 import numpy as np
 
@@ -39,37 +42,16 @@ TRANSPOSED_R_HINT = (
 
 
 def unit(rng):
-    """A random unit 3-vector.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        A standard normal draw divided by its norm (a uniformly distributed direction).
-    """
+    """A random unit 3-vector (3,), uniformly distributed: a standard normal draw over its norm."""
     v = rng.normal(size=3)
     return v / np.linalg.norm(v)
 
 
 def rotation_vectors(rng, hidden=False):
-    """Rotation vectors over every regime: zero, tiny, at the series switch, generic, near pi.
+    """Rotation vectors (3,) over every regime: zero, tiny, at the series switch, generic, near pi.
 
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-        Draws the axes (:func:`unit`) and the generic vectors.
-    hidden : bool
-        False: the angles 0, 1e-12, 1e-9, 1e-6, 1e-3, 0.05, 0.1, 0.5, 1, 2, 3, pi - 1e-6 and pi
-        (rad); True: 0, 1e-15, 3e-8, 2e-4, 0.0999, 0.1001, 0.7, 1.5, 2.5, pi - 1e-9 and pi - 1e-3.
-
-    Returns
-    -------
-    list of ndarray, shape (3,)
-        ``angle * axis`` with a random unit axis for each angle, then 4 standard normal vectors
-        (17 vectors visible, 15 hidden).
+    A list: ``angle * axis`` with a random unit axis for 13 angles from 0 to pi (hidden: 11 others,
+    0.0999 and 0.1001 among them), then 4 standard normal vectors.
     """
     angles = [0.0, 1e-12, 1e-9, 1e-6, 1e-3, 0.05, 0.1, 0.5, 1.0, 2.0, 3.0, np.pi - 1e-6, np.pi]
     if hidden:
@@ -78,21 +60,7 @@ def rotation_vectors(rng, hidden=False):
 
 
 def twists(rng, hidden=False):
-    """Twists ``[v; w]`` with the rotation vectors of :func:`rotation_vectors`, at rest, pure translation.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-    hidden : bool
-        Passed to :func:`rotation_vectors`.
-
-    Returns
-    -------
-    list of ndarray, shape (6,)
-        One twist per rotation vector ``w``, its ``v`` normal with standard deviation 3; then the
-        zero twist and the pure translation ``[2, -1, 0.5, 0, 0, 0]`` (19 twists visible, 17
-        hidden).
-    """
+    """Twists ``[v; w]`` (6,): each :func:`rotation_vectors` ``w`` with ``v`` of std 3, then rest and a translation."""
     out = [np.concatenate([rng.normal(scale=3.0, size=3), w]) for w in rotation_vectors(rng, hidden)]
     out.append(np.zeros(6))
     out.append(np.array([2.0, -1.0, 0.5, 0.0, 0.0, 0.0]))
@@ -100,43 +68,18 @@ def twists(rng, hidden=False):
 
 
 def random_pose(rng, scale=10.0):
-    """A random pose ``se3_exp([v; w])``: translation of the order of ``scale``, any rotation.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-    scale : float
-        Standard deviation of each entry of ``v`` (m); ``w`` is standard normal (rad).
-
-    Returns
-    -------
-    ndarray, shape (4, 4)
-    """
+    """A random pose (4, 4) ``se3_exp([v; w])``: ``v`` normal, std ``scale`` (m); ``w`` standard normal (rad)."""
     u = np.concatenate([rng.normal(scale=scale, size=3), rng.normal(size=3)])
     return lie.se3_exp(u)
 
 
 def rig(hidden=False):
-    """A KITTI-like stereo rig: the simulator's, or another one for the hidden cases.
+    """A KITTI-like stereo rig: left intrinsics ``K`` (3, 3), baseline ``b`` (m), left camera ``imu_T_cam`` (4, 4).
 
-    The visible cases use what :func:`visla_edu.simulate.default_rig` returns, the rig of the
-    notebooks' simulated drives. The hidden cases use KITTI odometry's focal lengths (``fsv``
-    slightly off ``fsu``) and baseline and a camera mounted elsewhere, so a function that
-    takes the notebook's rig (``rig.Ks``, ``rig.cam_T_imu``) instead of its arguments fails.
-
-    Parameters
-    ----------
-    hidden : bool
-        Return the hidden cases' rig.
-
-    Returns
-    -------
-    K : ndarray, shape (3, 3)
-        Left camera intrinsics.
-    b : float
-        Stereo baseline (m).
-    imu_T_cam : ndarray, shape (4, 4)
-        Pose of the left camera in the IMU frame.
+    Visible: :func:`visla_edu.simulate.default_rig`, the rig of the notebooks' simulated drives.
+    Hidden: KITTI odometry's focal lengths (``fsv`` slightly off ``fsu``) and baseline and a
+    camera mounted elsewhere, so a function that takes the notebook's rig (``rig.Ks``,
+    ``rig.cam_T_imu``) instead of its arguments fails.
     """
     from visla_edu.simulate import default_rig
 
@@ -150,18 +93,7 @@ def rig(hidden=False):
 
 
 def stereo_camera(hidden=False):
-    """The :class:`~visla_edu.camera.StereoCamera` of :func:`rig`.
-
-    Parameters
-    ----------
-    hidden : bool
-        The hidden cases' camera.
-
-    Returns
-    -------
-    visla_edu.camera.StereoCamera
-        A new camera object, ``StereoCamera(K, b, imu_T_cam)``.
-    """
+    """A new :class:`~visla_edu.camera.StereoCamera` of :func:`rig`."""
     return cam.StereoCamera(*rig(hidden))
 
 
@@ -173,19 +105,10 @@ NOTEBOOK_RIG_HINT = (
 
 
 def notebook_rig_variant(hidden, variant):
-    """The mistake "used the notebook's rig" as a list of variants for :func:`~visla_edu.course.checks._core.compare`.
+    """The mistake "used the notebook's rig" as variants for :func:`~visla_edu.course.checks._core.compare`.
 
-    Parameters
-    ----------
-    hidden : bool
-        Only the hidden cases' rig differs from the notebook's (:func:`rig`).
-    variant : callable
-        The output computed with the visible rig, ``stereo_camera()``, on the case's inputs.
-
-    Returns
-    -------
-    list of (str, callable)
-        ``[(NOTEBOOK_RIG_HINT, variant)]`` if ``hidden``, else empty.
+    ``[(NOTEBOOK_RIG_HINT, variant)]`` if ``hidden`` (only the hidden rig differs from the
+    notebook's), else empty; ``variant()`` is the output with the visible rig, ``stereo_camera()``.
     """
     return [(NOTEBOOK_RIG_HINT, variant)] if hidden else []
 
@@ -193,22 +116,8 @@ def notebook_rig_variant(hidden, variant):
 def points_in_view(rng, world_T_imu, imu_T_cam, n, depth=(2.0, 60.0)):
     """World points (n, 3) the left camera sees at depths in ``depth`` (m).
 
-    In the left camera frame each point is ``[a d, c d, d]`` with the depth ``d`` uniform in
-    ``depth``, ``a`` uniform in [-0.8, 0.8] and ``c`` in [-0.3, 0.3] (inside the image of
-    :func:`rig`); it is then mapped to the world with ``world_T_imu @ imu_T_cam``.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-    world_T_imu : ndarray, shape (4, 4)
-    imu_T_cam : ndarray, shape (4, 4)
-    n : int
-    depth : (float, float)
-        Range of the camera-frame depth ``z`` (m).
-
-    Returns
-    -------
-    ndarray, shape (n, 3)
+    In the camera frame ``[a d, c d, d]``: ``d`` uniform in ``depth``, ``a`` in [-0.8, 0.8] and
+    ``c`` in [-0.3, 0.3] (inside :func:`rig`'s image), then mapped by ``world_T_imu @ imu_T_cam``.
     """
     d = rng.uniform(*depth, size=n)
     x = rng.uniform(-0.8, 0.8, size=n) * d
@@ -219,52 +128,19 @@ def points_in_view(rng, world_T_imu, imu_T_cam, n, depth=(2.0, 60.0)):
 
 
 def random_covariance(rng, D):
-    """A well-conditioned random covariance (D, D).
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-    D : int
-
-    Returns
-    -------
-    ndarray, shape (D, D)
-        ``A A^T + D I`` with ``A`` standard normal: symmetric, every eigenvalue at least ``D``.
-    """
+    """A random covariance (D, D) ``A A^T + D I``, ``A`` standard normal: eigenvalues >= D (well conditioned)."""
     A = rng.normal(size=(D, D))
     return A @ A.T + D * np.eye(D)
 
 
 def swap_twist(u):
-    """``[w; v]`` for ``u = [v; w]`` (the other twist order).
-
-    Parameters
-    ----------
-    u : array_like, shape (6,)
-
-    Returns
-    -------
-    ndarray, shape (6,)
-        ``[u[3:]; u[:3]]``, float.
-    """
+    """``[w; v]`` (6,) for ``u = [v; w]``, the other twist order (a new float array)."""
     u = np.asarray(u, dtype=float)
     return np.concatenate([u[3:], u[:3]])
 
 
 def not_rotation(R):
-    """A hint if ``R`` is not a rotation, else "".
-
-    Parameters
-    ----------
-    R : array_like, shape (3, 3)
-
-    Returns
-    -------
-    str
-        ``"the result is not a rotation (R R^T != I)..."`` when an entry of ``R R^T - I`` exceeds
-        1e-9 in size, ``"det(R) = -1: a reflection, not a rotation"`` when ``det R < 0``, else
-        ``""``.
-    """
+    """A hint if ``R`` (3, 3) is not a rotation (``R R^T - I`` over 1e-9, or ``det R < 0``), else ""."""
     R = np.asarray(R)
     if not np.allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-9):
         return "the result is not a rotation (R R^T != I)\nIs a term of Rodrigues' formula missing?"
@@ -274,18 +150,9 @@ def not_rotation(R):
 
 
 def not_se3(T):
-    """A hint if ``T`` is not a pose, else "".
+    """A hint if ``T`` (4, 4) is not a pose, else "": its bottom row (``atol=1e-9``), then its rotation block.
 
-    Parameters
-    ----------
-    T : array_like, shape (4, 4)
-
-    Returns
-    -------
-    str
-        A hint about the bottom row when it is not close to ``[0, 0, 0, 1]`` (``numpy.allclose``
-        with ``atol=1e-9``), else the hint of :func:`not_rotation` on the rotation block (worded
-        "the rotation block is not a rotation"), else ``""``.
+    The block's hint is :func:`not_rotation`'s, worded "the rotation block is not a rotation".
     """
     T = np.asarray(T)
     if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
@@ -300,34 +167,16 @@ def _not_rotation_block(R):
 
 
 def rotation_transposed(T):
-    """``T`` with its rotation block transposed and its translation kept.
-
-    Parameters
-    ----------
-    T : array_like, shape (4, 4)
-
-    Returns
-    -------
-    ndarray, shape (4, 4)
-        A new float array; ``T`` is not modified.
-    """
+    """A copy (4, 4) of ``T`` with its rotation block transposed and its translation kept."""
     out = np.array(T, dtype=float)
     out[:3, :3] = out[:3, :3].T
     return out
 
 
 def wrong_inverses(T):
-    """Inverses of ``T`` written with R where R^T belongs: ``[[R, -R p]]``, ``[[R, -R^T p]]``, ``[[R^T, -R p]]``.
+    """Inverses of ``T = [[R, p], [0, 1]]`` written with R where R^T belongs: a list of three (4, 4).
 
-    Parameters
-    ----------
-    T : ndarray, shape (4, 4)
-        ``[[R, p], [0, 1]]``.
-
-    Returns
-    -------
-    list of ndarray, shape (4, 4)
-        The three wrong inverses in this order, each with the bottom row ``[0, 0, 0, 1]``.
+    ``[[R, -R p]]``, ``[[R, -R^T p]]`` and ``[[R^T, -R p]]``, bottom row ``[0, 0, 0, 1]``.
     """
     R, p = T[:3, :3], T[:3, 3]
     out = []
@@ -339,23 +188,10 @@ def wrong_inverses(T):
 
 
 def project_with(Ks, cam_T_imu, imu_T_world, p_world):
-    """Stereo pixels (M, 4) ``Ks pi(cam_T_imu imu_T_world m)`` with explicit transforms.
+    """Stereo pixels (M, 4) ``Ks pi(cam_T_imu imu_T_world m)`` of world points (M, 3), ``pi(q) = q / q_3``.
 
-    The checks pass wrong transforms (the pose not inverted, a rotation transposed) to compute
-    the pixels a mistake gives.
-
-    Parameters
-    ----------
-    Ks : ndarray, shape (4, 4)
-        Stereo matrix.
-    cam_T_imu : ndarray, shape (4, 4)
-    imu_T_world : ndarray, shape (4, 4)
-    p_world : ndarray, shape (M, 3)
-
-    Returns
-    -------
-    ndarray, shape (M, 4)
-        ``[uL, vL, uR, vR]`` of each point, with ``pi(q) = q / q_3``.
+    With explicit transforms, so that the checks can pass wrong ones (the pose not inverted, a
+    rotation transposed) to get a mistake's pixels.
     """
     p_h = np.c_[p_world, np.ones(len(p_world))]
     return cam.projection(p_h @ (cam_T_imu @ imu_T_world).T) @ Ks.T

@@ -24,21 +24,18 @@ reference_numerical_jacobian = numdiff.central_jacobian
 
 @exercise_check
 def check_projection_jacobian(projection_jacobian, hidden=False):
-    """Exercise 03: ``projection_jacobian(q (4,)) -> dpi/dq (4, 4)``.
+    """Exercise 03: ``projection_jacobian(q (4,)) -> dpi/dq (4, 4)`` of ``pi(q) = q / q3``.
 
-    At 6 random points ``q = [x, y, z, 1]`` with depths ``z`` of 1 to 50 (hidden: also a point on
-    the optical axis at depth 1e-3, one at depth 500 and one with ``q4 = 0.5``); compares with
-    :func:`visla_edu.camera.projection_jacobian` (``rtol=1e-7``, ``atol=1e-12``). Recognises the
-    transpose, a missing ``1/q3`` factor, a flipped third column and a wrong last row. Hides
-    ``camera.projection_jacobian``.
+    At random ``q = [x, y, z, 1]`` with depths 1 to 50 (hidden: also depths 1e-3 and 500 and
+    ``q4 = 0.5``); compares with :func:`visla_edu.camera.projection_jacobian` (``rtol=1e-7``,
+    ``atol=1e-12``), which it hides.
 
     Parameters
     ----------
     projection_jacobian : callable
-        The student's function: a homogeneous camera-frame point ``q`` (4,) to the Jacobian of
-        ``pi(q) = q / q3`` (4, 4).
+        A homogeneous point in the camera frame.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "projection_jacobian"
     generator = rng(hidden)
@@ -64,17 +61,15 @@ def check_projection_jacobian(projection_jacobian, hidden=False):
 def check_odot(odot, hidden=False):
     """Exercise 03: ``odot(s (4,)) -> (4, 6)`` with ``twist_hat(u) @ s == odot(s) @ u``.
 
-    At 5 random points ``s = [p, 1]`` (``p`` normal with standard deviation 10; hidden: also
-    the origin and a point of size about 1e4); compares with :func:`visla_edu.lie.odot` (default
-    tolerances of :func:`~visla_edu.course.checks._core.compare`). Recognises the sign of the hat
-    block and the two blocks swapped. Hides ``lie.odot``.
+    At random points ``s = [p, 1]`` (hidden: also the origin and a point of size 1e4); compares
+    with :func:`visla_edu.lie.odot`, which it hides.
 
     Parameters
     ----------
     odot : callable
-        The student's function: a homogeneous point ``s`` (4,) to ``[[I, -hat(s)], [0, 0]]`` (4, 6).
+        A homogeneous point ``s`` to ``[[I, -hat(s)], [0, 0]]``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "odot"
     generator = rng(hidden)
@@ -129,19 +124,15 @@ def _jacobian_cases(generator, hidden):
 def check_numerical_jacobian(numerical_jacobian, hidden=False):
     """Exercise 03: ``numerical_jacobian(f, x, eps=1e-6) -> (m, n)`` by central differences.
 
-    Called as ``numerical_jacobian(f, x)`` (the student's default ``eps``) for a linear map from
-    3 to 4 dimensions and a curved map from 2 to 2 (hidden: a map with one output, one with one
-    input, and the linear map); compares with the exact Jacobians (``rtol=atol=1e-7``).
-    Recognises the transpose, a factor of 2 or 1/2, and forward differences. Hides
-    ``numdiff.central_jacobian``.
+    Called as ``numerical_jacobian(f, x)`` (the student's default ``eps``) on maps with known
+    Jacobians, which it compares with (``rtol=atol=1e-7``). Hides ``numdiff.central_jacobian``.
 
     Parameters
     ----------
     numerical_jacobian : callable
-        The student's function: a function ``f`` from (n,) to (m,), a point ``x`` (n,) and a step
-        ``eps`` to the Jacobian of ``f`` at ``x`` (m, n).
+        ``f`` from (n,) to (m,), a point ``x`` (n,) and the step ``eps``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "numerical_jacobian"
     call = student(numerical_jacobian, name, hide=[numdiff.central_jacobian])
@@ -201,24 +192,17 @@ def _pose_jacobian_variants(camera, mu, m, ref):
 def check_pose_jacobian(pose_jacobian, hidden=False):
     """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``.
 
-    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
-    (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m); compares with
-    :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``, ``atol=1e-8``), i.e.
-    ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``. Recognises a missing minus sign, the columns
-    ``[d/dw, d/dv]``, the left perturbation's Jacobian, ``odot`` of the world point or with the
-    wrong sign of its hat block, ``dpi/dq`` left out (or replaced by ``1/q3``), and transposed
-    rotations. Hides ``StereoCamera.jacobian_pose`` and ``StereoCamera.predict_with_jacobians``,
-    and the same computation in ``capstone.library_parts()`` and ``camera.stereo_projection`` /
-    ``camera.project_points``.
+    ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``, one landmark at 2 to 60 m (hidden: to 200 m):
+    compares with :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``,
+    ``atol=1e-8``). Hides it, ``StereoCamera.predict_with_jacobians``, ``camera.stereo_projection``,
+    ``camera.project_points`` and the ``pose_jacobian`` of ``capstone.library_parts()``.
 
     Parameters
     ----------
     pose_jacobian : callable
-        The student's function: stereo matrix ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), the pose mean
-        ``mu`` = ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
-        pixels with respect to the right perturbation ``[v; w]`` (4, 6).
+        ``Ks``, ``cam_T_imu``, the mean ``mu = world_T_imu`` and a world point; columns ``[v; w]``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -262,22 +246,18 @@ def _landmark_jacobian_variants(camera, T, m, ref):
 def check_landmark_jacobian(landmark_jacobian, hidden=False):
     """Exercise 05: ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)``.
 
-    With the simulator's rig (hidden: another one), at the identity and at 3 random poses
-    (hidden: 5), one landmark in view at 2 to 60 m (hidden: up to 200 m); a 4x4 result fails at
-    once. Compares with :meth:`visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``,
-    ``atol=1e-9``), i.e. ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``. Recognises
-    ``world_T_imu`` without its inverse, a missing ``Ks``, a flipped sign, ``dpi/dq`` left out
-    (or replaced by ``1/q3``) and transposed rotations. Hides ``StereoCamera.jacobian_landmark``
-    and ``StereoCamera.predict_with_jacobians``, and the same computation in
-    ``capstone.library_parts()`` and ``camera.stereo_projection`` / ``camera.project_points``.
+    ``Ks dpi/dq(q) cam_T_imu inv(world_T_imu) P^T``: compares with
+    :meth:`visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``, ``atol=1e-9``); a 4x4
+    result fails at once. Hides it, ``StereoCamera.predict_with_jacobians``,
+    ``camera.stereo_projection``, ``camera.project_points`` and the ``landmark_jacobian`` of
+    ``capstone.library_parts()``.
 
     Parameters
     ----------
     landmark_jacobian : callable
-        The student's function: ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), ``world_T_imu`` (4, 4) and a
-        world point ``m`` (3,) to the Jacobian of its pixels with respect to ``m`` (4, 3).
+        ``Ks``, ``cam_T_imu``, ``world_T_imu`` and a world point ``m``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "landmark_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

@@ -31,17 +31,14 @@ def _hat_inputs(generator, hidden):
 def check_hat(hat, hidden=False):
     """Exercise 01: ``hat(w) -> (3, 3)`` with ``hat(w) @ x == cross(w, x)``.
 
-    On ``[1, 2, 3]``, the zero vector and 5 random vectors (hidden: an integer array, a plain
-    list, a vector of size 1e8 and 5 random ones); compares with :func:`visla_edu.lie.hat`
-    (default tolerances of :func:`~visla_edu.course.checks._core.compare`). Recognises the transpose,
-    entries in the wrong places, and a result that is not skew-symmetric. Hides ``lie.hat``.
+    On ``[1, 2, 3]``, zero and random vectors (hidden: also an integer array, a list and a vector of
+    size 1e8); compares with :func:`visla_edu.lie.hat`, which it hides.
 
     Parameters
     ----------
     hat : callable
-        The student's function: a 3-vector ``w`` to the skew-symmetric matrix (3, 3).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "hat"
     call = student(hat, name, hide=[lie.hat])
@@ -108,24 +105,19 @@ def _tiny_angle_failure(name, t, error):
 def check_so3_exp(so3_exp, hidden=False):
     """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
 
-    Compares with :func:`visla_edu.lie.so3_exp` (``atol=1e-9``) on the rotation vectors of
-    :func:`~visla_edu.course.checks._inputs.rotation_vectors` (angles from 0 to pi), then at 3 tiny
-    angles (1e-7, 1e-6 and 1e-5 rad; hidden: 3e-7, 3e-6 and 2e-5) to ``atol=1e-15``. The closed
-    form guarded at exactly 0 passes: its coefficient ``(1 - cos t)/t^2`` loses relative digits
-    near 0, but it multiplies ``hat(w)^2``, of size ``t^2``, so ``R`` keeps full precision (the
-    cancellation that matters is in the translation of :func:`check_se3_exp` and in the log,
-    :func:`check_so3_log`). Recognises ``R^T``, an unnormalised axis, a flipped second-order term,
-    NaN at 0 and a result that is not a rotation.
-
-    Hides ``lie.so3_exp``, ``lie.se3_exp``, the library's sin(t)/t and (1 - cos t)/t^2 and
-    ``scipy.linalg.expm`` (the exercise is the closed form); ``lie.hat`` stays.
+    Compares with :func:`visla_edu.lie.so3_exp` (``atol=1e-9``) on
+    :func:`~visla_edu.course.checks._inputs.rotation_vectors`, then ``atol=1e-15`` at tiny angles.
+    A closed form guarded at exactly 0 passes: ``(1 - cos t)/t^2`` loses digits near 0 but
+    multiplies ``hat(w)^2``, of size ``t^2`` (the cancellation that matters is in
+    :func:`check_se3_exp` and :func:`check_so3_log`). Hides ``lie.so3_exp``, ``lie.se3_exp``, the
+    library's sin(t)/t and (1 - cos t)/t^2 and ``scipy.linalg.expm``; ``lie.hat`` stays.
 
     Parameters
     ----------
     so3_exp : callable
-        The student's function: a rotation vector ``w`` (3,) to the rotation matrix (3, 3).
+        A rotation vector (rad).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "so3_exp"
     generator = rng(hidden)
@@ -189,23 +181,18 @@ def _check_tiny_twist(name, T, u):
 def check_se3_exp(se3_exp, hidden=False):
     """Exercise 01: ``se3_exp(u) -> (4, 4)`` for a twist ``u = [v; w]``, closed form.
 
-    Compares with :func:`visla_edu.lie.se3_exp` (``atol=1e-9``) on the twists of
-    :func:`~visla_edu.course.checks._inputs.twists` (rest, pure translation, angles from 0 to pi), then
-    at 3 tiny angles (as in :func:`check_so3_exp`) requires the translation ``J_l v`` to relative
-    accuracy 1e-12 of ``|v|`` (a closed form guarded at exactly 0 is off by about ``eps / t``
-    there: the small-angle series is needed) and the rotation to ``atol=1e-15``. Recognises the twist order ``[w; v]``,
-    the inverse pose, the translation ``v`` instead of ``J_l v`` or ``J_l^T v``, a transposed rotation
-    block, NaN near 0 and a result that is not a pose.
-
-    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the SE(3) right Jacobian and its
-    inverse and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
+    Compares with :func:`visla_edu.lie.se3_exp` (``atol=1e-9``) on
+    :func:`~visla_edu.course.checks._inputs.twists`; at the tiny angles of :func:`check_so3_exp`
+    the translation ``J_l v`` must be within 1e-12 ``|v|`` (a closed form guarded at exactly 0 is
+    off by about ``eps / t``: the small-angle series is needed), the rotation ``atol=1e-15``.
+    Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the SE(3) right Jacobian and its inverse
+    and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
 
     Parameters
     ----------
     se3_exp : callable
-        The student's function: a twist ``u = [v; w]`` (6,) to the pose (4, 4).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "se3_exp"
     generator = rng(hidden)
@@ -298,23 +285,17 @@ def _dead_reckon_variants(time_stamps, samples, lag, ref):
 def check_dead_reckon(dead_reckon, hidden=False):
     """Exercise 04: ``dead_reckon(time_stamps (T,), twists (T, 6), lag=0) -> (T, 4, 4)`` from the identity.
 
-    ``T_{t+1} = T_t exp(tau_t u_{t+lag}^)`` from ``T_0 = I``, the index ``t + lag`` clipped to
-    ``0 .. T-1`` (:func:`visla_edu.motion.select_twists`). On a random drive of 30 frames with
-    steps of 0.08 to 0.12 s, with the lags 0 and +1 (hidden: 45 frames, steps from 0.02 s, zero
-    twists for a stretch (the car stops), the lags 0, +1, -1 and +2); compares with
-    :func:`visla_edu.motion.dead_reckon` (``atol=1e-8``). A function without a ``lag`` argument
-    fails with a hint. Recognises multiplication on the left, the twist order ``[w; v]``, the lag
-    ignored or with the wrong sign, an index that wraps around at an end instead of being
-    clipped, a missing ``tau``, one constant ``tau`` and inverted poses. Hides
-    ``motion.dead_reckon``, ``motion.select_twists`` and ``motion.predict_pose``.
+    ``T_{t+1} = T_t exp(tau_t u_{t+lag}^)``, ``t + lag`` clipped to ``0 .. T-1``
+    (:func:`visla_edu.motion.select_twists`); compares with :func:`visla_edu.motion.dead_reckon`
+    (``atol=1e-8``) for lags 0 and +1 (hidden: also -1 and +2, irregular steps and a stop). Hides
+    it, ``motion.select_twists`` and ``motion.predict_pose``.
 
     Parameters
     ----------
     dead_reckon : callable
-        The student's function: time stamps (T,), body twists ``[v; w]`` (T, 6) and the lag (an
-        int) to the poses ``world_T_imu`` (T, 4, 4).
+        Time stamps (s), body twists ``[v; w]`` and the lag (int) to ``world_T_imu``.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "dead_reckon"
     T = 45 if hidden else 30
@@ -382,23 +363,18 @@ def _log_variants(R, ref):
 def check_so3_log(so3_log, hidden=False):
     """Exercise 01: ``so3_log(R (3, 3)) -> w (3,)``, the rotation vector, accurate at small angles.
 
-    On rotations ``lie.so3_exp(w)`` with angles from 0 to 3 rad (near pi another formula is
-    needed, the library's; the exercise stops at 3 rad) compares with
-    :func:`visla_edu.lie.so3_log` (``atol=1e-12``), then at 3 tiny angles (1e-9, 1e-7 and 1e-5
-    rad; hidden: other angles and axes) to ``atol=1e-15``: the angle read with ``arccos`` is off by
-    about ``eps / t`` there, the one read with ``atan2`` of the antisymmetric part is not.
-    Recognises the ``arccos`` angle, the ``arcsin`` angle (wrong above pi/2), ``-w``, twice and
-    half the rotation vector, NaN at the identity and a matrix result. Hides ``lie.so3_log``,
-    ``lie.se3_log`` and the library's sin(t)/t; ``lie.vee`` and ``lie.hat`` stay (scipy's general
-    ``scipy.linalg.logm`` cannot be hidden: the exercise text asks for the formula).
+    Compares with :func:`visla_edu.lie.so3_log` for angles 0 to 3 rad (``atol=1e-12``; near pi the
+    library needs another formula), then at 3 tiny angles (``atol=1e-15``), where an ``arccos``
+    angle is off by about ``eps / t`` and ``atan2`` of the antisymmetric part is not. Hides
+    ``lie.so3_log``, ``lie.se3_log`` and the library's sin(t)/t; ``lie.vee`` and ``lie.hat`` stay
+    (``scipy.linalg.logm`` cannot be hidden: the exercise text asks for the formula).
 
     Parameters
     ----------
     so3_log : callable
-        The student's function: a rotation matrix (3, 3) to its rotation vector ``w`` (3,), with
-        ``so3_exp(w) == R`` and an angle ``|w|`` in [0, pi].
+        A rotation to ``w`` with ``so3_exp(w) == R``, ``|w|`` in [0, pi].
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "so3_log"
     cases, tiny = _log_cases(rng(hidden), hidden)

@@ -18,11 +18,10 @@ __all__ = ["reference_slam_null_space", "check_slam_null_space", "check_invarian
 def reference_slam_null_space(world_T_imu, p_landmarks):
     """The state directions (6 + 3n, 6) of moving the whole world, in the right perturbation.
 
-    Column ``k`` is the first-order change of ``[delta; m_1; ...; m_n]`` when every pose and
-    landmark is moved by ``exp(hat(eps))`` on the left (in the world frame) with ``eps = e_k``,
-    ``eps = [eps_v; eps_w]``: the pose ``T <- exp(hat(eps)) T = T exp(hat(Ad(inv(T)) eps))``
-    gives ``delta = Ad(inv(T)) eps``, each landmark ``m <- exp(hat(eps)) m ~ m + eps_v + eps_w x m``
-    gives ``[I, -hat(m)] eps``.
+    Column ``k``: the first-order change of ``[delta; m_1; ...; m_n]`` when every pose and landmark
+    is moved by ``exp(hat(eps))`` on the left (in the world frame), ``eps = e_k = [eps_v; eps_w]``.
+    The pose ``exp(hat(eps)) T = T exp(hat(Ad(inv(T)) eps))`` gives ``delta = Ad(inv(T)) eps``; a
+    landmark ``exp(hat(eps)) m ~ m + eps_v + eps_w x m`` gives ``[I, -hat(m)] eps``.
 
     Parameters
     ----------
@@ -77,21 +76,15 @@ def _null_space_cases(generator, hidden):
 def check_slam_null_space(slam_null_space, hidden=False):
     """Exercise 08: ``slam_null_space(world_T_imu, p_landmarks (n, 3)) -> N (6 + 3n, 6)``.
 
-    Compares with :func:`reference_slam_null_space` (``rtol=1e-9``, ``atol=1e-9``) at random
-    poses with 0, 1 and 4 landmarks (hidden: 2, 7 and 1, other draws), after a case with the
-    identity pose (hidden: none). Recognises ``Ad(mu)`` or the identity as the pose block, the
-    sign of the landmark block's ``hat(m)``, its columns swapped (twist order), landmark rows
-    left zero, the landmark taken in the IMU frame and the transpose. Hides
-    :func:`reference_slam_null_space`; ``lie.adjoint``, ``lie.hat`` and ``lie.se3_inv`` stay.
+    Compares with :func:`reference_slam_null_space` (``rtol=atol=1e-9``), which it hides, at the
+    identity and random poses; ``lie.adjoint``, ``lie.hat`` and ``lie.se3_inv`` stay.
 
     Parameters
     ----------
     slam_null_space : callable
-        The student's function: the pose estimate (4, 4) and the landmark estimates (n, 3) to
-        the directions of moving the whole world (6 + 3n, 6), one per component of
-        ``eps = [eps_v; eps_w]``.
+        As :func:`reference_slam_null_space`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "slam_null_space"
     generator = rng(hidden)
@@ -128,25 +121,17 @@ def _invariant_variants(camera, T, m, J_landmark):
 def check_invariant_pose_jacobian(invariant_pose_jacobian, hidden=False):
     """Exercise 10: ``invariant_pose_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 6)``.
 
-    The invariant error (``T = exp(xi^) mu``, ``xi = [p; theta]``, ``m_j = exp(theta^) mu_j +
-    e_j``) makes the camera see ``inv(mu) (mu_j + e_j - p)`` to first order, so the pose Jacobian
-    is ``[-H_lm, 0]`` with ``H_lm`` the landmark Jacobian of notebook 05: compares with
-    :func:`visla_edu.ekf.invariant_pose_jacobian` of :meth:`~visla_edu.camera.StereoCamera.jacobian_landmark`
-    (``rtol=1e-6``, ``atol=1e-8``) with the simulator's rig (hidden: another one) at 3 random
-    poses (hidden: 5), then the identity, one landmark in view at 2 to 60 m. Recognises the
-    right perturbation's pose Jacobian, the sign, the columns swapped, a landmark error that
-    does not share the rotation (a non-zero ``theta`` block) and the notebook's rig. Hides
-    :func:`visla_edu.ekf.invariant_pose_jacobian`; the landmark Jacobian may be computed with
-    the library's camera functions.
+    ``[-H_lm, 0]`` in the invariant error ``xi = [p; theta]``, ``H_lm`` the landmark Jacobian of
+    notebook 05: compares with :func:`visla_edu.ekf.invariant_pose_jacobian` (the derivation;
+    hidden) of :meth:`~visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``,
+    ``atol=1e-8``), which the student may use for ``H_lm``.
 
     Parameters
     ----------
     invariant_pose_jacobian : callable
-        The student's function: stereo matrix ``Ks`` (4, 4), ``cam_T_imu`` (4, 4), the pose
-        estimate ``world_T_imu`` (4, 4) and a world point ``m`` (3,) to the Jacobian of its
-        pixels with respect to the invariant pose error ``xi = [p; theta]`` (4, 6).
+        ``Ks``, ``cam_T_imu``, the pose estimate ``world_T_imu`` and a world point.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "invariant_pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

@@ -59,21 +59,17 @@ def _update_variants(m, var, z, r):
 def check_kalman_update_1d(kalman_update_1d, hidden=False):
     """Exercise 00b: ``kalman_update_1d(mean, variance, z, noise_variance) -> (mean, variance)``.
 
-    ``L = variance / (variance + V)`` (``V`` the noise variance), ``(mean + L (z - mean), (1 - L) variance)``: compares
-    with :func:`visla_edu.course.kalman.update_1d` (``rtol=1e-9``, ``atol=1e-12``) on 4 fixed cases
-    (hidden: 4 random ones, a certain prior with variance 0 and a perfect sensor with noise
-    variance 0). The result must be a pair of single numbers. Recognises a variance that does
-    not shrink, a swapped gain, standard deviations in the gain, a flipped innovation,
-    ``variance / V`` as the gain, ``variance - L`` and the pair swapped. Hides
+    ``L = variance / (variance + V)`` (``V`` the noise variance), ``(mean + L (z - mean), (1 - L)
+    variance)``, a pair of single numbers: compares with :func:`visla_edu.course.kalman.update_1d`
+    (``rtol=1e-9``, ``atol=1e-12``), also (hidden) for a prior or a sensor of variance 0. Hides
     ``kalman.update_1d``, ``kalman.update`` and ``ekf.cholesky_update``.
 
     Parameters
     ----------
     kalman_update_1d : callable
-        The student's function: prior mean and variance, measurement ``z`` and its noise
-        variance ``r`` to the posterior ``(mean, variance)``.
+        Prior mean and variance, the measurement and its noise variance.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "kalman_update_1d"
     call = student(kalman_update_1d, name, hide=[kalman.update_1d, kalman.update, ekf.cholesky_update])
@@ -105,20 +101,16 @@ def _predict_cases(hidden):
 def check_kalman_predict(kalman_predict, hidden=False):
     """Exercise 00b: ``kalman_predict(x, Sigma, F, W) -> (F x, F Sigma F^T + W)``.
 
-    On a position-velocity model (step 0.1 s; hidden: 0.25 s) and random models with 3 and 4
-    states (hidden: 1, 3 and 5), ``F`` not symmetric; compares mean and covariance with
-    :func:`visla_edu.course.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Recognises a mean that
-    does not move, ``F.T @ x``, a missing ``W``, ``F.T Sigma F``, a missing or untransposed right
-    factor, and ``F (Sigma + W) F^T``. Hides ``kalman.predict`` and ``motion.predict_pose_covariance``
-    (``F P F^T + W`` for any size).
+    On a position-velocity model and random ones (``F`` not symmetric); compares with
+    :func:`visla_edu.course.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Hides it and
+    ``motion.predict_pose_covariance`` (``F P F^T + W`` for any size).
 
     Parameters
     ----------
     kalman_predict : callable
-        The student's function: mean ``x`` (n,), covariance ``Sigma`` (n, n), transition ``F``
-        (n, n) and motion noise ``W`` (n, n) to the pair (mean (n,), covariance (n, n)).
+        Mean ``x`` (n,), covariance, transition and motion noise (n, n each).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "kalman_predict"
     call = student(kalman_predict, name, hide=[kalman.predict, motion.predict_pose_covariance])

@@ -35,9 +35,8 @@ def reference_motion_residual(world_T_prev, world_T_next, step_inv):
     e : ndarray, shape (6,)
         The residual twist ``[rho; phi]``.
     J_prev, J_next : ndarray, shape (6, 6)
-        Its Jacobians with respect to the right perturbations of the two poses:
-        ``J_next = J_r(e)^-1`` and ``J_prev = -J_r(e)^-1 Ad(T_next^-1 T_prev)``
-        (:func:`visla_edu.smoother.motion_residuals`).
+        Its Jacobians for the right perturbations of the two poses: ``J_next = J_r(e)^-1``,
+        ``J_prev = -J_r(e)^-1 Ad(T_next^-1 T_prev)`` (:func:`visla_edu.smoother.motion_residuals`).
     """
     e, J_prev, J_next = motion_residuals(np.stack([world_T_prev, world_T_next]), step_inv[None])
     return e[0], J_prev[0], J_next[0]
@@ -88,22 +87,16 @@ def _motion_variants(T_prev, T_next, step_inv):
 def check_motion_residual(motion_residual, hidden=False):
     """Exercise 13: ``motion_residual(T_prev, T_next, step_inv) -> (e (6,), J_prev (6, 6), J_next (6, 6))``.
 
-    For 3 steps whose next pose is the IMU prediction times an error of size 0.05, 0.2 and 0.5
-    (hidden: 0, 1e-7, 0.3 and 0.9); the result must be a tuple of three. Compares with
-    :func:`reference_motion_residual` (``e``: ``rtol=1e-7``, ``atol=1e-9``; Jacobians:
-    ``rtol=1e-6``, ``atol=1e-9``). Recognises a flipped residual, the IMU increment missing or
-    on the wrong side, the twist order, ``J_r`` or ``J_r(-e)^-1`` in ``J_next``, and a missing,
-    wrong or transposed adjoint, a flipped sign or a missing ``J_r(e)^-1`` in ``J_prev``. Hides
-    the library's motion factor, :func:`reference_motion_residual` and
-    ``numdiff.central_jacobian``.
+    A tuple of three for steps whose next pose is the IMU prediction times an error: compares with
+    :func:`reference_motion_residual` (``e``: ``rtol=1e-7``, ``atol=1e-9``; Jacobians ``rtol=1e-6``,
+    ``atol=1e-9``). Hides it, the library's motion factor and ``numdiff.central_jacobian``.
 
     Parameters
     ----------
     motion_residual : callable
-        The student's function: the poses ``world_T_imu`` at the start and end of a step (4, 4)
-        each and ``step_inv = exp(-tau u^)`` (4, 4) to the residual and its Jacobians.
+        As :func:`reference_motion_residual`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "motion_residual"
     call = student(motion_residual, name, hide=[motion_residuals, reference_motion_residual,
@@ -130,9 +123,7 @@ def reference_schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
     Parameters
     ----------
     H_pp : ndarray, shape (p, p)
-        Pose block.
     H_pm : ndarray, shape (p, 3 L)
-        Pose-landmark block.
     H_mm : ndarray, shape (L, 3, 3)
         The landmarks' diagonal blocks (each inverted with ``numpy.linalg.inv``).
     g_p : ndarray, shape (p,)
@@ -144,11 +135,6 @@ def reference_schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
         ``H_pp - H_pm H_mm^-1 H_pm^T``.
     b : ndarray, shape (p,)
         ``g_p - H_pm H_mm^-1 g_m``; the reduced system is ``S dp = -b``.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        A block of ``H_mm`` is singular.
     """
     L = len(H_mm)
     H_mm_inv = np.zeros((3 * L, 3 * L))
@@ -197,19 +183,15 @@ def _schur_variants(H_pp, H_pm, H_mm, g_p, g_m):
 def check_schur_reduce(schur_reduce, hidden=False):
     """Exercise 13: ``schur_reduce(H_pp, H_pm, H_mm (L, 3, 3), g_p, g_m) -> (S (p, p), b (p,))``.
 
-    For 2 random systems of ``J^T J`` form (6 pose entries and 2 landmarks, 12 and 4; hidden:
-    4 systems, up to 40 landmarks); the result must be a tuple ``(S, b)``. Compares with
-    :func:`reference_schur_reduce` (``rtol=1e-7``, ``atol=1e-9``). Recognises the correction
-    added, ``H_mm`` not inverted, the correction alone, the landmarks dropped, and ``b``
-    without (or with a flipped) reduction. Hides :func:`reference_schur_reduce`.
+    For random systems of ``J^T J`` form, the tuple ``(S, b)``: compares with
+    :func:`reference_schur_reduce`, which it hides.
 
     Parameters
     ----------
     schur_reduce : callable
-        The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L), the landmark blocks
-        ``H_mm`` (L, 3, 3), ``g_p`` (p,) and ``g_m`` (3 L,) to the reduced system ``(S, b)``.
+        As :func:`reference_schur_reduce`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "schur_reduce"
     call = student(schur_reduce, name, hide=[reference_schur_reduce])
@@ -227,11 +209,10 @@ def check_schur_reduce(schur_reduce, hidden=False):
 
 
 def reference_pose_marginal_covariance(H_pp, H_pm, H_mm):
-    """Marginal covariance of the poses: the inverse of the Schur complement, ``S^-1``.
+    """The poses' marginal covariance ``(H_pp - H_pm H_mm^-1 H_pm^T)^-1``, the inverse of the Schur complement.
 
-    The Gaussian with information matrix ``H = [[H_pp, H_pm], [H_pm^T, blockdiag(H_mm)]]`` has
-    covariance ``H^-1``; its pose block (the poses' marginal, the landmarks' uncertainty
-    included) is ``(H_pp - H_pm H_mm^-1 H_pm^T)^-1`` by the block inverse.
+    The pose block of ``H^-1`` (block inverse, ``H`` as in :func:`reference_schur_reduce`): the
+    landmarks' uncertainty included.
 
     Parameters
     ----------
@@ -267,21 +248,16 @@ def _marginal_variants(H_pp, H_pm, H_mm):
 def check_pose_marginal_covariance(pose_marginal_covariance, hidden=False):
     """Exercise 14: ``pose_marginal_covariance(H_pp, H_pm, H_mm (L, 3, 3)) -> (p, p)``, the poses' marginal.
 
-    The pose block of ``H^-1``, i.e. ``S^-1`` with the Schur complement ``S = H_pp - H_pm H_mm^-1
-    H_pm^T``: compares with :func:`reference_pose_marginal_covariance` (``rtol=1e-6``,
-    ``atol=1e-10``) on the systems of :func:`check_schur_reduce`. Recognises ``inv(H_pp)`` (the
-    covariance given the landmarks: conditioning, not marginalising), ``S`` not inverted, the
-    correction added, ``H_mm`` not inverted and ``inv(H_pp) - inv(S)``. Hides
-    :func:`reference_pose_marginal_covariance` (the student's own ``schur_reduce`` may be used;
-    :func:`reference_schur_reduce` is hidden too).
+    On the systems of :func:`check_schur_reduce`; compares with
+    :func:`reference_pose_marginal_covariance` (``rtol=1e-6``, ``atol=1e-10``). Hides it and
+    :func:`reference_schur_reduce` (the student's own ``schur_reduce`` may be used).
 
     Parameters
     ----------
     pose_marginal_covariance : callable
-        The student's function: ``H_pp`` (p, p), ``H_pm`` (p, 3 L) and the landmark blocks
-        ``H_mm`` (L, 3, 3) of an information matrix to the poses' marginal covariance (p, p).
+        As :func:`reference_pose_marginal_covariance`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "pose_marginal_covariance"
     call = student(pose_marginal_covariance, name, hide=[reference_pose_marginal_covariance, reference_schur_reduce])
@@ -322,20 +298,13 @@ def reference_gauss_newton_step(world_T_body, p_body, q_world):
     ----------
     world_T_body : ndarray, shape (4, 4)
         The current pose ``T = [[R, t], [0, 1]]``.
-    p_body : ndarray, shape (N, 3)
-        Points in the body frame.
-    q_world : ndarray, shape (N, 3)
-        Their measured positions in the world frame.
+    p_body, q_world : ndarray, shape (N, 3)
+        Points in the body frame and their measured positions in the world frame.
 
     Returns
     -------
     ndarray, shape (4, 4)
         ``world_T_body @ se3_exp(delta)``.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        ``numpy.linalg.solve`` finds ``J^T J`` singular.
     """
     return _step(world_T_body, p_body, q_world)
 
@@ -370,20 +339,15 @@ def _gauss_newton_variants(T, p_body, q_world):
 def check_gauss_newton_step(gauss_newton_step, hidden=False):
     """Exercise 14: ``gauss_newton_step(world_T_body, p_body (N, 3), q_world (N, 3)) -> world_T_body (4, 4)``.
 
-    For 2 cases (5 points and a pose error of size 0.2, 12 points and 0.8; hidden: 4 cases
-    from 3 to 30 points, errors from 0 to 1.5) with 1 cm noise on ``q_world``; compares with
-    :func:`reference_gauss_newton_step` (``rtol=1e-6``, ``atol=1e-8``). Recognises a flipped
-    step, the step applied on the left, the rotation missing from the Jacobian or its
-    rotation part's sign flipped, and the twist order. Hides the step that
-    :func:`reference_gauss_newton_step` computes with.
+    With 1 cm noise on ``q_world``; compares with :func:`reference_gauss_newton_step`
+    (``rtol=1e-6``, ``atol=1e-8``) and hides the step it computes with.
 
     Parameters
     ----------
     gauss_newton_step : callable
-        The student's function: the current pose (4, 4), points in the body frame (N, 3) and
-        their measured world positions (N, 3) to the pose after one step.
+        As :func:`reference_gauss_newton_step`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "gauss_newton_step"
     call = student(gauss_newton_step, name, hide=[_step])

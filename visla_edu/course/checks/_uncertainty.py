@@ -14,18 +14,14 @@ __all__ = ["check_curly_hat", "check_pose_transition", "check_left_pose_predicti
 def check_curly_hat(curly_hat, hidden=False):
     """Exercise 06: ``curly_hat(u) -> (6, 6)`` for ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
 
-    On ``[1, 2, 3, 4, 5, 6]`` and 4 random twists (hidden: the zero twist, a tiny rotation
-    ``[0, 0, 0, 1e-9, 0, 0]`` and 4 random ones); compares with :func:`visla_edu.lie.curly_hat`
-    (default tolerances of :func:`~visla_edu.course.checks._core.compare`). Recognises the twist
-    order, ``hat(v)`` in the lower-left block, ``curly_hat(-u)`` and the transpose. Hides
-    ``lie.curly_hat``.
+    On ``[1, 2, 3, 4, 5, 6]`` and random twists (hidden: zero, a tiny rotation and random ones);
+    compares with :func:`visla_edu.lie.curly_hat`, which it hides.
 
     Parameters
     ----------
     curly_hat : callable
-        The student's function: a twist ``u = [v; w]`` (6,) to its adjoint matrix (6, 6).
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "curly_hat"
     generator = rng(hidden)
@@ -52,22 +48,17 @@ def check_curly_hat(curly_hat, hidden=False):
 def check_pose_transition(pose_transition, hidden=False):
     """Exercise 06: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
 
-    On every other twist of :func:`~visla_edu.course.checks._inputs.twists` (10 visible, 8 hidden),
-    each with a step ``tau`` uniform in 0.05 to 0.2 s; a 4x4 result fails at once. Compares
-    with :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Recognises a
-    missing minus sign, the transpose, the twist order and the first-order ``I - tau
-    curly_hat(u)``.
-
-    Hides ``motion.pose_transition``, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp``
-    stays.
+    On every other :func:`~visla_edu.course.checks._inputs.twists` (``w = 0`` among them), ``tau``
+    of 0.05 to 0.2 s; a 4x4 result fails at once. Compares with
+    :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Hides it,
+    ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp`` stays.
 
     Parameters
     ----------
     pose_transition : callable
-        The student's function: a body twist ``u = [v; w]`` (6,) and the step ``tau`` (s) to the
-        perturbation transition ``F`` (6, 6).
+        A body twist ``[v; w]`` and the step ``tau`` (s); ``F`` acts on right perturbations.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "pose_transition"
     generator = rng(hidden)
@@ -94,9 +85,10 @@ def check_pose_transition(pose_transition, hidden=False):
 def reference_left_pose_prediction(mu, Sigma, u, tau, W):
     """The library's left-perturbation prediction of a pose: ``(mu exp(tau u^), Sigma + Ad(mu_next) W Ad(mu_next)^T)``.
 
-    The pose part of :func:`visla_edu.motion.predict_invariant_covariance` (the invariant
-    filter's error is the left perturbation); notebook cells fall back on it
-    (:func:`~visla_edu.course.checks._core.student_or_reference`).
+    The pose part of :func:`visla_edu.motion.predict_invariant_covariance` (the invariant filter's
+    error is the left perturbation): the transition is the identity and the step's body-frame noise
+    enters rotated into the world frame (``J_r(tau u)`` is dropped as in the right form). Notebook
+    cells fall back on it (:func:`~visla_edu.course.checks._core.student_or_reference`).
 
     Parameters
     ----------
@@ -104,6 +96,7 @@ def reference_left_pose_prediction(mu, Sigma, u, tau, W):
     Sigma : ndarray, shape (6, 6)
         Covariance of the left perturbation ``xi = [p; theta]`` of ``T = exp(xi^) mu``.
     u : ndarray, shape (6,)
+        The body twist ``[v; w]``; ``tau`` is the step (s), ``W`` the twist noise.
     tau : float
     W : ndarray, shape (6, 6)
 
@@ -158,27 +151,18 @@ def _left_cases(generator, hidden):
 def check_left_pose_prediction(left_pose_prediction, hidden=False):
     """Exercise 06: ``left_pose_prediction(mu, Sigma, u, tau, W) -> (mu_next, Sigma_next)``, left perturbation.
 
-    For the left (world-frame) perturbation ``T = exp(xi^) mu``, the prediction is
-    ``mu_next = mu exp(tau u^)`` and ``Sigma_next = Sigma + Ad(mu_next) W Ad(mu_next)^T`` (the
-    transition is the identity; the step's body-frame noise enters rotated into the world frame;
-    ``J_r(tau u)`` is dropped as in the right form): the pose part of
-    :func:`visla_edu.motion.predict_invariant_covariance`. On every third twist of
-    :func:`~visla_edu.course.checks._inputs.twists` (tiny angles and rest among them), the last from
-    the identity pose, with random covariances and per-axis motion noise (hidden: other draws);
-    compares the mean (``atol=1e-9``) and the covariance (``rtol=1e-7``, ``atol=1e-12``).
-    Recognises the right perturbation's ``F Sigma F^T + W``, ``F`` applied as well, the noise
-    not rotated, the pose before the step, the inverse or the transposed adjoint, and the mean
-    moved on the left. Hides :func:`visla_edu.motion.predict_invariant_covariance` and
+    As :func:`reference_left_pose_prediction` (which it hides) on some of
+    :func:`~visla_edu.course.checks._inputs.twists` (tiny angles and rest among them), the last
+    from the identity pose: compares the mean (``atol=1e-9``) and the covariance (``rtol=1e-7``,
+    ``atol=1e-12``). Also hides :func:`visla_edu.motion.predict_invariant_covariance` and
     :func:`visla_edu.motion.invariant_noise_factor`; ``lie.adjoint`` and ``lie.se3_exp`` stay.
 
     Parameters
     ----------
     left_pose_prediction : callable
-        The student's function: the pose mean ``mu`` (4, 4), the covariance ``Sigma`` (6, 6) of
-        its left perturbation ``xi = [p; theta]``, the twist ``u = [v; w]`` (6,), the step ``tau``
-        (s) and the twist noise ``W`` (6, 6) to the predicted ``(mu_next, Sigma_next)``.
+        As :func:`reference_left_pose_prediction`.
     hidden : bool
-        Run the hidden cases instead; what every check prints and raises: :mod:`visla_edu.course.checks`.
+        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "left_pose_prediction"
     call = student(left_pose_prediction, name,
