@@ -26,16 +26,7 @@ def limit_blas_threads(n):
 
 
 def check_blas_threads(n):
-    """``n`` if it is a positive integer (not a bool) or None (numpy's setting), else ValueError.
-
-    Parameters
-    ----------
-    n : int or None
-
-    Returns
-    -------
-    int or None
-    """
+    """``n`` if it is a positive integer (not a bool) or None (numpy's setting), else ValueError."""
     if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1):
         raise ValueError(f"blas_threads must be a positive integer or None, got {n!r}")
     return n

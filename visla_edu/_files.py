@@ -48,38 +48,19 @@ def expand_user(path):
 def atomic_write(path, mode="w", encoding="utf-8", replace=True):
     """Context manager: a file object whose content replaces ``path`` only if the block succeeds.
 
-    The bytes go to ``.<name>.<pid>.<random>.tmp`` in the target's folder, are flushed and fsynced,
-    then renamed over ``path`` with :func:`os.replace` (atomic on POSIX and Windows within one file
-    system): a reader sees the old file or the whole new one. If the body raises (or the process is
-    interrupted), the temporary file is removed and ``path`` keeps its previous content (a kill
-    leaves at most the hidden temporary file). A replaced file keeps its permission bits; a new one
-    gets those a plain ``open`` would give (``0o666`` minus the umask).
+    ``mode`` is ``"w"`` (text, in ``encoding``) or ``"wb"``; write to the yielded file, do not close
+    it. The bytes go to ``.<name>.<pid>.<random>.tmp`` in the target's folder, are flushed and
+    fsynced, then renamed over ``path`` with :func:`os.replace` (atomic on POSIX and Windows within
+    one file system): a reader sees the old file or the whole new one. If the body raises (or the
+    process is interrupted), the temporary file is removed and ``path`` keeps its previous content
+    (a kill leaves at most the hidden temporary file). A replaced file keeps its permission bits; a
+    new one gets those a plain ``open`` would give (``0o666`` minus the umask).
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    mode : {"w", "wb"}
-        Text or binary.
-    encoding : str
-        For text mode.
-    replace : bool
-        False: never replace an existing file. The finished temporary file is hard-linked to
-        ``path`` (:func:`os.link` fails if ``path`` exists, even if it appeared while writing); on a
-        file system without hard links, ``path`` is checked just before the rename.
-
-    Yields
-    ------
-    file object
-        Write to it; do not close it.
-
-    Raises
-    ------
-    FileNotFoundError
-        The target's folder does not exist (the message names it).
-    ValueError
-        ``mode`` is not ``"w"`` or ``"wb"``, or ``path`` is a folder.
-    FileExistsError
-        ``replace`` is False and ``path`` exists; it is left as it was.
+    ``replace=False`` never replaces an existing file: the finished temporary file is hard-linked to
+    ``path`` (:func:`os.link` fails if ``path`` exists, even if it appeared while writing; without
+    hard links, ``path`` is checked just before the rename), else a FileExistsError leaves ``path``
+    as it was. A missing folder is a FileNotFoundError naming it; another ``mode``, or ``path`` a
+    folder, a ValueError.
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write: mode must be 'w' or 'wb', got {mode!r}")
@@ -131,9 +112,10 @@ def format_bytes(n):
 def file_kind(path):
     """What ``path`` is, for messages: ``"a regular file"``, ``"a directory"``, ``"a FIFO (named pipe)"``, ...
 
-    Symbolic links are followed; also ``"a socket"``, ``"a character device"``, ``"a block device"``,
-    ``"missing"`` (nothing there, or a component of the path is not a folder) and ``"a broken
-    symbolic link"``. Other ``os.stat`` errors propagate (e.g. ``PermissionError`` on the way).
+    Symbolic links are followed; also ``"a socket"``, ``"a character device"``, ``"a block
+    device"``, ``"missing"`` (nothing there, or a component of the path is not a folder) and ``"a
+    broken symbolic link"``. Other ``os.stat`` errors propagate (e.g. ``PermissionError`` on the
+    way).
     """
     try:
         mode = os.stat(path).st_mode
@@ -147,26 +129,10 @@ def file_kind(path):
 def check_input_file(path, what="data file"):
     """``path`` as an absolute Path (symbolic links resolved) if it is a readable regular file, else a clear error.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    what : str
-        What the file is for, e.g. ``"course file"`` (starts the message).
-
-    Returns
-    -------
-    pathlib.Path
-
-    Raises
-    ------
-    FileNotFoundError
-        Nothing there, or a broken symbolic link (says where it points).
-    IsADirectoryError
-        A folder.
-    PermissionError
-        Not readable by this user.
-    ValueError
-        A FIFO, socket or device: not a file on disk (visla-edu seeks in its inputs).
+    The message starts with ``what`` (e.g. ``"course file"``): a FileNotFoundError (nothing there,
+    or a broken symbolic link: it says where it points), IsADirectoryError, PermissionError (not
+    readable by this user), or ValueError for a FIFO, socket or device (visla-edu seeks in its
+    inputs).
     """
     path = expand_user(path)
     kind = file_kind(path)
@@ -189,8 +155,8 @@ def check_input_file(path, what="data file"):
 def same_file(a, b):
     """Whether paths ``a`` and ``b`` (``~`` expanded) name the same file, through links, ``..`` or hard links.
 
-    :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise whether both
-    resolve to the same absolute path.
+    :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise whether
+    both resolve to the same absolute path.
     """
     a, b = expand_user(a), expand_user(b)
     with contextlib.suppress(OSError):
@@ -199,37 +165,16 @@ def same_file(a, b):
 
 
 def check_output_path(path, suffixes, option, inputs=(), others=()):
-    """Check an output path before any work: suffix, folder, kind, and that it is no input.
+    """Check an output path before any work (suffix, folder, kind, no input); return the absolute path to write.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    suffixes : sequence of str
-        Allowed suffixes, lower case with the dot (``(".npz",)``); the first one is suggested.
-    option : str
-        How the user gave the path (``"--out"``), to start the message.
-    inputs : sequence of path-like
-        Files the command reads; the output may not be one of them (not even through a symbolic
-        link or a relative path).
-    others : sequence of (str, path-like)
-        Other outputs of the same command, ``(option, path)``; the output may not be one of them.
-
-    Returns
-    -------
-    pathlib.Path
-        The absolute path that will be written (the folder resolved, the name as given).
-
-    Raises
-    ------
-    ValueError
-        Wrong suffix, an existing FIFO or device, a name too long for the folder, or the same file
-        as an input or another output.
-    IsADirectoryError
-        ``path`` is a folder.
-    FileNotFoundError, NotADirectoryError
-        The folder does not exist or is not a folder.
-    PermissionError
-        The folder is not writable.
+    ``suffixes`` are the allowed ones, lower case with the dot (``(".npz",)``), the first suggested;
+    ``option`` is how the user gave the path (``"--out"``) and starts the message. The output may be
+    none of ``inputs`` (the files the command reads, not even through a symbolic link or a relative
+    path) nor of ``others`` (``(option, path)`` of the command's other outputs). The folder is
+    resolved, the name kept as given. Errors: ValueError (wrong suffix, an existing FIFO or device,
+    a name too long for the folder, an input or another output), IsADirectoryError (``path`` is a
+    folder), FileNotFoundError or NotADirectoryError (no such folder), PermissionError (not
+    writable).
     """
     given = expand_user(path)
     kind = file_kind(given)

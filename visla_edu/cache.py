@@ -2,11 +2,9 @@
 
 Results that take a while to compute from a dataset (its calibration,
 :func:`visla_edu.diagnostics.calibrate`) are kept between runs in a user cache folder
-(:func:`cache_dir`), one JSON file per entry named by a content hash of the arrays it was
-computed from and a version string (:func:`content_hash`): changed data or a new version is a
-new entry. Entries are written atomically (:func:`save_json`); a missing or corrupt one reads as
-no entry (:func:`load_json`) and a folder that cannot be written is skipped: the cache never
-fails a run.
+(:func:`cache_dir`), one JSON file per entry named by :func:`content_hash` of the arrays and a
+version. Entries are written atomically (:func:`save_json`); a missing or corrupt one reads as none
+(:func:`load_json`) and a folder that cannot be written is skipped: the cache never fails a run.
 """
 
 import hashlib
@@ -49,8 +47,8 @@ def cache_dir():
 def content_hash(arrays, version):
     """Hex digest (BLAKE2b, 32 bytes: 64 characters) of named arrays and a version string.
 
-    Each array enters with its name, dtype, shape and bytes (C order), so equal content gives the
-    same key whatever the memory layout, and any changed value, shape or type a new one.
+    Each array enters with its name, dtype, shape and bytes (C order): equal content gives the same
+    key whatever the memory layout, any changed value, shape or type a new one.
 
     Parameters
     ----------

@@ -1,11 +1,10 @@
 """Declared settings: what each field of a configuration dataclass accepts, in one place.
 
-:class:`~visla_edu.filters.FilterConfig` and :class:`~visla_edu.smoother.SmootherConfig`
-declare every field with :func:`setting`, which stores a :class:`SettingSpec` in the field's
-metadata. The same spec checks a value given in Python (:func:`check_settings`, from the
-config's ``__post_init__``), parses one given as text on the command line
-(:func:`parse_setting`, for ``visla-edu run --set NAME=VALUE`` and ``--smoother-set``) and says
-what is valid for ``--help`` (:meth:`SettingSpec.describe`, :func:`format_value`):
+:class:`~visla_edu.filters.FilterConfig` and :class:`~visla_edu.smoother.SmootherConfig` declare
+every field with :func:`setting`, which stores a :class:`SettingSpec` in its metadata. The spec
+checks a value given in Python (:func:`check_settings`, from ``__post_init__``), parses one given
+as text (:func:`parse_setting`, for ``visla-edu run --set`` and ``--smoother-set``) and says what
+is valid for ``--help`` (:meth:`SettingSpec.describe`, :func:`format_value`):
 
 * booleans are ``true/false``, ``1/0``, ``yes/no`` (any case); anything else is an error;
 * integers are integer literals (``2``, not ``2.5`` or ``2.0``);
@@ -40,13 +39,12 @@ class SettingSpec:
     low_open : bool
         The range excludes ``low``.
     words : tuple of str
-        Text values accepted as they are (e.g. ``("auto",)``); for ``str`` settings, empty
-        means any text (checked where it is used).
+        Text values accepted as they are (e.g. ``("auto",)``); for ``str`` settings, empty means any
+        text (checked where it is used).
     optional : bool
         None is allowed (``none`` on the command line).
     per_axis : bool
-        A number setting that also takes three numbers, one per body axis ``(x, y, z)``
-        (``0.1,0.02,0.02`` on the command line), each within the range.
+        A number setting also taking three, one per body axis, each in range (``0.1,0.02,0.02``).
     unit, why : str
         For messages: the unit of the value and why the range is what it is.
     default : object
@@ -127,8 +125,7 @@ def setting(default, kind, low=None, high=None, *, low_open=False, words=(), opt
     Parameters
     ----------
     default : object
-        The field's default, kept in the spec too (not checked here; :func:`check_settings` checks
-        it on each instance).
+        Kept in the spec too; :func:`check_settings` checks it on each instance.
     kind, low, high, low_open, words, optional, unit, why, per_axis
         As the :class:`SettingSpec` attributes (``words``: any iterable, stored as a tuple).
 
@@ -176,10 +173,9 @@ def check_settings(config):
 def parse_setting(cls, pair):
     """``"NAME=VALUE"`` -> ``(name, value)`` for a field of ``cls``, parsed strictly; ValueError otherwise.
 
-    The name is split at the first ``=`` (spaces around it ignored); the value is parsed by
-    :meth:`SettingSpec.parse` (the module docstring says what each kind accepts), then checked like a
-    value given in Python. The ValueError names a missing ``=``, an unknown name (listing the
-    settings) or a value that does not parse or is out of range.
+    Split at the first ``=``, spaces around the name ignored; the value is parsed by
+    :meth:`SettingSpec.parse` (module docstring), then checked like a value given in Python. The
+    ValueError names a missing ``=``, an unknown name (listing the settings) or a bad value.
 
     Parameters
     ----------

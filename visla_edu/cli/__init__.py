@@ -74,10 +74,9 @@ _DATASET_HELP = "03, 0022, 0020, 0042, 10, datasetNN, sim, sim-small, sim-tiny, 
 def build_parser():
     """The argument parser of ``visla-edu``.
 
-    Subcommands ``info``, ``run``, ``stepper``, ``release``, ``student``, ``project`` and ``book``
-    (required, stored as ``command``); ``--debug`` is accepted before or after the subcommand,
-    ``--data-dir`` after ``info``, ``run`` and ``stepper``. Values are checked while parsing
-    (:mod:`visla_edu.cli.options`).
+    Subcommands (required, stored as ``command``): ``info``, ``run``, ``stepper``, ``release``,
+    ``student``, ``project``, ``book``; ``--debug`` before or after the subcommand, ``--data-dir``
+    after ``info``, ``run``, ``stepper``; values checked while parsing (:mod:`visla_edu.cli.options`).
 
     Returns
     -------
@@ -172,8 +171,8 @@ def _add_frames_option(parser):
 def _select_frames(dataset, frames, truth_option=None):
     """``dataset`` cut to ``frames``, ``--frames (start, stop)`` (stop None: the end), or unchanged.
 
-    A range outside the drive is a ValueError. A segment that keeps fewer ground-truth poses than
-    an ATE needs is refused when ``truth_option`` (the user's ``--ground-truth`` file) was given, and
+    A range outside the drive is a ValueError. A segment that keeps fewer ground-truth poses than an
+    ATE needs is refused when ``truth_option`` (the user's ``--ground-truth`` file) was given, and
     otherwise loses its ground truth, with a note on stdout (:func:`_segment_truth_checked`).
     """
     if frames is None:
@@ -457,11 +456,10 @@ _HANDLERS["project"] = _project_commands.run
 def main(argv=None):
     """The one error boundary of the commands: parse ``argv``, run the command, return its exit status.
 
-    Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected, not
-    printed: a failure is reported by its one line (the filter detects a non-finite state itself),
-    a success by one line counting them; ``--debug`` prints them as they happen. The process's entry
-    point, ``visla_edu.__main__.console_main``, also covers loading this module and the moments after
-    this function returns.
+    Numerical warnings (numpy's ``RuntimeWarning``) are collected: a failure is reported by its one
+    line (the filter detects a non-finite state itself), a success by one line counting them;
+    ``--debug`` prints them as they happen. ``visla_edu.__main__.console_main`` also covers loading
+    this module and the moments after this function returns.
 
     Parameters
     ----------

@@ -15,8 +15,8 @@ __all__ = ["settings_help", "frames", "integer_in", "blas_threads", "path", "por
 def settings_help():
     """The epilog of ``run --help``: every ``--set`` and ``--smoother-set`` setting, its default and what it accepts.
 
-    One line a setting (:meth:`visla_edu.settings.SettingSpec.describe`; the smoother's own also say
-    which mode reads them); the configs are imported only when the help is asked for.
+    One line a setting (:meth:`visla_edu.settings.SettingSpec.describe`); the configs are imported
+    only when the help is asked for.
 
     Returns
     -------

@@ -28,11 +28,10 @@ MIN_DEPTH = 0.1
 class FilterDivergedError(RuntimeError):
     """The filter produced a non-finite state or a covariance that is not positive definite.
 
-    Raised by a filter's ``step()`` when, after the frame, the pose or its covariance has a
-    non-finite entry, a pose variance is negative, or the pose lies more than
-    :data:`MAX_DISTANCE` metres from the world origin; and when an update cannot factorise its
-    innovation covariance (chained from the ``numpy.linalg.LinAlgError``). The message names
-    the dataset and the frame.
+    Raised by ``step()`` when, after the frame, the pose or its covariance is not finite, a pose
+    variance is negative or the pose is more than :data:`MAX_DISTANCE` m from the origin, and when
+    an update cannot factorise its innovation covariance (chained from the ``LinAlgError``). The
+    message names the dataset and the frame.
     """
 
 
@@ -62,8 +61,7 @@ class StepRecord:
         Its degrees of freedom: 4 per used observation, and ``4 n - 3`` per track of ``n``
         observations used in a null-space update (joint SLAM with clones).
     active_ids : ndarray of int, shape (n,)
-        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO);
-        empty when the filter's ``record_landmarks`` is off.
+        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO).
     active_means : ndarray, shape (n, 3)
     active_covs : ndarray, shape (n, 3, 3)
         Marginal covariance of each active landmark.
@@ -84,9 +82,7 @@ class StepRecord:
 
 
 class FilterBase(abc.ABC):
-    """Shared bookkeeping: time, twists, observations with their status, the landmark means.
-
-    Its parameters, attributes and ``ValueError`` are those of every mode.
+    """Shared bookkeeping of every mode: time, twists, observations with their status, the landmark means.
 
     Parameters
     ----------
@@ -149,16 +145,16 @@ class FilterBase(abc.ABC):
     def _predict_covariance(self, F, W):
         """Propagate the covariance through one IMU step: ``Sigma_pose <- F Sigma_pose F^T + W``, F and W (6, 6).
 
-        Called after the pose mean moved (:func:`visla_edu.motion.imu_step`); a joint state also carries
-        the pose-landmark cross-covariance through ``F``.
+        Called after the pose mean moved (:func:`visla_edu.motion.imu_step`); a joint state also
+        carries the pose-landmark cross-covariance through ``F``.
         """
 
     @abc.abstractmethod
     def _update(self, ids, z, status, z_pred):
         """Use frame ``self.t``'s observations ``ids`` (k,), ``z`` (k, 4); return ``(nis, dof)`` as the StepRecord's.
 
-        Fills in place ``status`` (k,), which starts as ``OBS_IGNORED``, and ``z_pred`` (k, 4), which
-        starts as NaN, for the observations of landmarks already in the state.
+        Fills in place ``status`` (k,), which starts as ``OBS_IGNORED``, and ``z_pred`` (k, 4),
+        which starts as NaN, for the observations of landmarks already in the state.
         """
 
     @abc.abstractmethod
@@ -210,10 +206,10 @@ class FilterBase(abc.ABC):
     def _new_landmarks(self, ids, z, status, candidates):
         """Triangulate never-seen landmarks among ``candidates`` (mask) at the current pose.
 
-        Their first observation is consumed (``OBS_NEW``; ``OBS_FAR`` below ``min_init_disparity``) and
-        their means written to :attr:`landmarks`; the covariance is the caller's to store. Returns ``new``
-        (k,) bool, ``G_pose`` (k_new, 3, 6) (sensitivity to the pose perturbation) and ``C_new``
-        (k_new, 3, 3), the pixels' covariance ``inflation^2 C_tri + sigma^2 I``.
+        Their first observation is consumed (``OBS_NEW``; ``OBS_FAR`` below ``min_init_disparity``)
+        and their means written to :attr:`landmarks`; the covariance is the caller's to store.
+        Returns ``new`` (k,) bool, ``G_pose`` (k_new, 3, 6) (sensitivity to the pose perturbation)
+        and ``C_new`` (k_new, 3, 3), the pixels' covariance ``inflation^2 C_tri + sigma^2 I``.
         """
         cfg = self.config
         disparity = self.camera.disparity(z)

@@ -36,21 +36,9 @@ MSCKF_WINDOW = 20
 def gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step):
     """``r = (sigma_pixel / focal_length) / (sigma_w tau)``: the angle one observation resolves over the gyro's in one step.
 
-    Parameters
-    ----------
-    sigma_pixel : float
-        The pixel noise the camera is said to have (px).
-    focal_length : float
-        ``fsu`` (px).
-    sigma_angular : float or array_like, shape (3,)
-        The angular-velocity noise (rad/s); per-axis values are averaged.
-    time_step : float
-        A typical step ``tau`` (s).
-
-    Returns
-    -------
-    float
-        ``inf`` for a noise-free gyro.
+    ``sigma_pixel`` is the pixel noise the camera is said to have (px), ``focal_length`` its ``fsu``
+    (px), ``sigma_angular`` the angular-velocity noise (rad/s; per-axis values (3,) are averaged)
+    and ``time_step`` a typical step ``tau`` (s). A float, ``inf`` for a noise-free gyro.
     """
     gyro_angle = float(np.mean(sigma_angular)) * float(time_step)
     return float(sigma_pixel / focal_length / gyro_angle) if gyro_angle > 0 else np.inf
@@ -62,26 +50,17 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
 
     ``max(1, r)^power`` with ``r`` of :func:`gyro_ratio`, and in the gyro regime (``r >=``
     :data:`GYRO_REGIME_RATIO`) at least ``(1 + rho) / (1 - rho)``: track errors are correlated from
-    frame to frame (tracker drift, a feature sliding along an edge), so a track of ``L`` observations
-    is worth about ``L (1 - rho) / (1 + rho)``. Where the gyro resolves angles better than one
-    observation (``r > 1``, the GPS-aided velocities of the 2019 release), a camera treated as
-    independent pixels would pull a good dead reckoning off by the sum of its correlated errors;
+    frame to frame (tracker drift, a feature sliding along an edge), so a track of ``L``
+    observations is worth about ``L (1 - rho) / (1 + rho)``. Where the gyro resolves angles better
+    than one observation (``r > 1``, the GPS-aided velocities of the 2019 release), a camera treated
+    as independent pixels would pull a good dead reckoning off by the sum of its correlated errors;
     where one observation beats a gyro step (``r <= 1``, the 2020 release), the camera carries the
     estimate and is not inflated.
 
-    Parameters
-    ----------
-    sigma_pixel, focal_length, sigma_angular, time_step
-        As in :func:`gyro_ratio`.
-    power : float
-    track_correlation : float
-        ``rho`` in ``[-1, 1)``: :func:`visla_edu.diagnostics.track_correlation` along the
-        dead-reckoned poses (which the gyro regime makes locally accurate).
-
-    Returns
-    -------
-    float
-        The factor on ``sigma_pixel``, from 1 to :data:`MAX_INFLATION`.
+    The first four arguments are :func:`gyro_ratio`'s; ``rho`` (``track_correlation``, in
+    ``[-1, 1)``) is :func:`visla_edu.diagnostics.track_correlation` along the dead-reckoned poses
+    (which the gyro regime makes locally accurate). Returns the factor on ``sigma_pixel``, a float
+    from 1 to :data:`MAX_INFLATION`.
     """
     ratio = gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step)
     if not np.isfinite(ratio):
@@ -94,20 +73,12 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
 
 
 def msckf_window(sigma_pixel, focal_length, sigma_angular, time_step):
-    """Clones kept on a drive: 0 (the joint EKF without clones) in the gyro regime, else :data:`MSCKF_WINDOW`.
+    """Clones kept on a drive (an int): 0 (the joint EKF without clones) in the gyro regime, else :data:`MSCKF_WINDOW`.
 
-    In the gyro regime (:func:`gyro_ratio` at least :data:`GYRO_REGIME_RATIO`) dead reckoning is
-    locally accurate and the camera a weak corrector; the clones' multi-frame updates of the short
-    tracks then add the tracks' correlated errors more than information.
-
-    Parameters
-    ----------
-    sigma_pixel, focal_length, sigma_angular, time_step
-        As in :func:`gyro_ratio`.
-
-    Returns
-    -------
-    int
+    In the gyro regime (:func:`gyro_ratio`, whose arguments these are, at least
+    :data:`GYRO_REGIME_RATIO`) dead reckoning is locally accurate and the camera a weak corrector;
+    the clones' multi-frame updates of the short tracks then add the tracks' correlated errors more
+    than information.
     """
     return 0 if gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step) >= GYRO_REGIME_RATIO else MSCKF_WINDOW
 
@@ -124,10 +95,10 @@ class FilterConfig:
 
     The defaults are one setting for every drive: what can be measured is measured from each drive's
     own data (``"auto"``, :meth:`resolve`); the comments at the declarations give the evidence for
-    the rest, which notebooks 04, 10 and 11 and ``benchmarks/bench_accuracy.py`` recompute (they print
-    the figures; none is typed here). The switches ``landmark_cross_covariance``,
-    ``mapping_motion_noise`` and ``vio_refine_landmarks`` are teaching comparisons: the default is the
-    consistent filter, the other value the tempting shortcut the notebook named in its attribute
+    the rest, which notebooks 04, 10 and 11 and ``benchmarks/bench_accuracy.py`` recompute (they
+    print the figures; none is typed here). The switches ``landmark_cross_covariance``,
+    ``mapping_motion_noise`` and ``vio_refine_landmarks`` are teaching comparisons: the default is
+    the consistent filter, the other value the tempting shortcut the notebook named in its attribute
     measures against it.
 
     Attributes
@@ -136,37 +107,38 @@ class FilterConfig:
         Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate;
         ``R = (pixel_noise_inflation sigma_pixel)^2 I4``.
     pixel_noise_inflation : float or "auto"
-        Modes: mapping, vio, slam. A factor on ``sigma_pixel`` (``"auto"``: :func:`pixel_noise_inflation`).
+        Modes: mapping, vio, slam. A factor on ``sigma_pixel`` (:func:`pixel_noise_inflation`).
     sigma_linear_velocity, sigma_angular_velocity : float, (float, float, float) or "auto"
         Modes: all. Noise on each linear (angular) velocity sample, for all or per body axis; ``W``
         scales it by the time step.
     landmark_prior_inflation, landmark_prior_sigma : float
-        Modes: mapping, vio, slam. A new landmark's covariance from its pixels is ``inflation^2 C_tri
-        + sigma^2 I`` (:func:`visla_edu.ekf.initialize_landmarks`): ``C_tri`` is long along the viewing
-        ray and grows with depth squared; the inflation allows for far points' linearisation error.
+        Modes: mapping, vio, slam. A new landmark's covariance from its pixels is ``inflation^2
+        C_tri + sigma^2 I`` (:func:`visla_edu.ekf.initialize_landmarks`): ``C_tri`` is long along
+        the viewing ray and grows with depth squared; the inflation allows for far points'
+        linearisation error.
     initial_pose_sigma : float
         Modes: all. Standard deviation of the first pose.
     gate_probability : float
-        Modes: mapping, vio, slam. Observations beyond this chi-square (4 dof) quantile are outliers.
+        Modes: mapping, vio, slam. Observations beyond this chi-square (4 dof) quantile are gated.
     min_init_disparity : float
-        Modes: mapping, vio, slam. Least disparity ``uL - uR`` to triangulate a new landmark (a depth
-        up to ``fsu b / min_init_disparity``); a non-positive disparity is never used.
+        Modes: mapping, vio, slam. Least disparity ``uL - uR`` to triangulate a new landmark (a
+        depth up to ``fsu b / min_init_disparity``); a non-positive disparity is never used.
     imu_lag : int or "auto"
         Modes: all (and the driver's dead reckoning). The step ``t -> t+1`` uses ``u[t + imu_lag]``.
     extrinsic_correction : str
-        Modes: all (:func:`visla_edu.run.make_filter` applies it to the camera). ``"auto"``: what
-        :func:`visla_edu.diagnostics.check_extrinsics` finds with strong evidence (dataset 03's flipped
-        axes); ``"none"``: the file's ``imu_T_cam``; or a correction (:data:`~visla_edu.diagnostics.CORRECTIONS`).
+        Modes: all, through the camera (:func:`visla_edu.run.make_filter`). ``"none"``: the file's
+        ``imu_T_cam``; ``"auto"``: what :func:`visla_edu.diagnostics.check_extrinsics` finds with
+        strong evidence; or one of :data:`visla_edu.diagnostics.CORRECTIONS`.
     landmark_cross_covariance : bool
-        Mode: slam (notebook 08). A new landmark enters correlated with the state (``G_pose Sigma_pose,x``).
+        Mode: slam (notebook 08). A new landmark enters correlated, ``G_pose Sigma_pose,x``.
     mapping_motion_noise : bool
-        Mode: mapping (notebook 05). Widen each observation's noise by the dead-reckoning motion noise
-        since the landmark's first sighting; False takes the dead-reckoned poses as exact.
+        Mode: mapping (notebook 05). Widen each observation's noise by the dead-reckoning motion
+        noise since the landmark's first sighting; False takes the dead-reckoned poses as exact.
     vio_refine_landmarks : bool
         Mode: vio (notebook 07). Also update the landmarks, which counts each observation twice.
     skip_repeated_frames : bool
-        Modes: mapping, vio, slam. No update at frames whose observations exactly repeat the previous
-        frame's (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
+        Modes: mapping, vio, slam. No update at frames repeating the previous one's observations
+        exactly (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
     landmark_stride : int
         Modes: mapping, vio, slam. Use only the landmarks whose index is a multiple of this (the
         textbook workaround for the dense filter's memory).
@@ -177,9 +149,9 @@ class FilterConfig:
         next observation when that one is gated (the first was the outlier); False keeps the first
         placement, so a landmark born from a bad observation gates its whole track.
     msckf_window : int or "auto"
-        Mode: slam (not dense). Past poses kept as clones (``"auto"``: :func:`msckf_window`): a track
-        seen longer enters the state, a shorter one is used in one null-space (MSCKF) update when it
-        ends (:mod:`visla_edu.filters._clones`). 0: the joint EKF of notebook 08.
+        Mode: slam (not dense). Past poses kept as clones (``"auto"``: :func:`msckf_window`): a
+        track seen longer enters the state, a shorter one is used in one null-space (MSCKF) update
+        when it ends (:mod:`visla_edu.filters._clones`). 0: the joint EKF of notebook 08.
     track_gate_probability : float
         Mode: slam with clones. A track whose null-space residual exceeds this chi-square quantile
         (``4 n - 3`` dof) is refused whole.
@@ -270,8 +242,8 @@ class FilterConfig:
         Returns
         -------
         FilterConfig
-            A new config with :attr:`resolved` True (``self`` is unchanged); ``extrinsic_correction``
-            stays as it was.
+            A new config with :attr:`resolved` True (``self`` is unchanged);
+            ``extrinsic_correction`` stays as it was.
 
         Raises
         ------

@@ -2,12 +2,13 @@
 
 Both run the same EKF on the same state layout (:class:`~visla_edu.filters.ActiveSet`); they
 differ in what the state's error *means*, and so in four places: the covariance prediction, the
-pose Jacobian, how a correction is applied, and how a new landmark inherits the pose's uncertainty.
+pose Jacobian, how a correction is applied, and how a new landmark inherits the pose's
+uncertainty.
 
-* :class:`RightForm`, the form notebooks 06-08 derive (right perturbation, see :mod:`visla_edu.lie`).
-  Its unobservable directions (moving the whole world) depend on the estimate, so each update,
-  linearised at a slightly different estimate, gains information the data never gave: the classic
-  overconfidence of EKF-SLAM (Huang, Mourikis and Roumeliotis 2008).
+* :class:`RightForm`, the form notebooks 06-08 derive (right perturbation, see
+  :mod:`visla_edu.lie`). Its unobservable directions (moving the whole world) depend on the
+  estimate, so each update, linearised at a slightly different estimate, gains information the
+  data never gave: the classic overconfidence of EKF-SLAM (Huang, Mourikis and Roumeliotis 2008).
 * :class:`InvariantForm`, the invariant EKF (Barrau and Bonnabel 2017): the unobservable
   directions are the same whatever the estimate, the transition is the identity, and the filter
   stays consistent (notebook 10 compares the NEES of both).
@@ -16,16 +17,18 @@ Each form is a namespace of static methods with the same signatures (the class i
 never an instance), documented once here; a method ignores the arguments its form does not need:
 
 * ``Sigma`` (D, D): the joint covariance, ``D = 6 + 3 n`` (then 6 per clone);
-* ``world_T_imu`` (4, 4): the pose mean ``mu``, the IMU in the world (in ``predict``: after the step);
+* ``world_T_imu`` (4, 4): the pose mean ``mu``, the IMU in the world (in ``predict``: after the
+  step);
 * ``p_active`` (n, 3): the landmark means in slot order; ``p_world`` (k, 3): the world point of
   each observation;
 * ``F``, ``W`` (6, 6): the step's :func:`visla_edu.motion.pose_transition` and motion noise;
-* ``J_landmark`` (k, 4, 3), ``J_pose`` (k, 4, 6): the stereo pixels' Jacobians with respect to the
-  point and to the pose's right perturbation, at the pose's (or the clone's) mean
+* ``J_landmark`` (k, 4, 3), ``J_pose`` (k, 4, 6): the stereo pixels' Jacobians with respect to
+  the point and to the pose's right perturbation, at the pose's (or the clone's) mean
   (:meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`);
 * ``delta`` (6 + 3 n,): a correction ``[pose (6); landmarks (3 each)]``; for the clones
   ``clone_T`` (n, 4, 4) and ``delta`` (n, 6);
-* ``G_pose`` (k, 3, 6): new landmarks' pose sensitivity (:func:`visla_edu.ekf.initialize_landmarks`);
+* ``G_pose`` (k, 3, 6): the pose sensitivity of new landmarks
+  (:func:`visla_edu.ekf.initialize_landmarks`);
 * ``cols`` (k, 3) of int, ``means`` (k, 3): state columns and means of landmarks in the state.
 
 Results are reported in the library's convention either way: the pose covariance of the right
@@ -72,10 +75,7 @@ class RightForm:
 
     @staticmethod
     def delayed_pose_jacobian(J_landmark, p_world):
-        """Jacobian (N, 4, 6) of a past observation of a landmark entering now with respect to the current pose.
-
-        Zero: the right form's landmark error ``m - mu_m`` does not involve the pose.
-        """
+        """Zero (N, 4, 6): a past observation of a landmark entering now does not depend on the current pose."""
         return np.zeros(J_landmark.shape[:-1] + (6,))
 
     @staticmethod
@@ -102,19 +102,19 @@ class RightForm:
 class InvariantForm:
     """The invariant error ``T = exp(hat(xi)) mu``, ``m_j = exp(hat(theta)) mu_j + e_j`` (``slam_error="invariant"``).
 
-    ``xi = [p; theta]`` is in the world frame. :meth:`pose_cov` and :meth:`landmark_covs` convert back
-    to the library's convention. Arguments of its methods: the module docstring.
+    ``xi = [p; theta]`` is in the world frame. :meth:`pose_cov` and :meth:`landmark_covs` convert
+    back to the library's convention. Arguments of its methods: the module docstring.
     """
 
     name = "invariant"
 
     @staticmethod
     def predict(Sigma, world_T_imu, p_active, F, W):
-        """``Sigma <- Sigma + B B^T`` (:func:`visla_edu.motion.predict_invariant_covariance`); F is the identity here.
+        """``Sigma <- Sigma + B B^T`` in place (:func:`visla_edu.motion.predict_invariant_covariance`); F is I here.
 
-        In place. Non-finite entries of ``p_active`` count as 0 (the dense filter's placeholders get no
-        noise). Clones (columns after the landmarks) get no noise: a clone's world-frame error does not
-        change when the current pose moves.
+        Non-finite entries of ``p_active`` count as 0 (the dense filter's placeholders get no
+        noise). Clones (columns after the landmarks) get no noise: a clone's world-frame error does
+        not change when the current pose moves.
         """
         end = 6 + 3 * len(p_active)
         motion.predict_invariant_covariance(Sigma[:end, :end], world_T_imu, p_active, W)
@@ -128,8 +128,7 @@ class InvariantForm:
     def retract(world_T_imu, p_active, delta):
         """``mu <- exp(hat(xi)) mu``, ``mu_j <- R_xi mu_j + J_l(theta) e_j`` (:func:`visla_edu.ekf.invariant_retract`).
 
-        ``delta`` is ``[xi (6); e_0 (3); e_1 (3); ...]``; returns ``(world_T_imu, p_active)`` as
-        :meth:`RightForm.retract`.
+        ``delta`` is ``[xi (6); e_0 (3); e_1 (3); ...]``; returns as :meth:`RightForm.retract`.
         """
         return ekf.invariant_retract(world_T_imu, p_active, delta)
 
@@ -137,17 +136,18 @@ class InvariantForm:
     def clone_jacobian(J_landmark, J_pose, p_world):
         """``[-J_landmark, J_landmark hat(m)]`` (N, 4, 6): an observation from a clone, by the clone's error.
 
-        With ``T = exp(hat(xi)) mu`` and a point ``m`` (``p_world``) not in the state, the camera sees
-        ``inv(T) m ~ inv(mu) (m - p - theta x m)``; ``J_landmark`` is ``dz/dm`` at the clone's mean.
+        With ``T = exp(hat(xi)) mu`` and a point ``m`` (``p_world``) not in the state, the camera
+        sees ``inv(T) m ~ inv(mu) (m - p - theta x m)``; ``J_landmark`` is ``dz/dm`` at the clone's
+        mean.
         """
         return np.concatenate([-J_landmark, J_landmark @ lie.hat(p_world)], axis=-1)
 
     @staticmethod
     def delayed_pose_jacobian(J_landmark, p_world):
-        """``[0, -J_landmark hat(mu_m)]`` (N, 4, 6): a past observation of a landmark entering now, by the current pose.
+        """``[0, -J_landmark hat(mu_m)]`` (N, 4, 6): a past observation of a landmark entering now, by the pose.
 
-        The landmark's invariant error is taken relative to the current pose's rotation error,
-        ``m = exp(hat(theta)) mu_m + e`` (``mu_m``: ``p_world``), so every observation of it depends on
+        Its invariant error is taken relative to the current pose's rotation error, ``m =
+        exp(hat(theta)) mu_m + e`` (``mu_m``: ``p_world``), so all its observations depend on
         ``theta``.
         """
         return np.concatenate([np.zeros_like(J_landmark), -J_landmark @ lie.hat(p_world)], axis=-1)
@@ -161,9 +161,10 @@ class InvariantForm:
     def landmark_sensitivity(G_pose):
         """``[I, 0]`` for each new landmark, (k, 3, 6) (only ``len(G_pose)`` is used).
 
-        With ``T = exp(hat(xi)) mu`` a point placed at ``mu p_imu`` is ``exp(hat(theta)) mu p_imu + p`` to
-        first order, so its invariant error ``e = p + R dp_imu`` takes the pose's translation error and
-        nothing of ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance in the world frame).
+        With ``T = exp(hat(xi)) mu`` a point placed at ``mu p_imu`` is ``exp(hat(theta)) mu p_imu +
+        p`` to first order, so its invariant error ``e = p + R dp_imu`` takes the pose's translation
+        error and nothing of ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance,
+        world frame).
         """
         G = np.zeros((len(G_pose), 3, 6))
         G[:, :, :3] = np.eye(3)
@@ -171,9 +172,10 @@ class InvariantForm:
 
     @staticmethod
     def pose_cov(Sigma_pose, world_T_imu):
-        """``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (6, 6): the right-perturbation covariance, ``delta = Ad(inv(mu)) xi``.
+        """``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (6, 6): the right-perturbation covariance.
 
-        ``Sigma_pose`` is the covariance of ``xi``, ``world_T_imu`` is ``mu``.
+        ``delta = Ad(inv(mu)) xi``; ``Sigma_pose`` is the covariance of ``xi``, ``world_T_imu`` is
+        ``mu``.
         """
         A = lie.adjoint(lie.se3_inv(world_T_imu))
         return A @ Sigma_pose @ A.T
@@ -182,8 +184,8 @@ class InvariantForm:
     def landmark_covs(Sigma, cols, means):
         """Covariances (k, 3, 3) of ``m - mu_m = e - hat(mu_m) theta`` for the slots with columns ``cols``.
 
-        ``A Sigma_theta A^T + A Sigma_theta,e + (A Sigma_theta,e)^T + Sigma_e`` with ``A = -hat(mu_m)``
-        (``mu_m``: ``means``), symmetrised.
+        ``A Sigma_theta A^T + A Sigma_theta,e + (A Sigma_theta,e)^T + Sigma_e`` with
+        ``A = -hat(mu_m)`` (``mu_m``: ``means``), symmetrised.
         """
         See = Sigma[cols[:, :, None], cols[:, None, :]]
         if len(cols) == 0:

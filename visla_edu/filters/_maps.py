@@ -28,8 +28,7 @@ class DeadReckoning(FilterBase):
     Attributes
     ----------
     pose_cov : ndarray, shape (6, 6)
-        Covariance of the pose's right perturbation ``[v; w]``, ``initial_pose_sigma^2 I`` at
-        the start.
+        Covariance of the right perturbation ``[v; w]``; ``initial_pose_sigma^2 I`` at the start.
     """
 
     def __init__(self, dataset, camera, config):
@@ -81,9 +80,9 @@ class _LandmarkMap(DeadReckoning):
     def _gate_mapped(self, ids, z, status, z_pred, known):
         """Predict and gate the observations of mapped landmarks (``known`` mask); fills ``z_pred`` and ``status``.
 
-        Returns ``accepted`` (k,) bool (inside the gate), ``nis`` (the sum of their squared Mahalanobis
-        distances), ``dof`` (4 per accepted observation) and ``pose_noise`` (k_accepted, 4, 4), the
-        :meth:`_pose_noise` of the accepted ones; ``nis`` NaN and ``pose_noise`` None when none was predicted.
+        Returns ``accepted`` (k,) bool, ``nis`` (the sum of their squared Mahalanobis distances),
+        ``dof`` (4 per accepted) and ``pose_noise`` (k_accepted, 4, 4); ``nis`` NaN and
+        ``pose_noise`` None when none was predicted.
         """
         accepted = np.zeros(len(ids), dtype=bool)
         if not np.any(known):
@@ -171,13 +170,12 @@ class LandmarkMapping(_LandmarkMap):
 class VisualInertialOdometry(_LandmarkMap):
     """Pose EKF against landmarks fixed where they were first triangulated.
 
-    A landmark is placed once, from its first observation and the pose at that time (its
-    covariance includes that pose's uncertainty, ``G_pose Sigma_pose G_pose^T``); later
-    observations update the pose alone, with ``R_i = sigma^2 I + J_landmark Sigma_i
-    J_landmark^T``. Updating the landmarks too with the observations that just corrected the pose
+    A landmark is placed once, from its first observation and the pose then (its covariance includes
+    that pose's uncertainty, ``G_pose Sigma_pose G_pose^T``); later observations update the pose
+    alone, with ``R_i = sigma^2 I + J_landmark Sigma_i J_landmark^T``. Updating the landmarks too
     would count each observation twice and drag pose and map along together
-    (``FilterConfig.vio_refine_landmarks`` does it for comparison); the joint filter
-    (``JointSlam``) is the consistent way to refine both.
+    (``FilterConfig.vio_refine_landmarks`` does it for comparison);
+    :class:`~visla_edu.filters.JointSlam` refines both consistently.
 
     Parameters
     ----------
@@ -189,7 +187,7 @@ class VisualInertialOdometry(_LandmarkMap):
     pose_cov : ndarray, shape (6, 6)
         Covariance of the pose's right perturbation ``[v; w]``, updated by the observations.
     landmark_cov, init_frame
-        As :class:`LandmarkMapping`'s; a covariance includes the pose's uncertainty when it was placed.
+        As :class:`LandmarkMapping`'s; a covariance includes the pose's uncertainty when placed.
     """
 
     def _update(self, ids, z, status, z_pred):

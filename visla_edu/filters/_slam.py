@@ -60,11 +60,10 @@ class JointSlam(CloneWindow, FilterBase):
     clone_T : ndarray, shape (n_clones, 4, 4)
         The clones' means, oldest first (their frames: ``state.clone_frames``).
     track_counts : dict of str -> int
-        Multi-frame track updates so far: ``tracks_used``, ``tracks_gated`` (refused by the
-        whole-track gate), ``tracks_short`` (fewer than
-        :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations in the window),
-        ``tracks_failed`` (no point in front of every camera), ``entered`` (tracks that entered
-        the state), and ``observations_used``, ``observations_gated`` (their observations).
+        Multi-frame track updates so far: ``tracks_used``, ``tracks_gated`` (refused whole),
+        ``tracks_short`` (fewer than :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS`
+        observations in the window), ``tracks_failed`` (no point in front of every camera),
+        ``entered`` (into the state), and the tracks' ``observations_used``, ``observations_gated``.
     """
 
     def __init__(self, dataset, camera, config, dense=False):
@@ -148,8 +147,8 @@ class JointSlam(CloneWindow, FilterBase):
     def _gate_known(self, ids, z, status, z_pred, known):
         """Predict and gate the observations of landmarks in the state (``known`` mask); fills ``z_pred``, ``status``.
 
-        Returns the predictions (k, 4), ``J_landmark`` (k, 4, 3) and ``J_pose`` (k, 4, 6, in the error
-        form's coordinates) of the known observations; None when there are none.
+        Returns ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``, ``J_pose`` in the error
+        form's coordinates; None when there are none.
         """
         if not np.any(known):
             return None
@@ -197,10 +196,9 @@ class JointSlam(CloneWindow, FilterBase):
         return active, self._landmark_covs(active)
 
     def landmark_estimates(self):
-        """Final landmark means (M, 3) and marginal covariances (M, 3, 3); NaN if never initialised.
+        """Landmark means (M, 3) and marginal covariances (M, 3, 3), NaN if never initialised.
 
-        Landmarks still in the state report their current estimate (in the dense form: every
-        initialised landmark, retired or not).
+        Landmarks still in the state (dense: every initialised one) report their current estimate.
         """
         cov = self.landmark_cov.copy()
         ids = self.state.active_ids

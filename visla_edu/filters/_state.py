@@ -54,8 +54,8 @@ class ActiveSet:
     def dense(cls, num_landmarks, ids, pose_cov, placeholder_variance):
         """Every landmark of ``ids`` in the state from the start (the textbook filter), uncorrelated.
 
-        ``placeholder_variance`` on their diagonal until :meth:`augment` fills their rows at the first
-        observation (exact: a landmark never observed is uncorrelated with everything).
+        ``placeholder_variance`` on their diagonal until :meth:`augment` fills their rows at the
+        first observation (exact: a landmark never observed is uncorrelated with everything).
         """
         state = cls(num_landmarks, pose_cov)
         state.enter(ids)
@@ -128,9 +128,8 @@ class ActiveSet:
     def correct(self, ids, z, noise_var, prediction, rows):
         """The joint update with stereo observations of landmarks ``ids`` in the state; ``(delta, nis)``.
 
-        :func:`visla_edu.ekf.joint_correction` on :attr:`Sigma` with the slots of ``ids`` (its
-        parameters: ``z`` (k, 4), ``prediction`` ``(z_pred, J_landmark, J_pose)``, ``rows`` the rig's
-        stereo rows).
+        :func:`visla_edu.ekf.joint_correction` on their slots (``z`` (k, 4), ``prediction``
+        ``(z_pred, J_landmark, J_pose)``, ``rows`` the rig's stereo rows).
         """
         return ekf.joint_correction(self.Sigma, self.slot_of[ids], z, noise_var, prediction, rows)
 

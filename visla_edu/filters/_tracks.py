@@ -2,9 +2,8 @@
 
 A landmark that is not in the joint state keeps its observations in a :class:`TrackBuffer`
 while the frames they were made from are *cloned* in the state (copies of past poses,
-:meth:`visla_edu.filters.ActiveSet.clone_pose`). When its track ends, or when it has been seen
-for the whole clone window, its observations are used all at once (Mourikis and Roumeliotis
-2007; OpenVINS):
+:meth:`visla_edu.filters.ActiveSet.clone_pose`); when they are used is
+:mod:`visla_edu.filters._clones`'s. Then, all at once (Mourikis and Roumeliotis 2007; OpenVINS):
 
 1. **Triangulation** from every observation and the clones' means (:func:`triangulate_tracks`):
    Gauss-Newton on the inverse depth ``(x/z, y/z, 1/z)`` in the camera of the observation with
@@ -117,22 +116,11 @@ def _from_inverse_depth(world_T_cam, psi):
 
 
 def triangulate_tracks(camera, world_T_imu, z, owner, count, sigma_pixel):
-    """Least-squares points of ``count`` tracks from their observations and the poses they were made from.
+    """Least-squares points ``p_world`` (count, 3) of ``count`` tracks, and ``ok`` (count,) bool.
 
-    Parameters
-    ----------
-    camera : visla_edu.camera.StereoCamera
-    world_T_imu, z, owner
-        The observations (module docstring), every track at least once.
-    count : int
-    sigma_pixel : float
-        Scale of the Huber weights (:data:`HUBER_SIGMAS`).
-
-    Returns
-    -------
-    p_world : ndarray, shape (count, 3)
-    ok : ndarray of bool, shape (count,)
-        Finite, and at least :data:`MIN_POINT_DEPTH` in front of every camera that saw it.
+    From the observations ``world_T_imu``, ``z`` and ``owner`` (module docstring; every track at
+    least once); ``sigma_pixel`` scales the Huber weights (:data:`HUBER_SIGMAS`). ``ok``: finite,
+    and at least :data:`MIN_POINT_DEPTH` in front of every camera that saw it.
     """
     disparity = camera.disparity(z)
     anchor = np.zeros(count, dtype=np.int64)

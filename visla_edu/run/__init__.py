@@ -1,8 +1,8 @@
 """One driver for every filter mode and the smoothers: build, step, run, evaluate, save.
 
 How the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
-(:func:`limit_blas_threads`) and the progress bar. Results and their file: :mod:`visla_edu.run._results`;
-cost and failure hints: :mod:`visla_edu.run.workload`.
+(:func:`limit_blas_threads`) and the progress bar. Results and their file:
+:mod:`visla_edu.run._results`; cost and failure hints: :mod:`visla_edu.run.workload`.
 
 **"auto" settings.** Every run first measures the settings left at ``"auto"`` from the data
 (:func:`resolve_config`): the velocity noise and the IMU lag by
@@ -64,14 +64,14 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     ------
     ValueError
         A bad mode, ``dense`` without ``"slam"``, a dataset without observations for a mode that
-        needs them, or an implausible calibration (:func:`visla_edu.data.calibration_problems`: an
-        in-memory dataset is held to the loader's ranges, as the filter would silently turn an absurd
-        focal length, baseline or extrinsic into inf/NaN covariances or a garbage map).
+        needs them, or an implausible calibration (:func:`visla_edu.data.calibration_problems`).
     """
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if dense and mode != SLAM:
         raise ValueError(f"dense=True is the textbook joint filter and needs mode='slam', got mode={mode!r}")
+    # In-memory datasets are held to the ranges the loader enforces on files: the filter would silently turn
+    # an absurd focal length, baseline or extrinsic into inf/NaN covariances or a garbage map.
     problems = data.calibration_problems(dataset)
     if problems:
         raise ValueError(f"cannot run the filter: {problems[0]}")
@@ -98,8 +98,6 @@ def _check_enough_data(dataset, mode):
 def resolve_config(dataset, config):
     """``config`` with its ``"auto"`` settings measured from ``dataset`` (module docstring).
 
-    ``extrinsic_correction="auto"`` stays as it is: it is resolved with the camera (:func:`_imu_T_cam`).
-
     Parameters
     ----------
     dataset, config
@@ -108,7 +106,7 @@ def resolve_config(dataset, config):
     Returns
     -------
     visla_edu.filters.FilterConfig
-        The same object when nothing was ``"auto"``.
+        The same object when nothing was ``"auto"``; ``extrinsic_correction`` is left to the camera.
     """
     if config.resolved:
         return config
@@ -129,14 +127,11 @@ def _imu_T_cam(dataset, config, verbose):
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
     """Yield one :class:`~visla_edu.filters.StepRecord` per frame, ``t = 0 .. T - 1``.
 
-    Being a generator, it raises the errors of :func:`run_filter` at the first ``next()``, not when
-    called.
-
     Parameters
     ----------
     dataset, mode, config, dense, blas_threads
         As in :func:`run_filter` (no progress bar, nothing printed); the BLAS thread limit holds
-        while the generator runs.
+        while the generator runs, and its errors come at the first ``next()``.
 
     Yields
     ------
@@ -206,7 +201,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     """Run a smoother over the whole dataset, into the same :class:`RunResult` as the filters.
 
     ``"smooth"``: the batch smoother (:func:`visla_edu.smoother.smooth`) started from the joint
-    EKF's trajectory and map (:func:`run_filter` with ``"slam"``, kept as ``start_world_T_imu``).
+    EKF's trajectory and map (:func:`run_filter`, ``"slam"``; kept as ``start_world_T_imu``);
     ``"window"``: the fixed-lag sliding window (:func:`visla_edu.smoother.smooth_window`). Both use
     the filter's model: the resolved ``config`` and its camera calibration (module docstring).
 
@@ -227,8 +222,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     Returns
     -------
     RunResult
-        ``nis`` is NaN (a smoother has no innovations); ``status_counts`` count the smoother's
-        statuses (:mod:`visla_edu.codes`; ``ignored``: repeated frames).
+        ``nis`` is NaN; ``status_counts`` hold the smoother's codes (``ignored``: repeated frames).
     """
     from visla_edu import smoother
 
@@ -256,11 +250,10 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
 
 
 def _best_start(dataset, config, settings, progress, verbose, blas_threads):
-    """The batch smoother's start: the joint EKF, or (``start="best"``) the lowest objective of dead reckoning, VIO and it.
+    """The batch smoother's start (a RunResult, its ``mode`` naming it) and a line of the candidates' costs.
 
-    Each candidate is a :class:`RunResult` (dead reckoning with no map: the smoother triangulates it),
-    priced on the same observations by :func:`visla_edu.smoother.start_cost`. Returns the chosen
-    result (its ``mode`` names it) and a line of the costs.
+    The joint EKF, or with ``start="best"`` the lowest :func:`visla_edu.smoother.start_cost` of dead
+    reckoning (no map: the smoother triangulates it), VIO and the joint EKF.
     """
     from visla_edu import smoother
 
@@ -275,11 +268,10 @@ def _best_start(dataset, config, settings, progress, verbose, blas_threads):
 
 
 def _smoother_settings(config, mode, own=None):
-    """The smoother's model (a SmootherConfig) from the filter's resolved settings and its own ``own``.
+    """The smoother's model from the filter's resolved settings and its own ``own``; a ValueError names ``mode``.
 
-    A ValueError names ``mode`` when a filter setting does not suit the smoother (e.g. a velocity
-    noise of 0, which its motion factors cannot weigh), or a setting of its own is bad (``own`` is
-    already checked by :func:`visla_edu.smoother.check_own_settings`).
+    E.g. a velocity noise of 0, which the filters accept and the smoother's motion factors cannot
+    weigh.
     """
     from visla_edu import smoother
 

@@ -1,6 +1,4 @@
-"""A whole run's result, its per-frame arrays, and its file: :class:`RunResult`, :class:`RunArrays`.
-
-:mod:`visla_edu.run` produces them and re-exports all four.
+"""A whole run's result, its per-frame arrays, and its file (re-exported by :mod:`visla_edu.run`).
 
 **The file** (``.npz``, no pickle; written atomically by :func:`save_result`, read by
 :func:`load_result`): one key per array field of :class:`RunResult` (``start_world_T_imu`` only
@@ -60,7 +58,8 @@ class RunResult:
     track_counts : dict of str -> int
         Joint SLAM with clones: :attr:`visla_edu.filters.JointSlam.track_counts` (empty otherwise).
     start_mode : str
-        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``), else ``""``.
+        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``), else
+        ``""``.
     notes : str
         Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
     """
@@ -89,9 +88,9 @@ class RunResult:
     def status_totals(self):
         """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``.
 
-        With clones, the ``delayed`` observations of the tracks that were used or gated later
-        count as ``used`` or ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (tracks
-        too short, without a point in front of their cameras, or still open at the end).
+        With clones, the ``delayed`` observations of tracks used or gated later count as ``used`` or
+        ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (short, failed or still open
+        tracks).
         """
         totals = dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
         used, gated = (int(self.track_counts.get(k, 0)) for k in ("observations_used", "observations_gated"))
@@ -139,10 +138,7 @@ class RunResult:
 
 
 class RunArrays:
-    """Per-frame arrays of a run, filled one :class:`~visla_edu.filters.StepRecord` at a time.
-
-    The whole-run driver (:func:`run_filter`) and the stepper (:class:`visla_edu.stepper.Stepper`)
-    both keep their per-frame figures here.
+    """Per-frame arrays of a run (of :func:`run_filter` and the stepper), filled one StepRecord at a time.
 
     Parameters
     ----------

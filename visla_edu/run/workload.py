@@ -51,9 +51,8 @@ class WorkEstimate:
     max_rows : int
         Most observation rows of one update.
     peak_bytes : int
-        The largest matrices at once: in SLAM the covariance and the same-size product of its
-        update (``2 D^2 8`` bytes) and the (D, m) and (m, m) blocks of the update, in VIO the
-        innovation covariance and its factor.
+        The largest matrices at once: in SLAM the covariance and its update's same-size product
+        (``2 D^2 8`` bytes) and (D, m) and (m, m) blocks, in VIO the innovation covariance and factor.
     seconds : float
         See :data:`SECONDS_PER_ENTRY`.
     """
@@ -89,9 +88,9 @@ def estimate_work(dataset, mode=SLAM, config=None, dense=False):
     """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
 
     The dense filter carries every (strided) landmark, the active set those whose track spans the
-    frame, both with 3 rows per observation. VIO solves one 4-row block per observation; mapping and
-    dead reckoning work in 3x3 and 6x6 blocks (cheap). The smoothers: the joint EKF's estimate
-    times :data:`SMOOTHER_FACTOR`, plus their memory per observation.
+    frame, both with 3 rows per observation; VIO solves a 4-row block per observation; mapping and
+    dead reckoning work in cheap 3x3 and 6x6 blocks. The smoothers: the joint EKF's estimate times
+    :data:`SMOOTHER_FACTOR`, plus their memory per observation.
 
     Parameters
     ----------
