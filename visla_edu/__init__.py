@@ -1,19 +1,10 @@
 """visla-edu: visual-inertial SLAM with an extended Kalman filter, for teaching.
 
-Modules (import the one you need; nothing runs at import time):
-``lie`` SE(3) kinematics, ``camera`` stereo model, ``dataset`` the Dataset class,
-``data`` loading the course files, ``simulate`` drives with ground truth, ``motion``
-IMU prediction, ``ekf`` the update steps, ``filters`` the filter modes and their settings,
-``smoother`` batch and sliding-window least squares, ``codes`` observation codes and mode
-names, ``settings`` the declared settings, ``validation`` calibration and rigidity checks,
-``run`` the driver (and ``run.workload`` the cost estimate before a run), ``metrics`` (ATE,
-drift, NEES), ``trajectory`` KITTI and TUM trajectory files, ``diagnostics`` the calibration
-from the data (and ``diagnostics.odometry`` stereo visual odometry), ``cache`` the user cache,
-``plotting``, ``stepper`` the filter stepper (model, figure, widget, Voila page), ``course``
-course scaffolding (``course.checks`` the exercise checks, ``course.capstone`` notebook 12's
-filter loop, ``course.kalman`` the primer's linear Kalman filter, ``course.numdiff``
-central differences, ``course.release`` the student notebooks, the student's folder, the
-project grader, the site), ``cli`` the command line.
+Import the module you need (nothing runs at import time); each module's docstring says what it
+holds. The estimator: ``lie``, ``camera``, ``motion``, ``ekf``, ``filters``, ``smoother``, ``run``;
+the data: ``dataset``, ``data``, ``simulate``, ``trajectory``, ``validation``; judging and
+showing a run: ``metrics``, ``diagnostics``, ``plotting``, ``stepper``; shared pieces: ``codes``,
+``settings``, ``cache``; the course's tools: ``course``; the command line: ``cli``.
 """
 
 __version__ = "0.1.0"

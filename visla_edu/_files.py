@@ -1,24 +1,10 @@
 """Files visla-edu reads and writes: atomic writes, and checks of input and output paths.
 
-A leaf module (imports only the standard library).
-
-Every file the package writes (result ``.npz``, figures, saved datasets, exported
-trajectories, released notebooks) goes through :func:`atomic_write`: the bytes go to a
-temporary file in the target's folder, which then replaces the target with
-:func:`os.replace` (atomic on POSIX and Windows within one file system). A reader therefore
-sees the old file or the whole new one; a crash or a kill in the middle leaves the previous
-file as it was (and at most a hidden ``.<name>.*.tmp`` file next to it).
-
->>> from visla_edu._files import atomic_write
->>> with atomic_write("trajectory.txt") as f:    # doctest: +SKIP
-...     f.write("1 0 0 0 0 1 0 0 0 0 1 0\\n")
-
-:func:`check_output_path` and :func:`check_input_file` turn the usual path mistakes (a
-folder, a FIFO, a missing or read-only folder, a wrong suffix, an output that is one of the
-inputs) into one-line errors that name the path and what to do, before any work starts.
-Both raise the built-in types (``FileNotFoundError``, ``IsADirectoryError``,
-``NotADirectoryError``, ``PermissionError``, ``ValueError``) with that message as their only
-argument, so ``str(err)`` is the whole message.
+A leaf module (imports only the standard library). Every file the package writes (results,
+figures, datasets, trajectories, notebooks) goes through :func:`atomic_write`.
+:func:`check_output_path` and :func:`check_input_file` turn the usual path mistakes into one-line
+errors that name the path and what to do, before any work starts; they raise built-in types with
+that message as the only argument, so ``str(err)`` is the whole message.
 """
 
 import contextlib
@@ -47,19 +33,8 @@ _KINDS = (
 def expand_user(path):
     """``Path(path)`` with a leading ``~`` or ``~user`` expanded, as :meth:`pathlib.Path.expanduser`.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-
-    Returns
-    -------
-    pathlib.Path
-
-    Raises
-    ------
-    ValueError
-        ``~user`` names no user of this system, or ``~`` no home folder (``expanduser`` raises a
-        ``RuntimeError`` there, which would read as a bug); the message names the path.
+    Where ``expanduser`` raises a ``RuntimeError`` (``~user`` of no user, ``~`` without a home
+    folder), which would read as a bug, this raises a ValueError naming the path.
     """
     try:
         return Path(path).expanduser()
@@ -73,45 +48,19 @@ def expand_user(path):
 def atomic_write(path, mode="w", encoding="utf-8", replace=True):
     """Context manager: a file object whose content replaces ``path`` only if the block succeeds.
 
-    The temporary file ``.<name>.<pid>.<random>.tmp`` is created in the same folder (so the
-    final ``os.replace`` is a rename within one file system), flushed and fsynced, then
-    renamed over ``path``. If the body raises (or the process is interrupted), the
-    temporary file is removed and ``path`` keeps its previous content. A replaced file keeps
-    its permission bits; a new one gets the permissions a plain ``open`` would give
-    (``0o666`` minus the umask).
+    ``mode`` is ``"w"`` (text, in ``encoding``) or ``"wb"``; write to the yielded file, do not close
+    it. The bytes go to ``.<name>.<pid>.<random>.tmp`` in the target's folder, are flushed and
+    fsynced, then renamed over ``path`` with :func:`os.replace` (atomic on POSIX and Windows within
+    one file system): a reader sees the old file or the whole new one. If the body raises (or the
+    process is interrupted), the temporary file is removed and ``path`` keeps its previous content
+    (a kill leaves at most the hidden temporary file). A replaced file keeps its permission bits; a
+    new one gets those a plain ``open`` would give (``0o666`` minus the umask).
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The target file. Its folder must exist (a missing folder is a ``FileNotFoundError``
-        naming it).
-    mode : {"w", "wb"}
-        Text or binary.
-    encoding : str
-        For text mode.
-    replace : bool
-        False: never replace an existing file. The finished temporary file is hard-linked to
-        ``path`` (:func:`os.link` fails if ``path`` exists, even if it appeared while writing);
-        on a file system without hard links, ``path`` is checked just before the rename.
-
-    Yields
-    ------
-    file object
-        Write to it; do not close it.
-
-    Raises
-    ------
-    FileNotFoundError
-        The target's folder does not exist.
-    ValueError
-        ``mode`` is not ``"w"`` or ``"wb"``, or ``path`` is a folder.
-    FileExistsError
-        ``replace`` is False and ``path`` exists; it is left as it was.
-
-    Examples
-    --------
-    >>> with atomic_write(tmp_path / "result.npz", "wb") as f:    # doctest: +SKIP
-    ...     np.savez_compressed(f, x=x)
+    ``replace=False`` never replaces an existing file: the finished temporary file is hard-linked to
+    ``path`` (:func:`os.link` fails if ``path`` exists, even if it appeared while writing; without
+    hard links, ``path`` is checked just before the rename), else a FileExistsError leaves ``path``
+    as it was. A missing folder is a FileNotFoundError naming it; another ``mode``, or ``path`` a
+    folder, a ValueError.
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write: mode must be 'w' or 'wb', got {mode!r}")
@@ -153,21 +102,7 @@ def _link_new(tmp, path):
 
 
 def format_bytes(n):
-    """``n`` bytes as a short text: ``"512 B"``, ``"3.2 MiB"``, ``"7.0 TiB"``.
-
-    Binary units (1 KiB = 1024 bytes), one decimal; below 1 KiB the count as given.
-
-    Parameters
-    ----------
-    n : int or float
-        A number of bytes.
-
-    Returns
-    -------
-    str
-        ``f"{n / unit:.1f} {name}"`` for the largest of TiB, GiB, MiB and KiB that ``n`` reaches,
-        else ``f"{n} B"``.
-    """
+    """``n`` bytes as a short text in binary units (up to TiB), one decimal: ``"512 B"``, ``"3.2 MiB"``."""
     for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n >= size:
             return f"{n / size:.1f} {unit}"
@@ -177,24 +112,10 @@ def format_bytes(n):
 def file_kind(path):
     """What ``path`` is, for messages: ``"a regular file"``, ``"a directory"``, ``"a FIFO (named pipe)"``, ...
 
-    Symbolic links are followed (:func:`os.stat`).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-
-    Returns
-    -------
-    str
-        ``"a directory"``, ``"a FIFO (named pipe)"``, ``"a socket"``, ``"a character device"`` or
-        ``"a block device"``, else ``"a regular file"``; ``"missing"`` when nothing is there (or a
-        component of the path is not a folder) and ``"a broken symbolic link"`` for a link to
-        nothing.
-
-    Raises
-    ------
-    OSError
-        ``os.stat`` fails for another reason (e.g. ``PermissionError`` on a folder on the way).
+    Symbolic links are followed; also ``"a socket"``, ``"a character device"``, ``"a block
+    device"``, ``"missing"`` (nothing there, or a component of the path is not a folder) and ``"a
+    broken symbolic link"``. Other ``os.stat`` errors propagate (e.g. ``PermissionError`` on the
+    way).
     """
     try:
         mode = os.stat(path).st_mode
@@ -206,29 +127,12 @@ def file_kind(path):
 
 
 def check_input_file(path, what="data file"):
-    """``path`` as an absolute Path if it is a readable regular file, else a clear error.
+    """``path`` as an absolute Path (symbolic links resolved) if it is a readable regular file, else a clear error.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    what : str
-        What the file is for, e.g. ``"course file"`` (starts the message).
-
-    Returns
-    -------
-    pathlib.Path
-        Absolute, symbolic links resolved.
-
-    Raises
-    ------
-    FileNotFoundError
-        Nothing there, or a broken symbolic link (says where it points).
-    IsADirectoryError
-        A folder.
-    PermissionError
-        Not readable by this user.
-    ValueError
-        A FIFO, socket or device: not a file on disk (visla-edu seeks in its inputs).
+    The message starts with ``what`` (e.g. ``"course file"``): a FileNotFoundError (nothing there,
+    or a broken symbolic link: it says where it points), IsADirectoryError, PermissionError (not
+    readable by this user), or ValueError for a FIFO, socket or device (visla-edu seeks in its
+    inputs).
     """
     path = expand_user(path)
     kind = file_kind(path)
@@ -249,18 +153,10 @@ def check_input_file(path, what="data file"):
 
 
 def same_file(a, b):
-    """Whether paths ``a`` and ``b`` name the same file (through links, ``..`` or hard links).
+    """Whether paths ``a`` and ``b`` (``~`` expanded) name the same file, through links, ``..`` or hard links.
 
-    Parameters
-    ----------
-    a, b : str or os.PathLike
-        ``~`` is expanded.
-
-    Returns
-    -------
-    bool
-        :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise
-        (one is missing, or ``os.stat`` fails) whether both resolve to the same absolute path.
+    :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise whether
+    both resolve to the same absolute path.
     """
     a, b = expand_user(a), expand_user(b)
     with contextlib.suppress(OSError):
@@ -269,36 +165,16 @@ def same_file(a, b):
 
 
 def check_output_path(path, suffixes, option, inputs=(), others=()):
-    """Check an output path before any work: suffix, folder, kind, and that it is no input.
+    """Check an output path before any work (suffix, folder, kind, no input); return the absolute path to write.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    suffixes : sequence of str
-        Allowed suffixes, lower case with the dot (``(".npz",)``); the first one is suggested.
-    option : str
-        How the user gave the path (``"--out"``), to start the message.
-    inputs : sequence of path-like
-        Files the command reads; the output may not be one of them (not even through a
-        symbolic link or a relative path).
-    others : sequence of (str, path-like)
-        Other outputs of the same command, ``(option, path)``; the output may not be one of them.
-
-    Returns
-    -------
-    pathlib.Path
-        The absolute path that will be written (the folder resolved, the name as given).
-
-    Raises
-    ------
-    ValueError
-        Wrong suffix, an existing FIFO or device, or the same file as an input or another output.
-    IsADirectoryError
-        ``path`` is a folder.
-    FileNotFoundError, NotADirectoryError
-        The folder does not exist or is not a folder.
-    PermissionError
-        The folder is not writable.
+    ``suffixes`` are the allowed ones, lower case with the dot (``(".npz",)``), the first suggested;
+    ``option`` is how the user gave the path (``"--out"``) and starts the message. The output may be
+    none of ``inputs`` (the files the command reads, not even through a symbolic link or a relative
+    path) nor of ``others`` (``(option, path)`` of the command's other outputs). The folder is
+    resolved, the name kept as given. Errors: ValueError (wrong suffix, an existing FIFO or device,
+    a name too long for the folder, an input or another output), IsADirectoryError (``path`` is a
+    folder), FileNotFoundError or NotADirectoryError (no such folder), PermissionError (not
+    writable).
     """
     given = expand_user(path)
     kind = file_kind(given)
@@ -347,10 +223,7 @@ def _writable_folder(given, option, shown):
 
 
 def _probe_write(folder, option, shown):
-    """Create and remove a small file in ``folder``: permissions alone do not tell (root, /proc, read-only mounts).
-
-    Failing here, before any work, means no output of the command is written at all.
-    """
+    """Create and remove a small file in ``folder``: permissions alone do not tell (root, /proc, read-only mounts)."""
     try:
         with tempfile.NamedTemporaryFile(dir=folder, prefix=".visla-edu-probe-"):
             pass

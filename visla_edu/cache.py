@@ -1,16 +1,10 @@
 """A small user cache of JSON files, keyed by the content of numpy arrays.
 
 Results that take a while to compute from a dataset (its calibration,
-:func:`visla_edu.diagnostics.calibrate`) are kept between runs in a user cache folder:
-
-* ``$VISLA_EDU_CACHE`` if set, else ``$XDG_CACHE_HOME/visla-edu``, else ``~/.cache/visla-edu``
-  (:func:`cache_dir`);
-* one JSON file per entry, named by a content hash of the arrays it was computed from and a
-  version string (:func:`content_hash`): changed data or a new version is a new entry;
-* written atomically (a temporary file in the same folder, then ``os.replace``), so a reader
-  never sees half a file (:func:`save_json`);
-* a missing, unreadable or corrupt file reads as no entry (:func:`load_json`), and a folder that
-  cannot be written is skipped: the cache never fails a run.
+:func:`visla_edu.diagnostics.calibrate`) are kept between runs in a user cache folder
+(:func:`cache_dir`), one JSON file per entry named by :func:`content_hash` of the arrays and a
+version. Entries are written atomically (:func:`save_json`); a missing or corrupt one reads as none
+(:func:`load_json`) and a folder that cannot be written is skipped: the cache never fails a run.
 """
 
 import hashlib
@@ -40,7 +34,7 @@ def cache_dir():
     Raises
     ------
     ValueError
-        The folder starts with ``~user`` of no user, or ``~`` and there is no home folder
+        The folder starts with ``~user`` of no user, or ``~`` without a home folder
         (:func:`visla_edu._files.expand_user`); callers then skip the cache.
     """
     explicit = os.environ.get(ENV_VAR, "").strip()
@@ -51,22 +45,21 @@ def cache_dir():
 
 
 def content_hash(arrays, version):
-    """Hex digest (BLAKE2b, 32 bytes) of named arrays and a version string.
+    """Hex digest (BLAKE2b, 32 bytes: 64 characters) of named arrays and a version string.
 
-    Each array enters with its name, dtype, shape and bytes (C order), so equal content gives
-    the same key whatever the memory layout, and any changed value, shape or type a new one.
+    Each array enters with its name, dtype, shape and bytes (C order): equal content gives the same
+    key whatever the memory layout, any changed value, shape or type a new one.
 
     Parameters
     ----------
     arrays : dict
         Name -> array_like (scalars too).
     version : str
-        Mixed into the key: bump it whenever what is cached changes meaning.
+        Bump it whenever what is cached changes meaning.
 
     Returns
     -------
     str
-        64 hexadecimal characters.
     """
     digest = hashlib.blake2b(digest_size=32)
     digest.update(str(version).encode())
@@ -97,10 +90,7 @@ def load_json(path):
 
 
 def save_json(path, value):
-    """Write ``value`` as JSON to ``path`` atomically; False (and nothing written) on failure.
-
-    The folder is created if needed. The text goes to a temporary file in the same folder,
-    which then replaces ``path`` in one step (:func:`visla_edu._files.atomic_write`).
+    """Write ``value`` as JSON to ``path`` atomically (:func:`visla_edu._files.atomic_write`), creating the folder.
 
     Parameters
     ----------
@@ -111,8 +101,8 @@ def save_json(path, value):
     Returns
     -------
     bool
-        True when the file was written; False when the folder or file cannot be written, or
-        ``value`` is not JSON (NaN, infinity, other objects).
+        True when the file was written; False (and nothing written) when the folder or file cannot
+        be written, or ``value`` is not JSON (NaN, infinity, other objects).
     """
     path = Path(path)
     try:

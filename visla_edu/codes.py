@@ -1,27 +1,10 @@
 """Names shared by every layer: observation status codes, filter and smoother mode names.
 
 A leaf module (it imports nothing of the package), so views and the command line can use the
-codes and the mode names without importing the filters.
-
-Observation status, one vocabulary for every mode: one code per observation in a filter's
+codes and the mode names without importing the filters. The observation status is one
+vocabulary for every mode: one code per observation in a filter's
 :class:`visla_edu.filters.StepRecord` and in a smoother's ``SmootherResult.obs_status``, and a
-column per code in ``RunResult.status_counts``::
-
-    OBS_USED      used in the update (a smoother: in the final solution)
-    OBS_GATED     rejected as an outlier by a chi-square test of its Mahalanobis distance: the
-                  filters' gate on the innovation, the smoothers' test of the residual at their
-                  solution (rounds of rejection)
-    OBS_NEW       first observation: the landmark entered the state here (filters)
-    OBS_NO_DEPTH  non-positive disparity: a broken stereo match, never used
-    OBS_FAR       disparity too small to initialise the landmark (not yet in the state; filters)
-    OBS_IGNORED   not used by this mode (dead reckoning, landmark stride, repeated frame)
-    OBS_DELAYED   held for its track's multi-frame update (joint SLAM with clones: a landmark
-                  outside the state; the track's outcome, used or gated, is counted when the
-                  track is used, :attr:`visla_edu.filters.JointSlam.track_counts`)
-    OBS_DROPPED   usable, but its landmark was left out of the estimate (smoothers: too few
-                  observations, behind a camera, too far, no position; ``SmootherResult.rejected``
-                  counts the landmarks by reason)
-
+column per code in ``RunResult.status_counts`` (each code's meaning: its declaration below).
 ``STATUS_NAMES[code]`` is the code's name in summaries and per-status counts. Codes are only
 ever appended, so a count saved with fewer columns is the first columns of today's.
 """
@@ -48,14 +31,26 @@ __all__ = [
     "RUN_MODES_HELP",
 ]
 
-OBS_USED = 0  #: used in the update
-OBS_GATED = 1  #: rejected as an outlier (the filters' gate, the smoothers' residual test)
-OBS_NEW = 2  #: first observation: the landmark entered the state here
-OBS_NO_DEPTH = 3  #: non-positive disparity: a broken stereo match, never used
-OBS_FAR = 4  #: disparity too small to initialise the landmark (not yet in the state)
-OBS_IGNORED = 5  #: not used by this mode (dead reckoning, landmark stride, repeated frame)
-OBS_DELAYED = 6  #: held for its track's multi-frame update (joint SLAM with clones)
-OBS_DROPPED = 7  #: usable, but its landmark was left out of the estimate (smoothers)
+#: Used in the update (a smoother: in the final solution).
+OBS_USED = 0
+#: Rejected as an outlier by a chi-square test of its Mahalanobis distance: the filters' gate on the
+#: innovation, the smoothers' test of the residual at their solution (rounds of rejection).
+OBS_GATED = 1
+#: First observation: the landmark entered the state here (filters).
+OBS_NEW = 2
+#: Non-positive disparity: a broken stereo match, never used.
+OBS_NO_DEPTH = 3
+#: Disparity too small to initialise the landmark (not yet in the state; filters).
+OBS_FAR = 4
+#: Not used by this mode (dead reckoning, landmark stride, repeated frame).
+OBS_IGNORED = 5
+#: Held for its track's multi-frame update (joint SLAM with clones: a landmark outside the state);
+#: the track's outcome, used or gated, is counted when the track is used
+#: (:attr:`visla_edu.filters.JointSlam.track_counts`).
+OBS_DELAYED = 6
+#: Usable, but its landmark was left out of the estimate (smoothers: too few observations, behind a
+#: camera, too far, no position; ``SmootherResult.rejected`` counts the landmarks by reason).
+OBS_DROPPED = 7
 STATUS_NAMES = ("used", "gated", "new", "no depth", "too far", "ignored", "delayed", "dropped")
 
 DEADRECKON = "deadreckon"  #: IMU prediction only

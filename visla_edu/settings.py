@@ -1,13 +1,10 @@
 """Declared settings: what each field of a configuration dataclass accepts, in one place.
 
-:class:`~visla_edu.filters.FilterConfig` and :class:`~visla_edu.smoother.SmootherConfig`
-declare every field with :func:`setting`, which stores a :class:`SettingSpec` in the field's
-metadata: its default, kind (float, int, bool or str), plausible range and why, the words it
-accepts besides values (e.g. ``"auto"``) and whether it may be None. The same spec checks a
-value given in Python (:func:`check_settings`, from the config's ``__post_init__``), parses
-one given as text on the command line (:func:`parse_setting`, for ``visla-edu run --set
-NAME=VALUE`` and ``--smoother-set``) and says what is valid for ``--help``
-(:meth:`SettingSpec.describe`, :func:`format_value`):
+:class:`~visla_edu.filters.FilterConfig` and :class:`~visla_edu.smoother.SmootherConfig` declare
+every field with :func:`setting`, which stores a :class:`SettingSpec` in its metadata. The spec
+checks a value given in Python (:func:`check_settings`, from ``__post_init__``), parses one given
+as text (:func:`parse_setting`, for ``visla-edu run --set`` and ``--smoother-set``) and says what
+is valid for ``--help`` (:meth:`SettingSpec.describe`, :func:`format_value`):
 
 * booleans are ``true/false``, ``1/0``, ``yes/no`` (any case); anything else is an error;
 * integers are integer literals (``2``, not ``2.5`` or ``2.0``);
@@ -42,13 +39,12 @@ class SettingSpec:
     low_open : bool
         The range excludes ``low``.
     words : tuple of str
-        Text values accepted as they are (e.g. ``("auto",)``); for ``str`` settings, empty
-        means any text (checked where it is used).
+        Text values accepted as they are (e.g. ``("auto",)``); for ``str`` settings, empty means any
+        text (checked where it is used).
     optional : bool
         None is allowed (``none`` on the command line).
     per_axis : bool
-        A number setting that also takes three numbers, one per body axis ``(x, y, z)``
-        (``0.1,0.02,0.02`` on the command line), each within the range.
+        A number setting also taking three, one per body axis, each in range (``0.1,0.02,0.02``).
     unit, why : str
         For messages: the unit of the value and why the range is what it is.
     default : object
@@ -124,26 +120,14 @@ class SettingSpec:
 
 def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why="",
             per_axis=False):
-    """A dataclass field with its :class:`SettingSpec` (arguments as its attributes).
+    """A dataclass field with its :class:`SettingSpec`.
 
     Parameters
     ----------
     default : object
-        The field's default (not checked here; :func:`check_settings` checks it on each
-        instance); also kept in the spec.
-    kind : {float, int, bool, str}
-    low, high : float, optional
-        The plausible range; None leaves that side open.
-    low_open : bool
-        The range excludes ``low``.
-    words : iterable of str
-        Text values accepted as they are (stored as a tuple).
-    optional : bool
-        None is allowed.
-    unit, why : str
-        For messages.
-    per_axis : bool
-        Also accept three numbers, one per body axis.
+        Kept in the spec too; :func:`check_settings` checks it on each instance.
+    kind, low, high, low_open, words, optional, unit, why, per_axis
+        As the :class:`SettingSpec` attributes (``words``: any iterable, stored as a tuple).
 
     Returns
     -------
@@ -160,40 +144,27 @@ def specs(cls):
     Parameters
     ----------
     cls : type or instance
-        A dataclass (or one of its instances).
+        A dataclass (TypeError otherwise) or one of its instances.
 
     Returns
     -------
     dict
-        Field name -> :class:`SettingSpec`, in declaration order (fields declared otherwise
-        are left out).
-
-    Raises
-    ------
-    TypeError
-        ``cls`` is not a dataclass.
+        Field name -> :class:`SettingSpec`, in declaration order (other fields are left out).
     """
     return {f.name: f.metadata[SPEC] for f in dataclasses.fields(cls) if SPEC in f.metadata}
 
 
 def check_settings(config):
-    """Check every declared field of ``config`` in place (integral floats of int fields become ints).
+    """Check every declared field of ``config`` in place (:meth:`SettingSpec.check`); ValueError for the first invalid.
 
-    Each field declared with :func:`setting` is replaced by :meth:`SettingSpec.check` of its
-    value: numbers of float fields become Python floats, integral numbers of int fields Python
-    ints, numpy booleans Python booleans, and three per-axis numbers a tuple. Other fields are
-    left alone.
+    Numbers of float fields become Python floats, integral numbers of int fields Python ints, numpy
+    booleans Python booleans, and three per-axis numbers a tuple; other fields are left alone. The
+    message is ``"<class>.<name> must be <what is valid> (<why>), got <value>"``.
 
     Parameters
     ----------
     config : dataclass instance
         E.g. a :class:`~visla_edu.filters.FilterConfig`; modified in place.
-
-    Raises
-    ------
-    ValueError
-        The first invalid value: ``"<class>.<name> must be <what is valid> (<why>), got
-        <value>"``, e.g. ``"FilterConfig.imu_lag must be ..."``.
     """
     for name, spec in specs(config).items():
         setattr(config, name, spec.check(f"{type(config).__name__}.{name}", getattr(config, name)))
@@ -202,29 +173,21 @@ def check_settings(config):
 def parse_setting(cls, pair):
     """``"NAME=VALUE"`` -> ``(name, value)`` for a field of ``cls``, parsed strictly; ValueError otherwise.
 
-    Spaces around the name are ignored; the value is parsed by :meth:`SettingSpec.parse` (see
-    the module docstring for what each kind accepts) and then checked like a value given in
-    Python.
+    Split at the first ``=``, spaces around the name ignored; the value is parsed by
+    :meth:`SettingSpec.parse` (module docstring), then checked like a value given in Python. The
+    ValueError names a missing ``=``, an unknown name (listing the settings) or a bad value.
 
     Parameters
     ----------
     cls : type
         A dataclass whose fields were declared with :func:`setting`.
     pair : str
-        ``"NAME=VALUE"``, split at the first ``=``.
 
     Returns
     -------
     name : str
     value : object
-        The parsed value: a number, a bool, a declared word (lower case), a text, a tuple of
-        three numbers (per-axis settings) or None (``none`` for an optional setting).
-
-    Raises
-    ------
-    ValueError
-        No ``=``, an unknown name (the message lists the settings), or a value that does not
-        parse or is out of range.
+        A declared word comes back in lower case, three numbers of a per-axis setting as a tuple.
     """
     name, sep, text = pair.partition("=")
     name = name.strip()
@@ -236,24 +199,19 @@ def parse_setting(cls, pair):
 
 
 def parse_settings(cls, pairs):
-    """``["sigma_pixel=2", ...]`` -> keyword arguments of ``cls``; a name given twice is an error.
+    """``["sigma_pixel=2", ...]`` -> keyword arguments of ``cls``; ValueError for a refused pair or a name given twice.
 
     Parameters
     ----------
     cls : type
-        A dataclass whose fields were declared with :func:`setting`.
+        As :func:`parse_setting`.
     pairs : iterable of str
-        ``"NAME=VALUE"`` each (:func:`parse_setting`).
+        ``"NAME=VALUE"`` each.
 
     Returns
     -------
     dict
         Name -> parsed value, in the order given.
-
-    Raises
-    ------
-    ValueError
-        A pair :func:`parse_setting` refuses, or a name given twice.
     """
     out = {}
     for pair in pairs:

@@ -74,15 +74,14 @@ _DATASET_HELP = "03, 0022, 0020, 0042, 10, datasetNN, sim, sim-small, sim-tiny, 
 def build_parser():
     """The argument parser of ``visla-edu``.
 
-    Subcommands ``info``, ``run``, ``stepper``, ``release``, ``student``, ``project`` and ``book`` (required, stored as
-    ``command``); ``--debug`` is accepted before or after the subcommand, ``--data-dir`` after
-    ``info``, ``run`` and ``stepper``. Values are checked while parsing (paths, ports, strides,
-    BLAS threads and ``--set NAME=VALUE`` settings).
+    Subcommands (required, stored as ``command``): ``info``, ``run``, ``stepper``, ``release``,
+    ``student``, ``project``, ``book``; ``--debug`` before or after the subcommand, ``--data-dir``
+    after ``info``, ``run``, ``stepper``; values checked while parsing (:mod:`visla_edu.cli.options`).
 
     Returns
     -------
     argparse.ArgumentParser
-        Its usage errors are one line and status 2 (:class:`_Parser`, the module docstring).
+        Its usage errors are one line and status 2 (:class:`_Parser`).
     """
     parser = _Parser(prog="visla-edu",
                      description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
@@ -170,27 +169,11 @@ def _add_frames_option(parser):
 
 
 def _select_frames(dataset, frames, truth_option=None):
-    """``dataset`` cut to ``--frames`` (:meth:`~visla_edu.dataset.Dataset.segment`), or unchanged.
+    """``dataset`` cut to ``frames``, ``--frames (start, stop)`` (stop None: the end), or unchanged.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    frames : (int, int or None) or None
-        ``--frames``: ``(start, stop)``, ``stop`` None for the last frame.
-    truth_option : str, optional
-        The ``--ground-truth`` file, when the user gave one.
-
-    Returns
-    -------
-    visla_edu.dataset.Dataset
-        The segment, without ground truth when it keeps fewer poses than an ATE needs (a note
-        on stdout says so).
-
-    Raises
-    ------
-    ValueError
-        The range lies outside the drive, or ``truth_option`` was given and keeps fewer poses
-        than an ATE needs in the segment.
+    A range outside the drive is a ValueError. A segment that keeps fewer ground-truth poses than an
+    ATE needs is refused when ``truth_option`` (the user's ``--ground-truth`` file) was given, and
+    otherwise loses its ground truth, with a note on stdout (:func:`_segment_truth_checked`).
     """
     if frames is None:
         return dataset
@@ -331,10 +314,7 @@ def _run_inputs(args):
 
 
 def _check_outputs(args, inputs):
-    """``{"--out": path, "--plot": path, "--trajectory-out": path}`` checked before any work.
-
-    Suffix, folder, kind, and that no output is an input or another output.
-    """
+    """``{"--out": path, "--plot": path, "--trajectory-out": path}``, checked before any work (check_output_path)."""
     from visla_edu._files import check_output_path
 
     given = {"--out": args.out, "--plot": args.plot, "--trajectory-out": args.trajectory_out}
@@ -476,6 +456,11 @@ _HANDLERS["project"] = _project_commands.run
 def main(argv=None):
     """The one error boundary of the commands: parse ``argv``, run the command, return its exit status.
 
+    Numerical warnings (numpy's ``RuntimeWarning``) are collected: a failure is reported by its one
+    line (the filter detects a non-finite state itself), a success by one line counting them;
+    ``--debug`` prints them as they happen. ``visla_edu.__main__.console_main`` also covers loading
+    this module and the moments after this function returns.
+
     Parameters
     ----------
     argv : list of str, optional
@@ -484,21 +469,14 @@ def main(argv=None):
     Returns
     -------
     int
-        The exit status of a command that ran (the module docstring); 130 for Ctrl-C at any
-        moment from parsing to the last line printed.
+        The exit status of a command that ran (the module docstring); 130 for Ctrl-C at any moment
+        from parsing to the last line printed.
 
     Raises
     ------
     SystemExit
-        For a usage error (status 2), ``--help`` (0) and ``release --check`` finding notebooks
-        that drifted (1).
-
-    Numerical warnings (numpy's overflow and invalid-value ``RuntimeWarning``) are collected,
-    not printed: a failure is reported by its one line (the filter detects a non-finite state
-    itself), a success by one line counting them. ``--debug`` prints them as they happen.
-    The process's entry point (the console script, ``python -m visla_edu``) is
-    ``visla_edu.__main__.console_main``: it also covers loading this module and the moments
-    after this function returns.
+        For a usage error (status 2), ``--help`` (0) and ``release --check`` finding notebooks that
+        drifted (1).
     """
     command, debug = None, os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
     try:

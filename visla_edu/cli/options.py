@@ -15,9 +15,8 @@ __all__ = ["settings_help", "frames", "integer_in", "blas_threads", "path", "por
 def settings_help():
     """The epilog of ``run --help``: every ``--set`` and ``--smoother-set`` setting, its default and what it accepts.
 
-    One line a setting, ``name=default`` then :meth:`visla_edu.settings.SettingSpec.describe`
-    (the smoother's own settings also say which mode reads them); the configs are imported only
-    when the help is asked for.
+    One line a setting (:meth:`visla_edu.settings.SettingSpec.describe`); the configs are imported
+    only when the help is asked for.
 
     Returns
     -------
@@ -40,7 +39,7 @@ def settings_help():
 
 
 def _setting_lines(specs, modes):
-    """``"  name=default  what it accepts"`` per setting (``specs``: name -> SettingSpec), aligned.
+    """``"  name=default  what it accepts"`` per setting of ``specs`` (name -> SettingSpec), aligned.
 
     ``modes`` maps a name to the one mode that reads it, said after what it accepts.
     """

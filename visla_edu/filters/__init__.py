@@ -1,16 +1,10 @@
 """The four filter modes as small state machines that advance one frame per ``step()``.
 
-* :class:`DeadReckoning` - IMU prediction only (mean and covariance).
-* :class:`LandmarkMapping` - poses fixed to dead reckoning, one 3x3 EKF per landmark.
-* :class:`VisualInertialOdometry` - pose EKF against landmarks fixed at their first
-  triangulation.
-* :class:`JointSlam` - the joint EKF over the pose and the landmarks, on the active set
-  (:class:`ActiveSet`) or dense (the textbook form).
-
-Each ``step()`` returns a :class:`StepRecord` (what the stepper, the driver and the metrics
-read), its observations marked with the status codes of :mod:`visla_edu.codes` (re-exported
-here). :class:`FilterConfig` holds the modes' settings; :func:`visla_edu.run.make_filter`
-builds a mode by name.
+:class:`DeadReckoning`, :class:`LandmarkMapping`, :class:`VisualInertialOdometry` and
+:class:`JointSlam` (on the active set, :class:`ActiveSet`, or dense); :mod:`visla_edu.codes` says
+each mode in a line. Each ``step()`` returns a :class:`StepRecord`, its observations marked with
+the status codes of :mod:`visla_edu.codes` (re-exported here). :class:`FilterConfig` holds the
+modes' settings; :func:`visla_edu.run.make_filter` builds a mode by name.
 
 Where each piece lives: ``_config`` the settings, ``_base`` the step loop and its declared
 hooks, the record and the divergence error, ``_state`` the joint state's covariance

@@ -28,11 +28,10 @@ MIN_DEPTH = 0.1
 class FilterDivergedError(RuntimeError):
     """The filter produced a non-finite state or a covariance that is not positive definite.
 
-    Raised by a filter's ``step()`` when, after the frame, the pose or its covariance has a
-    non-finite entry, a pose variance is negative, or the pose lies more than
-    :data:`MAX_DISTANCE` metres from the world origin; and when an update cannot factorise its
-    innovation covariance (chained from the ``numpy.linalg.LinAlgError``). The message names
-    the dataset and the frame.
+    Raised by ``step()`` when, after the frame, the pose or its covariance is not finite, a pose
+    variance is negative or the pose is more than :data:`MAX_DISTANCE` m from the origin, and when
+    an update cannot factorise its innovation covariance (chained from the ``LinAlgError``). The
+    message names the dataset and the frame.
     """
 
 
@@ -62,8 +61,7 @@ class StepRecord:
         Its degrees of freedom: 4 per used observation, and ``4 n - 3`` per track of ``n``
         observations used in a null-space update (joint SLAM with clones).
     active_ids : ndarray of int, shape (n,)
-        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO);
-        empty when the filter's ``record_landmarks`` is off.
+        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO).
     active_means : ndarray, shape (n, 3)
     active_covs : ndarray, shape (n, 3, 3)
         Marginal covariance of each active landmark.
@@ -84,29 +82,37 @@ class StepRecord:
 
 
 class FilterBase(abc.ABC):
-    """Shared bookkeeping: time, twists, observations with their status, the landmark means.
+    """Shared bookkeeping of every mode: time, twists, observations with their status, the landmark means.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
+        The drive: time stamps, IMU twists and observations.
     camera : visla_edu.camera.StereoCamera
         With the calibration to use (after any extrinsic correction).
     config : visla_edu.filters.FilterConfig
+        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`); each
+        setting's attribute there says which modes read it.
 
     Attributes
     ----------
     t : int
         Last frame processed (-1 before the first step).
     world_T_imu : ndarray, shape (4, 4)
-        Pose mean.
+        Pose mean (the IMU in the world).
     landmarks : ndarray, shape (M, 3)
-        Landmark means, NaN until a landmark is initialised.
+        Landmark means in the world frame, NaN until a landmark is initialised.
     landmark_cov : ndarray, shape (M, 3, 3)
         Landmark covariances of the modes that keep them per landmark (in SLAM: of retired
         landmarks only, see :meth:`landmark_estimates`).
     record_landmarks : bool
         Fill the active landmarks of each :class:`StepRecord` (the stepper draws them); the
         whole-run driver, which keeps none of them, turns this off (they are then empty).
+
+    Raises
+    ------
+    ValueError
+        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
     """
 
     def __init__(self, dataset, camera, config):
@@ -137,33 +143,18 @@ class FilterBase(abc.ABC):
 
     @abc.abstractmethod
     def _predict_covariance(self, F, W):
-        """Propagate the covariance through one IMU step: ``Sigma_pose <- F Sigma_pose F^T + W``.
+        """Propagate the covariance through one IMU step: ``Sigma_pose <- F Sigma_pose F^T + W``, F and W (6, 6).
 
-        Called after the pose mean moved (``world_T_imu`` is already the prediction). ``F``
-        and ``W`` are (6, 6) (:func:`visla_edu.motion.imu_step`); a joint state also carries
-        the pose-landmark cross-covariance through ``F``.
+        Called after the pose mean moved (:func:`visla_edu.motion.imu_step`); a joint state also
+        carries the pose-landmark cross-covariance through ``F``.
         """
 
     @abc.abstractmethod
     def _update(self, ids, z, status, z_pred):
-        """Use frame ``self.t``'s observations; return ``(nis, dof)``.
+        """Use frame ``self.t``'s observations ``ids`` (k,), ``z`` (k, 4); return ``(nis, dof)`` as the StepRecord's.
 
-        Parameters
-        ----------
-        ids : ndarray of int, shape (k,)
-        z : ndarray, shape (k, 4)
-        status : ndarray of int, shape (k,)
-            Filled in place with an ``OBS_*`` code per observation (starts as ``OBS_IGNORED``).
-        z_pred : ndarray, shape (k, 4)
-            Filled in place with the prediction of each observation of a landmark already in
-            the state (starts as NaN).
-
-        Returns
-        -------
-        nis : float
-            NaN when nothing was used.
-        dof : int
-            4 per used observation (``4 n - 3`` per track of a null-space update).
+        Fills in place ``status`` (k,), which starts as ``OBS_IGNORED``, and ``z_pred`` (k, 4),
+        which starts as NaN, for the observations of landmarks already in the state.
         """
 
     @abc.abstractmethod
@@ -215,17 +206,10 @@ class FilterBase(abc.ABC):
     def _new_landmarks(self, ids, z, status, candidates):
         """Triangulate never-seen landmarks among ``candidates`` (mask) at the current pose.
 
-        Their first observation is consumed by the initialisation (status ``OBS_NEW``), and
-        their means are written to :attr:`landmarks`; the covariance is the caller's.
-
-        Returns
-        -------
-        new : ndarray of bool, shape (k,)
-            Observations whose landmark was initialised now.
-        G_pose : ndarray, shape (k_new, 3, 6)
-            Sensitivity of the new landmarks to the pose perturbation.
-        C_new : ndarray, shape (k_new, 3, 3)
-            Their covariance from the pixels: ``inflation^2 C_tri + sigma^2 I``.
+        Their first observation is consumed (``OBS_NEW``; ``OBS_FAR`` below ``min_init_disparity``)
+        and their means written to :attr:`landmarks`; the covariance is the caller's to store.
+        Returns ``new`` (k,) bool, ``G_pose`` (k_new, 3, 6) (sensitivity to the pose perturbation)
+        and ``C_new`` (k_new, 3, 3), the pixels' covariance ``inflation^2 C_tri + sigma^2 I``.
         """
         cfg = self.config
         disparity = self.camera.disparity(z)

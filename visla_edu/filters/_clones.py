@@ -1,9 +1,9 @@
 """The joint filter's clone window: when its tracks are used, and how their rows reach the state.
 
 :class:`CloneWindow` is the part of :class:`visla_edu.filters.JointSlam` that runs when
-``msckf_window > 0``: each frame it clones the pose, updates with the landmarks in the state
-(as the joint EKF without clones does), buffers the other observations, and uses the tracks that
-ended or outlived the window (the math is :mod:`visla_edu.filters._tracks`):
+``msckf_window > 0``: each frame it clones the pose, updates with the landmarks in the state,
+buffers the other observations, and uses the tracks that ended or outlived the window (the math
+is :mod:`visla_edu.filters._tracks`):
 
 * a track that ended (its landmark is not seen at this frame) gives its null-space rows;
 * a track seen for the whole window enters the state as a landmark (delayed entry) while there
@@ -25,18 +25,16 @@ __all__ = ["CloneWindow"]
 class CloneWindow:
     """Mixin of :class:`visla_edu.filters.JointSlam` for ``window > 0`` (see the module docstring).
 
-    Uses the host's ``state`` (an :class:`~visla_edu.filters.ActiveSet`), ``form``, ``camera``,
-    ``buffer``, ``clone_T``, ``window``, ``track_counts``, ``noise_var``, ``config`` and its
-    landmark arrays.
+    Uses the host's ``state``, ``form``, ``camera``, ``buffer``, ``clone_T``, ``window``,
+    ``track_counts``, ``noise_var``, ``config`` and its landmark arrays.
     """
 
     def _update_with_clones(self, ids, z, status, z_pred):
         """One frame with clones: returns ``(nis, dof)`` of its updates.
 
         The tracks are used first (their rows do not involve this frame's observations of the
-        landmarks in the state), then those observations update the state as in the joint EKF
-        without clones. A landmark that enters now is not updated again with the observation it
-        entered with.
+        landmarks in the state), then those observations update the state as without clones; a
+        landmark that enters now is not updated again with the observation it entered with.
         """
         self._retire_finished()
         self.state.clone_pose(self.t)
@@ -91,15 +89,11 @@ class CloneWindow:
         return np.concatenate([np.arange(ekf.POSE_DIM), clones])
 
     def _tracks_of(self, lms):
-        """Pop the observations of ``lms`` and keep the usable tracks.
+        """Pop the observations of ``lms``, keep the usable tracks (short ones only get a place on the map).
 
-        Returns
-        -------
-        tuple or None
-            ``(lms, clone_index, z, owner, p_world)`` of the tracks with at least
-            :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations and a point in
-            front of every camera, observations sorted by track; None when there are none.
-            Shorter tracks only get a place on the map.
+        Returns ``(lms, clone_index, z, owner, p_world)`` of the tracks with at least
+        :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations and a point in front
+        of every camera, observations sorted by track; None when there are none.
         """
         if len(lms) == 0:
             return None
@@ -198,11 +192,10 @@ class CloneWindow:
         return H_o, r_o
 
     def _update_rows(self, H, r):
-        """One EKF update with the stacked track rows (over :meth:`_update_columns`); ``(nis, dof)``.
+        """One EKF update with the stacked track rows (over :meth:`_update_columns`); ``(nis, dof)`` of all the rows.
 
-        More rows than columns are compressed orthonormally (``H = Q R``, the same update); the
-        part of ``r`` outside ``Q``'s columns, where ``S`` is ``noise_var I``, is added to the NIS,
-        so ``nis`` and ``dof`` are those of all the rows.
+        More rows than columns are compressed orthonormally (``H = Q R``, the same update); the part
+        of ``r`` outside ``Q``'s columns, where ``S`` is ``noise_var I``, is added to the NIS.
         """
         rows, outside = len(r), 0.0
         if len(r) > H.shape[1]:

@@ -28,28 +28,17 @@ INFLATION_POWER = 2
 #: the simulated drives and dataset 10's motion (ratio 1.1-1.3) gain from the clones and the
 #: GPS-aided drives 0020 and 0042 and their pieces (2.6-4.2) lose by them.
 GYRO_REGIME_RATIO = 2.0
-#: ``msckf_window`` outside the gyro regime.
+#: ``msckf_window`` outside the gyro regime: on the cross-drive benchmark where the camera carries the
+#: estimate, 20 clones beat the filter without them, and 10 and 30 were worse.
 MSCKF_WINDOW = 20
 
 
 def gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step):
     """``r = (sigma_pixel / focal_length) / (sigma_w tau)``: the angle one observation resolves over the gyro's in one step.
 
-    Parameters
-    ----------
-    sigma_pixel : float
-        The pixel noise the camera is said to have (px).
-    focal_length : float
-        ``fsu`` (px).
-    sigma_angular : float or array_like, shape (3,)
-        The angular-velocity noise (rad/s); per-axis values are averaged.
-    time_step : float
-        A typical step ``tau`` (s).
-
-    Returns
-    -------
-    float
-        ``inf`` for a noise-free gyro.
+    ``sigma_pixel`` is the pixel noise the camera is said to have (px), ``focal_length`` its ``fsu``
+    (px), ``sigma_angular`` the angular-velocity noise (rad/s; per-axis values (3,) are averaged)
+    and ``time_step`` a typical step ``tau`` (s). A float, ``inf`` for a noise-free gyro.
     """
     gyro_angle = float(np.mean(sigma_angular)) * float(time_step)
     return float(sigma_pixel / focal_length / gyro_angle) if gyro_angle > 0 else np.inf
@@ -60,30 +49,18 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
     """How much less than ``sigma_pixel`` promises the camera is to be trusted on a drive.
 
     ``max(1, r)^power`` with ``r`` of :func:`gyro_ratio`, and in the gyro regime (``r >=``
-    :data:`GYRO_REGIME_RATIO`) at least ``(1 + rho) / (1 - rho)`` for the track correlation
-    ``rho``. Track errors are correlated from frame to frame (tracker drift, a feature that
-    slides along an edge), so many observations of a track are worth fewer. Where the gyro
-    resolves angles better than one observation (``r > 1``, the GPS-aided velocities of the
-    2019 release), a camera treated as independent pixels would pull a good dead reckoning off
-    by the sum of its correlated errors: its noise is inflated, the more so the better the
-    gyro, and the more so the more the errors persist along a track (a track of ``L``
-    observations is worth about ``L (1 - rho) / (1 + rho)``; rho is 0.25 on 0020, 0.9 on the
-    highway drive 0042). Where one observation beats a gyro step (``r <= 1``, the 2020 release's noisy
-    velocities), the camera carries the estimate and is not inflated.
+    :data:`GYRO_REGIME_RATIO`) at least ``(1 + rho) / (1 - rho)``: track errors are correlated from
+    frame to frame (tracker drift, a feature sliding along an edge), so a track of ``L``
+    observations is worth about ``L (1 - rho) / (1 + rho)``. Where the gyro resolves angles better
+    than one observation (``r > 1``, the GPS-aided velocities of the 2019 release), a camera treated
+    as independent pixels would pull a good dead reckoning off by the sum of its correlated errors;
+    where one observation beats a gyro step (``r <= 1``, the 2020 release), the camera carries the
+    estimate and is not inflated.
 
-    Parameters
-    ----------
-    sigma_pixel, focal_length, sigma_angular, time_step
-        As in :func:`gyro_ratio`.
-    power : float
-    track_correlation : float
-        ``rho`` in ``[-1, 1)``: :func:`visla_edu.diagnostics.track_correlation` along the
-        dead-reckoned poses (which the gyro regime makes locally accurate).
-
-    Returns
-    -------
-    float
-        The factor on ``sigma_pixel``, from 1 to :data:`MAX_INFLATION`.
+    The first four arguments are :func:`gyro_ratio`'s; ``rho`` (``track_correlation``, in
+    ``[-1, 1)``) is :func:`visla_edu.diagnostics.track_correlation` along the dead-reckoned poses
+    (which the gyro regime makes locally accurate). Returns the factor on ``sigma_pixel``, a float
+    from 1 to :data:`MAX_INFLATION`.
     """
     ratio = gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step)
     if not np.isfinite(ratio):
@@ -96,20 +73,12 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
 
 
 def msckf_window(sigma_pixel, focal_length, sigma_angular, time_step):
-    """Clones kept on a drive: 0 (the joint EKF without clones) in the gyro regime, else :data:`MSCKF_WINDOW`.
+    """Clones kept on a drive (an int): 0 (the joint EKF without clones) in the gyro regime, else :data:`MSCKF_WINDOW`.
 
-    In the gyro regime (:func:`gyro_ratio` at least :data:`GYRO_REGIME_RATIO`) dead reckoning
-    is locally accurate and the camera a weak corrector; the clones' multi-frame updates of the
-    short tracks then add the tracks' correlated errors more than information.
-
-    Parameters
-    ----------
-    sigma_pixel, focal_length, sigma_angular, time_step
-        As in :func:`gyro_ratio`.
-
-    Returns
-    -------
-    int
+    In the gyro regime (:func:`gyro_ratio`, whose arguments these are, at least
+    :data:`GYRO_REGIME_RATIO`) dead reckoning is locally accurate and the camera a weak corrector;
+    the clones' multi-frame updates of the short tracks then add the tracks' correlated errors more
+    than information.
     """
     return 0 if gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step) >= GYRO_REGIME_RATIO else MSCKF_WINDOW
 
@@ -118,51 +87,19 @@ def msckf_window(sigma_pixel, focal_length, sigma_angular, time_step):
 class FilterConfig:
     """Noise, initialisation and gating parameters of the filter modes.
 
-    Each field's declaration below is the one statement of its default, kind, unit, plausible
-    range and why that range, and of the words it accepts such as ``"auto"``
-    (:mod:`visla_edu.settings`: how it checks values and parses ``visla-edu run --set``);
-    ``visla-edu run --help`` lists them. The attributes say what each setting means and which
-    modes read it (``deadreckon``, ``mapping``, ``vio``, ``slam``; see
-    :data:`visla_edu.codes.MODES`). How the driver runs (BLAS threads, progress bar) is not a
-    setting: those are arguments of :func:`visla_edu.run.run_filter`.
+    Each field's declaration below is the one statement of its default, kind, unit, plausible range
+    and why, and of the words it accepts such as ``"auto"`` (:mod:`visla_edu.settings`;
+    ``visla-edu run --help`` lists them); the attributes say what each setting means and which modes
+    read it. How the driver runs (BLAS threads, progress bar) is not a setting but arguments of
+    :func:`visla_edu.run.run_filter`.
 
-    The defaults are one setting for every drive: what can be measured is measured from each
-    drive's own data (``"auto"``), the rest rests on evidence that notebooks 04 and 11 and
-    ``benchmarks/bench_accuracy.py`` recompute (they print the figures; none is typed here):
-
-    * Velocity noise (``"auto"``, per body axis): :func:`visla_edu.diagnostics.calibrate`
-      measures the samples' white noise (second differences) and how much the velocity changes
-      within a step, which the motion model holds constant (first differences), with floors; a
-      drive of fewer than 10 samples, too short to measure them, gets the course's 0.5 m/s and
-      0.05 rad/s (:data:`visla_edu.diagnostics.MIN_NOISE_SAMPLES`). A fixed noise fits no
-      drive: the KITTI drives' velocities are nearly clean, the 2020 release's carry about
-      0.5 m/s and 0.05 rad/s, and a filter told the wrong level trusts far landmarks over an
-      accurate IMU, or an IMU over the camera.
-    * ``imu_lag`` (``"auto"``): from the track-reprojection evidence; a lag other than 0 is
-      chosen only when it beats lag 0 with 95% confidence (a block bootstrap), so a drive
-      without enough evidence keeps ``u[t]``.
-    * ``extrinsic_correction`` (``"auto"``): the same evidence finds dataset 03's flipped
-      ``imu_T_cam`` axes, and visual odometry checks the verdict.
-    * Gating stays on (and ``reinit_gated_landmarks``): track reprojection errors are
-      heavy-tailed, and the gated share grows with a track's age (tracker drift).
-    * ``sigma_pixel`` 1.5 px: slightly conservative NIS on the course drives, as it should be
-      with drifting tracks (notebook 11 shows the NIS for other values).
-    * ``min_init_disparity`` 3 px (110 m deep on dataset 03's rig): a far landmark triangulated
-      from a smaller disparity is a poor Gaussian in x, y, z that makes joint SLAM
-      overconfident and less accurate.
-    * ``pixel_noise_inflation`` (``"auto"``): :func:`pixel_noise_inflation` says why; its
-      exponent was chosen on the cross-drive benchmark.
-    * ``msckf_window`` (``"auto"``): :func:`msckf_window` says why; outside the gyro regime
-      the clones (20) beat the filter without them on the cross-drive benchmark where the
-      camera carries the estimate, and 10 and 30 were worse.
-    * ``slam_error="invariant"``: the invariant error's unobservable directions do not depend
-      on the estimate, so it stays consistent where the right perturbation (notebooks 06-08)
-      becomes overconfident (notebook 10).
-
-    The three switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
-    ``vio_refine_landmarks`` are the teaching comparisons of the modes that read them: the
-    default is the consistent filter, the other value the tempting shortcut the notebook named
-    in its attribute measures against it.
+    The defaults are one setting for every drive: what can be measured is measured from each drive's
+    own data (``"auto"``, :meth:`resolve`); the comments at the declarations give the evidence for
+    the rest, which notebooks 04, 10 and 11 and ``benchmarks/bench_accuracy.py`` recompute (they
+    print the figures; none is typed here). The switches ``landmark_cross_covariance``,
+    ``mapping_motion_noise`` and ``vio_refine_landmarks`` are teaching comparisons: the default is
+    the consistent filter, the other value the tempting shortcut the notebook named in its attribute
+    measures against it.
 
     Attributes
     ----------
@@ -170,87 +107,65 @@ class FilterConfig:
         Modes: mapping, vio, slam. Standard deviation of each stereo pixel coordinate;
         ``R = (pixel_noise_inflation sigma_pixel)^2 I4``.
     pixel_noise_inflation : float or "auto"
-        Modes: mapping, vio, slam. A factor on ``sigma_pixel`` for the filters. ``"auto"``:
-        :func:`pixel_noise_inflation` of the drive.
-    sigma_linear_velocity : float, (float, float, float) or "auto"
-        Modes: all. Noise on each linear-velocity sample, one value for every axis or one per
-        body axis; ``W`` scales it by the time step. ``"auto"``: measured from the data per
-        axis (the first point above).
-    sigma_angular_velocity : float, (float, float, float) or "auto"
-        Modes: all. Noise on each angular-velocity sample, as above.
-    landmark_prior_inflation : float
-        Modes: mapping, vio, slam. A landmark enters the state at its first observation (which
-        it consumes) with its mean at the stereo triangulation and the covariance
-        ``inflation^2 C_tri + sigma^2 I`` from the pixels, plus, in VIO and SLAM, the pose's
-        uncertainty (in SLAM also its correlation) carried through the triangulation (see
-        :func:`visla_edu.ekf.initialize_landmarks`). ``C_tri`` is long along the viewing ray
-        and grows with depth squared; the inflation allows for the linearisation error of far
-        points.
-    landmark_prior_sigma : float
-        Modes: mapping, vio, slam. Isotropic part ``sigma`` of a new landmark's covariance.
+        Modes: mapping, vio, slam. A factor on ``sigma_pixel`` (:func:`pixel_noise_inflation`).
+    sigma_linear_velocity, sigma_angular_velocity : float, (float, float, float) or "auto"
+        Modes: all. Noise on each linear (angular) velocity sample, for all or per body axis; ``W``
+        scales it by the time step.
+    landmark_prior_inflation, landmark_prior_sigma : float
+        Modes: mapping, vio, slam. A new landmark's covariance from its pixels is ``inflation^2
+        C_tri + sigma^2 I`` (:func:`visla_edu.ekf.initialize_landmarks`): ``C_tri`` is long along
+        the viewing ray and grows with depth squared; the inflation allows for far points'
+        linearisation error.
     initial_pose_sigma : float
         Modes: all. Standard deviation of the first pose.
     gate_probability : float
-        Modes: mapping, vio, slam. Observations whose Mahalanobis distance exceeds the
-        chi-square quantile with 4 degrees of freedom at this probability are rejected as
-        outliers.
+        Modes: mapping, vio, slam. Observations beyond this chi-square (4 dof) quantile are gated.
     min_init_disparity : float
-        Modes: mapping, vio, slam. Minimum disparity ``uL - uR`` to triangulate a new landmark
-        (a depth up to ``fsu b / min_init_disparity``). Observations with non-positive
-        disparity are never used.
+        Modes: mapping, vio, slam. Least disparity ``uL - uR`` to triangulate a new landmark (a
+        depth up to ``fsu b / min_init_disparity``); a non-positive disparity is never used.
     imu_lag : int or "auto"
-        Modes: all (and the driver's dead-reckoning reference). Which velocity sample drives
-        the step ``t -> t+1``: ``u[t + imu_lag]``.
+        Modes: all (and the driver's dead reckoning). The step ``t -> t+1`` uses ``u[t + imu_lag]``.
     extrinsic_correction : str
-        Modes: all (the driver resolves the camera with it, :func:`visla_edu.run.make_filter`).
-        ``"auto"`` applies the correction that :func:`visla_edu.diagnostics.check_extrinsics`
-        finds with strong evidence; ``"none"`` uses the file's ``imu_T_cam`` as is; or the name
-        of a correction, see :data:`visla_edu.diagnostics.CORRECTIONS`.
+        Modes: all, through the camera (:func:`visla_edu.run.make_filter`). ``"none"``: the file's
+        ``imu_T_cam``; ``"auto"``: what :func:`visla_edu.diagnostics.check_extrinsics` finds with
+        strong evidence; or one of :data:`visla_edu.diagnostics.CORRECTIONS`.
     landmark_cross_covariance : bool
-        Mode: slam (teaching comparison, notebook 08). True: a new landmark enters correlated
-        with the state (``G_pose Sigma_pose,x``). False is the textbook shortcut (pixel
-        covariance only, no correlation), which makes the filter overconfident.
+        Mode: slam (notebook 08). A new landmark enters correlated, ``G_pose Sigma_pose,x``.
     mapping_motion_noise : bool
-        Mode: mapping (teaching comparison, notebook 05). True: widen each observation's noise
-        by the dead-reckoning motion noise since the landmark's first sighting. False takes
-        the dead-reckoned poses as exact.
+        Mode: mapping (notebook 05). Widen each observation's noise by the dead-reckoning motion
+        noise since the landmark's first sighting; False takes the dead-reckoned poses as exact.
     vio_refine_landmarks : bool
-        Mode: vio (teaching comparison, notebook 07). True: also update the landmarks with the
-        observations that just corrected the pose, which counts each observation twice.
+        Mode: vio (notebook 07). Also update the landmarks, which counts each observation twice.
     skip_repeated_frames : bool
-        Modes: mapping, vio, slam. Make no update at frames whose observations exactly repeat
-        the previous frame's (a duplicated camera frame while the IMU moved on; dataset 03
-        has one at 1008).
+        Modes: mapping, vio, slam. No update at frames repeating the previous one's observations
+        exactly (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
     landmark_stride : int
-        Modes: mapping, vio, slam. Use only landmarks whose index is a multiple of this (the
+        Modes: mapping, vio, slam. Use only the landmarks whose index is a multiple of this (the
         textbook workaround for the dense filter's memory).
     slam_error : {"invariant", "right"}
-        Mode: slam. What the joint state's error means (:mod:`visla_edu.filters._forms`):
-        ``"invariant"`` (world-frame error, ``T = exp(hat(xi)) mu``) or ``"right"`` (the right
-        perturbation of :mod:`visla_edu.lie`).
+        Mode: slam. What the joint state's error means (:mod:`visla_edu.filters._forms`).
     reinit_gated_landmarks : bool
-        Mode: slam (``msckf_window=0``). A landmark no update has used yet (only its first
-        observation placed it) is placed again from its next observation when that one falls
-        outside the gate: the first observation was the outlier. False keeps the first
+        Mode: slam (``msckf_window=0``). A landmark no update has used yet is placed again from its
+        next observation when that one is gated (the first was the outlier); False keeps the first
         placement, so a landmark born from a bad observation gates its whole track.
     msckf_window : int or "auto"
-        Mode: slam (not dense). ``"auto"``: :func:`msckf_window` of the drive. Frames of past
-        poses kept in the joint state as clones for the multi-frame track updates
-        (:mod:`visla_edu.filters._tracks`): a landmark's observations wait until its track ends
-        and are then used together in a null-space (MSCKF) update that never puts the landmark
-        in the state; a track still seen after this many frames
-        enters the state as a landmark (delayed entry, from all its observations). 0: every
-        landmark enters the state at its first observation, the joint EKF of notebook 08.
+        Mode: slam (not dense). Past poses kept as clones (``"auto"``: :func:`msckf_window`): a
+        track seen longer enters the state, a shorter one is used in one null-space (MSCKF) update
+        when it ends (:mod:`visla_edu.filters._clones`). 0: the joint EKF of notebook 08.
     track_gate_probability : float
-        Mode: slam with clones. A track whose null-space residual exceeds the chi-square
-        quantile of its ``4 n - 3`` degrees of freedom at this probability is refused whole.
+        Mode: slam with clones. A track whose null-space residual exceeds this chi-square quantile
+        (``4 n - 3`` dof) is refused whole.
     max_slam_landmarks : int
-        Mode: slam with clones. At most this many landmarks in the state; a long track beyond
-        them is used in window-long pieces instead.
+        Mode: slam with clones. Most landmarks in the state; longer tracks beyond them are used in
+        window-long pieces.
     """
 
+    # 1.5 px: a slightly conservative NIS on the course drives, as it should be with drifting tracks.
     sigma_pixel: float = setting(1.5, float, 1e-3, 100.0, unit="px",
                                  why="no tracker locates a feature to a thousandth of a pixel; 100 px is no location")
+    # "auto": a fixed noise fits no drive (the KITTI drives' velocities are nearly clean, the 2020
+    # release's carry about 0.5 m/s and 0.05 rad/s), and a filter told the wrong level trusts far
+    # landmarks over an accurate IMU, or an IMU over the camera.
     sigma_linear_velocity: object = setting(AUTO, float, 0.0, 50.0, words=(AUTO,), per_axis=True, unit="m/s",
                                             why="0 trusts the velocities; 50 m/s (180 km/h) of noise is no measurement")
     sigma_angular_velocity: object = setting(AUTO, float, 0.0, 5.0, words=(AUTO,), per_axis=True, unit="rad/s",
@@ -261,10 +176,15 @@ class FilterConfig:
                                           why="a prior wider than 10 km says nothing")
     initial_pose_sigma: float = setting(0.0, float, 0.0, 1e3, unit="m",
                                         why="world is the first IMU frame, so 0 is exact")
+    # Gating stays on (and reinit_gated_landmarks): track reprojection errors are heavy-tailed, and
+    # the gated share grows with a track's age (tracker drift).
     gate_probability: float = setting(0.999, float, 0.0, 1.0, low_open=True,
                                       why="a probability; 1 disables gating")
+    # 3 px (110 m deep on dataset 03's rig): a landmark triangulated from a smaller disparity is a
+    # poor Gaussian in x, y, z that makes joint SLAM overconfident.
     min_init_disparity: float = setting(3.0, float, 0.0, 1000.0, unit="px",
                                         why="no image is wider than the range")
+    # "auto": a lag other than 0 only when it beats lag 0 with 95% confidence (a block bootstrap).
     imu_lag: object = setting(AUTO, int, -MAX_IMU_LAG, MAX_IMU_LAG, words=(AUTO,),
                               why="which velocity sample near the step drives it; a larger shift is a broken file")
     extrinsic_correction: str = setting("auto", str, words=(AUTO, *CORRECTIONS),
@@ -274,6 +194,7 @@ class FilterConfig:
     vio_refine_landmarks: bool = setting(False, bool)
     skip_repeated_frames: bool = setting(True, bool)
     landmark_stride: int = setting(1, int, 1, 1_000_000, why="1 uses every landmark")
+    # "invariant": consistent where the right perturbation becomes overconfident (notebook 10).
     slam_error: str = setting("invariant", str, words=("invariant", "right"),
                               why="the invariant EKF, or the right perturbation notebooks 06-08 derive")
     reinit_gated_landmarks: bool = setting(True, bool)
@@ -311,23 +232,18 @@ class FilterConfig:
 
         Parameters
         ----------
-        calibration : object
-            Has the attributes of :data:`AUTO_FIELDS` (e.g. a
-            :class:`visla_edu.diagnostics.Calibration`): per-axis sigmas (3,) and an int lag,
-            and ``track_correlation`` (float). Only the attributes that an ``"auto"`` needs are
-            read (``track_correlation`` by ``pixel_noise_inflation`` in the gyro regime); None
-            when none is needed.
+        calibration : object or None
+            Has the attributes of :data:`AUTO_FIELDS` (per-axis sigmas (3,), an int lag) and
+            ``track_correlation`` (float), e.g. a :class:`visla_edu.diagnostics.Calibration`; only
+            those an ``"auto"`` needs are read (None when none is needed).
         focal_length, time_step : float, optional
-            The drive's ``fsu`` (px) and typical time step (s), for :data:`DRIVE_FIELDS`
-            (:func:`pixel_noise_inflation`, :func:`msckf_window`, with the resolved
-            angular-velocity noise).
+            The drive's ``fsu`` (px) and typical time step (s), for :data:`DRIVE_FIELDS`.
 
         Returns
         -------
         FilterConfig
-            A new config (``self`` is not changed); settings that were not ``"auto"`` are kept,
-            so :attr:`resolved` is True. ``extrinsic_correction`` is not one of
-            :data:`AUTO_FIELDS` and stays as it was.
+            A new config with :attr:`resolved` True (``self`` is unchanged);
+            ``extrinsic_correction`` stays as it was.
 
         Raises
         ------

@@ -1,20 +1,35 @@
 """The two error forms of the joint filter: the right perturbation and the invariant error.
 
-Both run the same EKF on the same state layout (``[pose (6); slot 0 (3); ...]``, see
-:class:`~visla_edu.filters.ActiveSet`); they differ in what the state's error *means*, and so
-in four places: the covariance prediction, the pose Jacobian, how a correction is applied,
-and how a new landmark inherits the pose's uncertainty.
+Both run the same EKF on the same state layout (:class:`~visla_edu.filters.ActiveSet`); they
+differ in what the state's error *means*, and so in four places: the covariance prediction, the
+pose Jacobian, how a correction is applied, and how a new landmark inherits the pose's
+uncertainty.
 
-* :class:`RightForm`, the form notebooks 06-08 derive: ``T = mu exp(hat(delta))`` (body
-  frame), ``m = mu_m + delta_m``. Its unobservable directions (moving the whole world) depend
-  on the estimate, so each update, linearised at a slightly different estimate, gains
-  information the data never gave: the classic overconfidence of EKF-SLAM (Huang, Mourikis
-  and Roumeliotis 2008). On a 1100-frame simulated drive its pose NEES averages in the
-  hundreds where 6 is consistent.
-* :class:`InvariantForm`, the invariant EKF (Barrau and Bonnabel 2017): ``T = exp(hat(xi)) mu``
-  (world frame, ``xi = [p; theta]``) and ``m_j = exp(hat(theta)) mu_j + e_j``. The
-  unobservable directions are the same whatever the estimate, the transition is the identity,
-  and the filter stays consistent (pose NEES about 4-6 on the same drives).
+* :class:`RightForm`, the form notebooks 06-08 derive (right perturbation, see
+  :mod:`visla_edu.lie`). Its unobservable directions (moving the whole world) depend on the
+  estimate, so each update, linearised at a slightly different estimate, gains information the
+  data never gave: the classic overconfidence of EKF-SLAM (Huang, Mourikis and Roumeliotis 2008).
+* :class:`InvariantForm`, the invariant EKF (Barrau and Bonnabel 2017): the unobservable
+  directions are the same whatever the estimate, the transition is the identity, and the filter
+  stays consistent (notebook 10 compares the NEES of both).
+
+Each form is a namespace of static methods with the same signatures (the class itself is used,
+never an instance), documented once here; a method ignores the arguments its form does not need:
+
+* ``Sigma`` (D, D): the joint covariance, ``D = 6 + 3 n`` (then 6 per clone);
+* ``world_T_imu`` (4, 4): the pose mean ``mu``, the IMU in the world (in ``predict``: after the
+  step);
+* ``p_active`` (n, 3): the landmark means in slot order; ``p_world`` (k, 3): the world point of
+  each observation;
+* ``F``, ``W`` (6, 6): the step's :func:`visla_edu.motion.pose_transition` and motion noise;
+* ``J_landmark`` (k, 4, 3), ``J_pose`` (k, 4, 6): the stereo pixels' Jacobians with respect to
+  the point and to the pose's right perturbation, at the pose's (or the clone's) mean
+  (:meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`);
+* ``delta`` (6 + 3 n,): a correction ``[pose (6); landmarks (3 each)]``; for the clones
+  ``clone_T`` (n, 4, 4) and ``delta`` (n, 6);
+* ``G_pose`` (k, 3, 6): the pose sensitivity of new landmarks
+  (:func:`visla_edu.ekf.initialize_landmarks`);
+* ``cols`` (k, 3) of int, ``means`` (k, 3): state columns and means of landmarks in the state.
 
 Results are reported in the library's convention either way: the pose covariance of the right
 perturbation ``[v; w]`` and the landmark covariance of ``m - mu_m``.
@@ -28,15 +43,9 @@ __all__ = ["RightForm", "InvariantForm", "ERROR_FORMS"]
 
 
 class RightForm:
-    """The right perturbation ``T = mu exp(hat(delta))``, ``m = mu_m + delta_m`` (notebooks 06-08).
+    """The right perturbation ``T = mu exp(hat(delta))``, ``m = mu_m + delta_m`` (``slam_error="right"``).
 
-    A namespace of static methods (the class itself is used, never an instance); the joint
-    filter calls them on its state ``[pose (6); landmarks (3 each, in slot order)]``.
-
-    Attributes
-    ----------
-    name : str
-        ``"right"``, the value of ``FilterConfig.slam_error`` that selects it.
+    Arguments of its methods: the module docstring.
     """
 
     name = "right"
@@ -45,100 +54,28 @@ class RightForm:
     def predict(Sigma, world_T_imu, p_active, F, W):
         """``Sigma_pp <- F Sigma_pp F^T + W``, ``Sigma_pl <- F Sigma_pl`` (in place).
 
-        :func:`visla_edu.motion.predict_joint_covariance` (which also keeps ``Sigma``
-        symmetric).
-
-        Parameters
-        ----------
-        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
-            The joint covariance, modified in place.
-        world_T_imu : ndarray, shape (4, 4)
-            Unused here.
-        p_active : ndarray, shape (n, 3)
-            Unused here.
-        F : ndarray, shape (6, 6)
-            :func:`visla_edu.motion.pose_transition` of the step.
-        W : ndarray, shape (6, 6)
-            The step's motion noise.
+        :func:`visla_edu.motion.predict_joint_covariance` (which also keeps ``Sigma`` symmetric).
         """
         motion.predict_joint_covariance(Sigma, F, W)
 
     @staticmethod
     def pose_jacobian(J_landmark, J_pose):
-        """The camera's right-perturbation pose Jacobian, unchanged, (k, 4, 6).
-
-        Parameters
-        ----------
-        J_landmark : ndarray, shape (k, 4, 3)
-            Unused here.
-        J_pose : ndarray, shape (k, 4, 6)
-            From :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
-
-        Returns
-        -------
-        ndarray, shape (k, 4, 6)
-            ``J_pose`` itself.
-        """
+        """``J_pose`` itself, (k, 4, 6): the camera's Jacobian is already the right perturbation's."""
         return J_pose
 
     @staticmethod
     def retract(world_T_imu, p_active, delta):
-        """``mu exp(hat(delta_pose))`` and ``mu_m + delta_m``.
-
-        Parameters
-        ----------
-        world_T_imu : ndarray, shape (4, 4)
-        p_active : ndarray, shape (n, 3)
-            Means of the landmarks in the state, in slot order.
-        delta : ndarray, shape (6 + 3n,)
-            The correction ``[delta_pose (6); delta_m (3 each)]``.
-
-        Returns
-        -------
-        world_T_imu : ndarray, shape (4, 4)
-            ``world_T_imu @ se3_exp(delta[:6])``.
-        p_active : ndarray, shape (n, 3)
-            ``p_active + delta[6:].reshape(-1, 3)``.
-        """
+        """``(mu exp(hat(delta[:6])), p_active + delta[6:].reshape(-1, 3))``, shapes (4, 4) and (n, 3)."""
         return world_T_imu @ lie.se3_exp(delta[:6]), p_active + delta[6:].reshape(-1, 3)
 
     @staticmethod
     def clone_jacobian(J_landmark, J_pose, p_world):
-        """Jacobian of an observation made from a cloned pose with respect to that clone's error, (N, 4, 6).
-
-        A clone's error means what the pose's does (here the right perturbation), so it is the
-        camera's ``J_pose``.
-
-        Parameters
-        ----------
-        J_landmark : ndarray, shape (N, 4, 3)
-            Unused here.
-        J_pose : ndarray, shape (N, 4, 6)
-            The right-perturbation pose Jacobian at the clone's mean.
-        p_world : ndarray, shape (N, 3)
-            Unused here.
-
-        Returns
-        -------
-        ndarray, shape (N, 4, 6)
-        """
+        """Jacobian (N, 4, 6) of an observation made from a clone with respect to that clone's error: ``J_pose``."""
         return J_pose
 
     @staticmethod
     def delayed_pose_jacobian(J_landmark, p_world):
-        """Jacobian of a past observation of a landmark entering now with respect to the current pose, (N, 4, 6).
-
-        The right form's landmark error ``m - mu_m`` does not involve the pose: zero.
-
-        Parameters
-        ----------
-        J_landmark : ndarray, shape (N, 4, 3)
-        p_world : ndarray, shape (N, 3)
-
-        Returns
-        -------
-        ndarray, shape (N, 4, 6)
-        """
+        """Zero (N, 4, 6): a past observation of a landmark entering now does not depend on the current pose."""
         return np.zeros(J_landmark.shape[:-1] + (6,))
 
     @staticmethod
@@ -148,172 +85,70 @@ class RightForm:
 
     @staticmethod
     def landmark_sensitivity(G_pose):
-        """``G_pose`` of :func:`visla_edu.ekf.initialize_landmarks` (the body-frame error), (k, 3, 6).
-
-        Parameters
-        ----------
-        G_pose : ndarray, shape (k, 3, 6)
-
-        Returns
-        -------
-        ndarray, shape (k, 3, 6)
-            ``G_pose`` itself.
-        """
+        """``G_pose`` itself, (k, 3, 6): :func:`visla_edu.ekf.initialize_landmarks` uses the body-frame error."""
         return G_pose
 
     @staticmethod
     def pose_cov(Sigma_pose, world_T_imu):
-        """The state's pose block is already the right-perturbation covariance.
-
-        Parameters
-        ----------
-        Sigma_pose : ndarray, shape (6, 6)
-        world_T_imu : ndarray, shape (4, 4)
-            Unused here.
-
-        Returns
-        -------
-        ndarray, shape (6, 6)
-            ``Sigma_pose`` itself.
-        """
+        """``Sigma_pose`` itself, (6, 6): the state's pose block is already the right-perturbation covariance."""
         return Sigma_pose
 
     @staticmethod
     def landmark_covs(Sigma, cols, means):
-        """Marginal covariances of the slots with columns ``cols`` (k, 3), (k, 3, 3).
-
-        Parameters
-        ----------
-        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
-        cols : ndarray of int, shape (k, 3)
-            State columns of each landmark.
-        means : ndarray, shape (k, 3)
-            Unused here.
-
-        Returns
-        -------
-        ndarray, shape (k, 3, 3)
-            The diagonal blocks ``Sigma[cols_i, cols_i]``.
-        """
+        """Marginal covariances (k, 3, 3) of the slots with columns ``cols``: the blocks ``Sigma[cols_i, cols_i]``."""
         return Sigma[cols[:, :, None], cols[:, None, :]]
 
 
 class InvariantForm:
-    """The invariant error ``T = exp(hat(xi)) mu``, ``m_j = exp(hat(theta)) mu_j + e_j``.
+    """The invariant error ``T = exp(hat(xi)) mu``, ``m_j = exp(hat(theta)) mu_j + e_j`` (``slam_error="invariant"``).
 
-    ``xi = [p; theta]`` is in the world frame. A namespace of static methods with the same
-    signatures as :class:`RightForm`'s; :meth:`pose_cov` and :meth:`landmark_covs` convert back
-    to the library's convention (the right perturbation ``[v; w]`` of the pose, ``m - mu_m``).
-
-    Attributes
-    ----------
-    name : str
-        ``"invariant"``, the value of ``FilterConfig.slam_error`` that selects it.
+    ``xi = [p; theta]`` is in the world frame. :meth:`pose_cov` and :meth:`landmark_covs` convert
+    back to the library's convention. Arguments of its methods: the module docstring.
     """
 
     name = "invariant"
 
     @staticmethod
     def predict(Sigma, world_T_imu, p_active, F, W):
-        """``Sigma <- Sigma + B B^T`` (:func:`visla_edu.motion.predict_invariant_covariance`); F is the identity here.
+        """``Sigma <- Sigma + B B^T`` in place (:func:`visla_edu.motion.predict_invariant_covariance`); F is I here.
 
-        Parameters
-        ----------
-        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
-            The joint covariance, modified in place.
-        world_T_imu : ndarray, shape (4, 4)
-            The pose mean after the step.
-        p_active : ndarray, shape (n, 3)
-            Landmark means in slot order; non-finite entries count as 0 (the dense filter's
-            placeholders get no noise).
-        F : ndarray, shape (6, 6)
-            Ignored.
-        W : ndarray, shape (6, 6)
-            The step's motion noise.
-
-        Clones (columns after the landmarks) get no noise: a clone's world-frame error does not
-        change when the current pose moves.
+        Non-finite entries of ``p_active`` count as 0 (the dense filter's placeholders get no
+        noise). Clones (columns after the landmarks) get no noise: a clone's world-frame error does
+        not change when the current pose moves.
         """
         end = 6 + 3 * len(p_active)
         motion.predict_invariant_covariance(Sigma[:end, :end], world_T_imu, p_active, W)
 
     @staticmethod
     def pose_jacobian(J_landmark, J_pose):
-        """``[-J_landmark, 0]`` (:func:`visla_edu.ekf.invariant_pose_jacobian`), (k, 4, 6).
-
-        Parameters
-        ----------
-        J_landmark : ndarray, shape (k, 4, 3)
-        J_pose : ndarray, shape (k, 4, 6)
-            Unused here.
-
-        Returns
-        -------
-        ndarray, shape (k, 4, 6)
-            Columns 0-2 (for ``p``) ``-J_landmark``, columns 3-5 (for ``theta``) zero.
-        """
+        """``[-J_landmark, 0]`` (:func:`visla_edu.ekf.invariant_pose_jacobian`), (k, 4, 6): columns 0-2 for ``p``."""
         return ekf.invariant_pose_jacobian(J_landmark)
 
     @staticmethod
     def retract(world_T_imu, p_active, delta):
-        """:func:`visla_edu.ekf.invariant_retract`.
+        """``mu <- exp(hat(xi)) mu``, ``mu_j <- R_xi mu_j + J_l(theta) e_j`` (:func:`visla_edu.ekf.invariant_retract`).
 
-        ``mu <- exp(hat(xi)) mu`` and ``mu_j <- R_xi mu_j + J_l(theta) e_j``.
-
-        Parameters
-        ----------
-        world_T_imu : ndarray, shape (4, 4)
-        p_active : ndarray, shape (n, 3)
-        delta : ndarray, shape (6 + 3n,)
-            ``[xi (6); e_0 (3); e_1 (3); ...]``.
-
-        Returns
-        -------
-        world_T_imu : ndarray, shape (4, 4)
-        p_active : ndarray, shape (n, 3)
+        ``delta`` is ``[xi (6); e_0 (3); e_1 (3); ...]``; returns as :meth:`RightForm.retract`.
         """
         return ekf.invariant_retract(world_T_imu, p_active, delta)
 
     @staticmethod
     def clone_jacobian(J_landmark, J_pose, p_world):
-        """Jacobian of an observation made from a clone with respect to the clone's error, (N, 4, 6).
+        """``[-J_landmark, J_landmark hat(m)]`` (N, 4, 6): an observation from a clone, by the clone's error.
 
-        With ``T = exp(hat(xi)) mu`` and a point ``m`` not in the state, the camera sees
-        ``inv(T) m ~ inv(mu) (m - p - theta x m)``: ``[-J_landmark, J_landmark hat(m)]``.
-
-        Parameters
-        ----------
-        J_landmark : ndarray, shape (N, 4, 3)
-            ``dz/dm`` at the clone's mean.
-        J_pose : ndarray, shape (N, 4, 6)
-            Unused here.
-        p_world : ndarray, shape (N, 3)
-            ``m``.
-
-        Returns
-        -------
-        ndarray, shape (N, 4, 6)
+        With ``T = exp(hat(xi)) mu`` and a point ``m`` (``p_world``) not in the state, the camera
+        sees ``inv(T) m ~ inv(mu) (m - p - theta x m)``; ``J_landmark`` is ``dz/dm`` at the clone's
+        mean.
         """
         return np.concatenate([-J_landmark, J_landmark @ lie.hat(p_world)], axis=-1)
 
     @staticmethod
     def delayed_pose_jacobian(J_landmark, p_world):
-        """Jacobian of a past observation of a landmark entering now with respect to the current pose, (N, 4, 6).
+        """``[0, -J_landmark hat(mu_m)]`` (N, 4, 6): a past observation of a landmark entering now, by the pose.
 
-        The landmark's invariant error is taken relative to the current pose's rotation error,
-        ``m = exp(hat(theta)) mu_m + e``, so every observation of it depends on ``theta`` through
-        ``-J_landmark hat(mu_m)`` (and on ``e`` through ``J_landmark``).
-
-        Parameters
-        ----------
-        J_landmark : ndarray, shape (N, 4, 3)
-        p_world : ndarray, shape (N, 3)
-            ``mu_m``.
-
-        Returns
-        -------
-        ndarray, shape (N, 4, 6)
-            Columns 0-2 zero, 3-5 ``-J_landmark hat(mu_m)``.
+        Its invariant error is taken relative to the current pose's rotation error, ``m =
+        exp(hat(theta)) mu_m + e`` (``mu_m``: ``p_world``), so all its observations depend on
+        ``theta``.
         """
         return np.concatenate([np.zeros_like(J_landmark), -J_landmark @ lie.hat(p_world)], axis=-1)
 
@@ -324,21 +159,12 @@ class InvariantForm:
 
     @staticmethod
     def landmark_sensitivity(G_pose):
-        """``[I, 0]``: a landmark placed at ``mu p_imu`` has ``e = p + R dp_imu``, (k, 3, 6).
+        """``[I, 0]`` for each new landmark, (k, 3, 6) (only ``len(G_pose)`` is used).
 
-        With ``T = exp(hat(xi)) mu`` the new point is ``exp(hat(theta)) mu p_imu + p`` to first
-        order, so its invariant error takes the pose's translation error ``p`` and nothing of
-        ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance in the world frame).
-
-        Parameters
-        ----------
-        G_pose : ndarray, shape (k, 3, 6)
-            Only its length ``k`` is used.
-
-        Returns
-        -------
-        ndarray, shape (k, 3, 6)
-            ``[I, 0]`` for each new landmark.
+        With ``T = exp(hat(xi)) mu`` a point placed at ``mu p_imu`` is ``exp(hat(theta)) mu p_imu +
+        p`` to first order, so its invariant error ``e = p + R dp_imu`` takes the pose's translation
+        error and nothing of ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance,
+        world frame).
         """
         G = np.zeros((len(G_pose), 3, 6))
         G[:, :, :3] = np.eye(3)
@@ -346,40 +172,20 @@ class InvariantForm:
 
     @staticmethod
     def pose_cov(Sigma_pose, world_T_imu):
-        """The right-perturbation covariance ``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (``delta = Ad(inv(mu)) xi``).
+        """``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (6, 6): the right-perturbation covariance.
 
-        Parameters
-        ----------
-        Sigma_pose : ndarray, shape (6, 6)
-            Covariance of ``xi``.
-        world_T_imu : ndarray, shape (4, 4)
-            ``mu``.
-
-        Returns
-        -------
-        ndarray, shape (6, 6)
+        ``delta = Ad(inv(mu)) xi``; ``Sigma_pose`` is the covariance of ``xi``, ``world_T_imu`` is
+        ``mu``.
         """
         A = lie.adjoint(lie.se3_inv(world_T_imu))
         return A @ Sigma_pose @ A.T
 
     @staticmethod
     def landmark_covs(Sigma, cols, means):
-        """Covariances of ``m - mu_m = e - hat(mu_m) theta`` for the slots with columns ``cols``, (k, 3, 3).
+        """Covariances (k, 3, 3) of ``m - mu_m = e - hat(mu_m) theta`` for the slots with columns ``cols``.
 
         ``A Sigma_theta A^T + A Sigma_theta,e + (A Sigma_theta,e)^T + Sigma_e`` with
-        ``A = -hat(mu_m)``, symmetrised.
-
-        Parameters
-        ----------
-        Sigma : ndarray, shape (6 + 3n, 6 + 3n)
-        cols : ndarray of int, shape (k, 3)
-            State columns of each landmark's ``e``.
-        means : ndarray, shape (k, 3)
-            The landmark means ``mu_m``.
-
-        Returns
-        -------
-        ndarray, shape (k, 3, 3)
+        ``A = -hat(mu_m)`` (``mu_m``: ``means``), symmetrised.
         """
         See = Sigma[cols[:, :, None], cols[:, None, :]]
         if len(cols) == 0:

@@ -1,16 +1,8 @@
 """Dead reckoning and the two modes over a map of independent landmarks: mapping and VIO.
 
-* :class:`DeadReckoning` - IMU prediction only (mean and a 6x6 covariance).
-* :class:`LandmarkMapping` - poses fixed to dead reckoning, one 3x3 EKF per landmark; each
-  observation's noise includes the motion noise accumulated since the landmark's first
-  sighting.
-* :class:`VisualInertialOdometry` - pose EKF against landmarks fixed where they were first
-  triangulated (their covariance includes the pose's uncertainty at that time); only the
-  pose is updated.
-
 Mapping and VIO share :class:`_LandmarkMap`: the dead-reckoning pose plus landmarks with a
 mean and a 3x3 covariance each (no correlation between them or with the pose), the gate
-for their observations and their initialisation.
+for their observations and their initialisation. Each class says its model.
 """
 
 import abc
@@ -30,27 +22,13 @@ class DeadReckoning(FilterBase):
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-        The drive: time stamps, IMU twists and observations.
-    camera : visla_edu.camera.StereoCamera
-        With the calibration to use (after any extrinsic correction).
-    config : visla_edu.filters.FilterConfig
-        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`). Reads
-        the IMU settings (``sigma_linear_velocity``, ``sigma_angular_velocity``, ``imu_lag``)
-        and ``initial_pose_sigma``.
+    dataset, camera, config
+        As :class:`~visla_edu.filters.FilterBase` (also its attributes and ``ValueError``).
 
     Attributes
     ----------
     pose_cov : ndarray, shape (6, 6)
-        Covariance of the pose's right perturbation ``[v; w]``, ``initial_pose_sigma^2 I`` at
-        the start.
-    t, world_T_imu, landmarks, landmark_cov, record_landmarks
-        Shared by every mode (see :class:`visla_edu.filters._base.FilterBase`); no landmarks here.
-
-    Raises
-    ------
-    ValueError
-        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
+        Covariance of the right perturbation ``[v; w]``; ``initial_pose_sigma^2 I`` at the start.
     """
 
     def __init__(self, dataset, camera, config):
@@ -93,30 +71,18 @@ class _LandmarkMap(DeadReckoning):
 
     @abc.abstractmethod
     def _pose_noise(self, lm, J_pose):
-        """Noise ``(k, 4, 4)`` the pose's uncertainty adds to the observations of landmarks ``lm``.
-
-        ``J_pose`` (k, 4, 6) is each observation's pose Jacobian at the current pose.
-        """
+        """Noise (k, 4, 4) the pose's uncertainty adds to the observations of ``lm``; ``J_pose`` (k, 4, 6)."""
 
     def _active(self):
         active = np.nonzero(np.isfinite(self.landmarks[:, 0]) & (self.last_frame >= self.t))[0]
         return active, self.landmark_cov[active].copy()
 
     def _gate_mapped(self, ids, z, status, z_pred, known):
-        """Predict and gate the observations of mapped landmarks (``known`` mask).
+        """Predict and gate the observations of mapped landmarks (``known`` mask); fills ``z_pred`` and ``status``.
 
-        Fills ``z_pred`` and ``status`` for them.
-
-        Returns
-        -------
-        accepted : ndarray of bool, shape (k,)
-            Observations inside the gate.
-        nis : float
-            Sum of their squared Mahalanobis distances (NaN when none was predicted).
-        dof : int
-            4 per accepted observation.
-        pose_noise : ndarray, shape (k_accepted, 4, 4) or None
-            :meth:`_pose_noise` of the accepted observations (None when none was predicted).
+        Returns ``accepted`` (k,) bool, ``nis`` (the sum of their squared Mahalanobis distances),
+        ``dof`` (4 per accepted) and ``pose_noise`` (k_accepted, 4, 4); ``nis`` NaN and
+        ``pose_noise`` None when none was predicted.
         """
         accepted = np.zeros(len(ids), dtype=bool)
         if not np.any(known):
@@ -159,34 +125,19 @@ class LandmarkMapping(_LandmarkMap):
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-        The drive: time stamps, IMU twists and observations.
-    camera : visla_edu.camera.StereoCamera
-        With the calibration to use (after any extrinsic correction).
-    config : visla_edu.filters.FilterConfig
-        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`). Reads
-        the IMU settings as :class:`DeadReckoning` does, and the pixel noise, the gate, the
-        landmark initialisation and ``mapping_motion_noise``.
+    dataset, camera, config
+        As :class:`~visla_edu.filters.FilterBase`.
 
     Attributes
     ----------
-    pose_cov : ndarray, shape (6, 6)
-        The dead-reckoning pose covariance (:class:`DeadReckoning`).
-    landmarks : ndarray, shape (M, 3)
-        Landmark means in the world frame, NaN until a landmark is initialised.
     landmark_cov : ndarray, shape (M, 3, 3)
-        Their 3x3 covariances (independent of each other and of the pose).
+        Covariances of :attr:`landmarks`, independent of each other and of the pose.
     init_frame : ndarray of int, shape (M,)
         Frame of each landmark's first sighting, -1 before it.
     pose_history : ndarray, shape (T, 4, 4)
     pose_cov_history : ndarray, shape (T, 6, 6)
         Pose mean and covariance at every frame processed so far (rows of later frames are not
         set), for the motion noise ``Q``.
-
-    Raises
-    ------
-    ValueError
-        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
     """
 
     def __init__(self, dataset, camera, config):
@@ -219,41 +170,24 @@ class LandmarkMapping(_LandmarkMap):
 class VisualInertialOdometry(_LandmarkMap):
     """Pose EKF against landmarks fixed where they were first triangulated.
 
-    A landmark is placed once, from its first observation and the pose at that time (its
-    covariance includes that pose's uncertainty, ``G_pose Sigma_pose G_pose^T``); later
-    observations update the pose alone, with ``R_i = sigma^2 I + J_landmark Sigma_i
-    J_landmark^T``. The landmarks are not re-estimated: updating them with the same
-    observations that just corrected the pose would count each observation twice and drag
-    pose and map along together (on the simulated drive that makes the trajectory error 60x
-    larger; ``FilterConfig.vio_refine_landmarks`` does it for comparison). The joint filter
-    (``JointSlam``) is the consistent way to refine both.
+    A landmark is placed once, from its first observation and the pose then (its covariance includes
+    that pose's uncertainty, ``G_pose Sigma_pose G_pose^T``); later observations update the pose
+    alone, with ``R_i = sigma^2 I + J_landmark Sigma_i J_landmark^T``. Updating the landmarks too
+    would count each observation twice and drag pose and map along together
+    (``FilterConfig.vio_refine_landmarks`` does it for comparison);
+    :class:`~visla_edu.filters.JointSlam` refines both consistently.
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-        The drive: time stamps, IMU twists and observations.
-    camera : visla_edu.camera.StereoCamera
-        With the calibration to use (after any extrinsic correction).
-    config : visla_edu.filters.FilterConfig
-        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`). Reads
-        the IMU settings as :class:`DeadReckoning` does, and the pixel noise, the gate, the
-        landmark initialisation and ``vio_refine_landmarks``.
+    dataset, camera, config
+        As :class:`~visla_edu.filters.FilterBase`.
 
     Attributes
     ----------
     pose_cov : ndarray, shape (6, 6)
         Covariance of the pose's right perturbation ``[v; w]``, updated by the observations.
-    landmarks : ndarray, shape (M, 3)
-        Landmark means in the world frame, NaN until a landmark is initialised.
-    landmark_cov : ndarray, shape (M, 3, 3)
-        Their 3x3 covariances, including the pose's uncertainty when they were placed.
-    init_frame : ndarray of int, shape (M,)
-        Frame of each landmark's first sighting, -1 before it.
-
-    Raises
-    ------
-    ValueError
-        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
+    landmark_cov, init_frame
+        As :class:`LandmarkMapping`'s; a covariance includes the pose's uncertainty when placed.
     """
 
     def _update(self, ids, z, status, z_pred):

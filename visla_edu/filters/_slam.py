@@ -1,36 +1,20 @@
 """Joint SLAM: the EKF over the pose and the landmarks, on the active set or dense.
 
-By default only the *active set* (landmarks being tracked) is in the state: a landmark enters
-at its first usable observation, which it consumes (mean from stereo triangulation;
-covariance from the pixels and, through ``G_pose``, from the pose, with the matching
-cross-covariance to the rest of the state), and is marginalised (its rows and columns
-deleted) after its last one. With ``dense=True`` it is the textbook filter over all
-landmarks from the start. Both give the same trajectory: a landmark not yet observed is
-uncorrelated with everything (its rows are filled at its first observation exactly as the
-active set appends them), and marginalising a Gaussian in covariance form is deleting rows
-and columns. The maps differ in one way: in the dense filter a retired landmark keeps moving
-through its correlation with the pose, in the active set it keeps the estimate it had when
-it left.
+By default only the *active set* (landmarks being tracked) is in the state: a landmark enters at
+its first usable observation, which it consumes (covariance and cross-covariance through
+``G_pose``, :meth:`~visla_edu.filters.ActiveSet.augment`), and is marginalised after its last one.
+With ``dense=True`` it is the textbook filter over all landmarks from the start. Both give the
+same trajectory: a landmark not yet observed is uncorrelated with everything (its rows are filled
+at its first observation exactly as the active set appends them), and marginalising a Gaussian in
+covariance form is deleting rows and columns. The maps differ in one way: in the dense filter a
+retired landmark keeps moving through its correlation with the pose, in the active set it keeps
+the estimate it had when it left.
 
-The covariance bookkeeping is :class:`~visla_edu.filters.ActiveSet`'s; :class:`JointSlam`
-decides when to gate, update, enter and retire. What the state's error means is the error
-form's (``FilterConfig.slam_error``, :mod:`visla_edu.filters._forms`): the invariant error by
-default (consistent), or the right perturbation the notebooks derive first.
-
-A landmark whose only information is its first observation (no update has used it yet) is
-placed again from its next observation when that one falls outside the gate
-(``FilterConfig.reinit_gated_landmarks``): its first observation was the outlier, or the
-landmark moved. Without this, a landmark born from a bad observation gates all of its track.
-
-**With clones** (``FilterConfig.msckf_window > 0``, the default outside the gyro regime of
-:func:`~visla_edu.filters._config.msckf_window`; not dense) the state also holds
-copies of the last poses, and a landmark enters it only when its track outlives the window
-(delayed entry, from all its observations); shorter tracks update the state in one null-space
-(MSCKF) update when they end, without ever entering it (:mod:`visla_edu.filters._tracks`). A
-far landmark (a disparity of a pixel or less, which a single stereo pair cannot place) is then
-triangulated from its whole track, a track wrong as a whole is gated as a whole, and only the
-long tracks cost state. ``msckf_window=0`` is the joint EKF above, every landmark entering at its
-first observation (notebook 08).
+:class:`JointSlam` decides when to gate, update, enter, place again
+(``FilterConfig.reinit_gated_landmarks``) and retire; the error form (``FilterConfig.slam_error``,
+:mod:`visla_edu.filters._forms`) says what the state's error means. With clones
+(``FilterConfig.msckf_window > 0``; not dense) a landmark enters the state only when its track
+outlives the window (:mod:`visla_edu.filters._clones`), so only the long tracks cost state.
 """
 
 import numpy as np
@@ -58,17 +42,15 @@ class JointSlam(CloneWindow, FilterBase):
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    camera : visla_edu.camera.StereoCamera
-    config : visla_edu.filters.FilterConfig
+    dataset, camera, config
+        As :class:`~visla_edu.filters.FilterBase`.
     dense : bool
         Keep every (strided) landmark in the state from the first frame.
 
     Attributes
     ----------
     state : ActiveSet
-        The joint covariance and the slot of each landmark in it (in the error form's
-        coordinates).
+        The joint covariance (in the error form's coordinates) and each landmark's slot in it.
     form : RightForm or InvariantForm
         The error form (``config.slam_error``).
     updates : ndarray of int, shape (M,)
@@ -78,11 +60,10 @@ class JointSlam(CloneWindow, FilterBase):
     clone_T : ndarray, shape (n_clones, 4, 4)
         The clones' means, oldest first (their frames: ``state.clone_frames``).
     track_counts : dict of str -> int
-        Multi-frame track updates so far: ``tracks_used``, ``tracks_gated`` (refused by the
-        whole-track gate), ``tracks_short`` (fewer than
-        :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations in the window),
-        ``tracks_failed`` (no point in front of every camera), ``entered`` (tracks that entered
-        the state), and ``observations_used``, ``observations_gated`` (their observations).
+        Multi-frame track updates so far: ``tracks_used``, ``tracks_gated`` (refused whole),
+        ``tracks_short`` (fewer than :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS`
+        observations in the window), ``tracks_failed`` (no point in front of every camera),
+        ``entered`` (into the state), and the tracks' ``observations_used``, ``observations_gated``.
     """
 
     def __init__(self, dataset, camera, config, dense=False):
@@ -164,15 +145,10 @@ class JointSlam(CloneWindow, FilterBase):
         return self.state.landmark_covs(self.form, lm, self.landmarks[lm])
 
     def _gate_known(self, ids, z, status, z_pred, known):
-        """Predict and gate the observations of landmarks already in the state (``known`` mask).
+        """Predict and gate the observations of landmarks in the state (``known`` mask); fills ``z_pred``, ``status``.
 
-        Fills ``z_pred`` and ``status`` for them.
-
-        Returns
-        -------
-        tuple of ndarray or None
-            ``camera.predict_with_jacobians`` of the known observations: predictions (k, 4),
-            landmark Jacobians (k, 4, 3), pose Jacobians (k, 4, 6); None when there are none.
+        Returns ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``, ``J_pose`` in the error
+        form's coordinates; None when there are none.
         """
         if not np.any(known):
             return None
@@ -220,10 +196,9 @@ class JointSlam(CloneWindow, FilterBase):
         return active, self._landmark_covs(active)
 
     def landmark_estimates(self):
-        """Final landmark means (M, 3) and marginal covariances (M, 3, 3); NaN if never initialised.
+        """Landmark means (M, 3) and marginal covariances (M, 3, 3), NaN if never initialised.
 
-        Landmarks still in the state report their current estimate (in the dense form that
-        is every initialised landmark, retired or not).
+        Landmarks still in the state (dense: every initialised one) report their current estimate.
         """
         cov = self.landmark_cov.copy()
         ids = self.state.active_ids

@@ -1,12 +1,9 @@
 """The joint state's bookkeeping: one covariance over the pose and the landmarks in the state.
 
-:class:`ActiveSet` owns the joint EKF's covariance (in the manner of OpenVINS's
-``StateHelper``): it propagates it, updates it, augments it (a new landmark's or a cloned pose's
-rows), marginalises rows out (a landmark that left, an old clone) and reads marginals, and it
-keeps which slot holds which landmark. The filters (:class:`visla_edu.filters.JointSlam` and its
-clone window) build the Jacobians, the innovations and the retraction of the means, and decide
-*when* to do each; the formulas are :mod:`visla_edu.motion`'s and :mod:`visla_edu.ekf`'s, on the
-same layout. ``tests/test_structure.py`` holds that nothing else writes :attr:`ActiveSet.Sigma`.
+:class:`ActiveSet` owns the joint EKF's covariance (in the manner of OpenVINS's ``StateHelper``)
+and which slot holds which landmark; the filters build the Jacobians, the innovations and the
+retraction of the means, and decide *when* to do each. ``tests/test_structure.py`` holds that
+nothing else writes :attr:`ActiveSet.Sigma`.
 
 The state is ``[pose perturbation (6); slot 0 (3); slot 1 (3); ...; clone 0 (6); clone 1 (6);
 ...]``: slot ``s`` occupies the columns :func:`visla_edu.ekf.slot_columns` gives (``6 + 3 s ..
@@ -35,11 +32,8 @@ class ActiveSet:
 
     Attributes
     ----------
-    Sigma : ndarray, shape (D, D), D = 6 + 3 n
-        The joint covariance. Read it; only this class's methods change it (prediction:
-        :meth:`propagate`; updates: :meth:`update`, :meth:`correct`; new rows: :meth:`enter`,
-        :meth:`augment`, :meth:`augment_delayed`, :meth:`clone_pose`; removals: :meth:`retire`,
-        :meth:`drop_clone`).
+    Sigma : ndarray, shape (D, D), D = 6 + 3 n (+ 6 per clone)
+        The joint covariance. Read it; only this class's methods change it.
     active_ids : ndarray of int, shape (n,)
         Landmark id in each slot, in slot order.
     slot_of : ndarray of int, shape (M,)
@@ -58,11 +52,10 @@ class ActiveSet:
 
     @classmethod
     def dense(cls, num_landmarks, ids, pose_cov, placeholder_variance):
-        """Every landmark of ``ids`` in the state from the start (the textbook filter).
+        """Every landmark of ``ids`` in the state from the start (the textbook filter), uncorrelated.
 
-        Their slots have zero correlation and ``placeholder_variance`` on the diagonal until
-        :meth:`augment` fills them at the landmark's first observation (a landmark never
-        observed is uncorrelated with everything, so filling its rows then is exact).
+        ``placeholder_variance`` on their diagonal until :meth:`augment` fills their rows at the
+        first observation (exact: a landmark never observed is uncorrelated with everything).
         """
         state = cls(num_landmarks, pose_cov)
         state.enter(ids)
@@ -108,14 +101,9 @@ class ActiveSet:
         Parameters
         ----------
         form : class
-            The error form (:class:`visla_edu.filters._forms.RightForm` or ``InvariantForm``),
-            whose ``predict`` holds the formula.
-        world_T_imu : ndarray, shape (4, 4)
-            The pose mean after the step.
-        p_active : ndarray, shape (n, 3)
-            The landmark means in slot order.
-        F, W : ndarray, shape (6, 6)
-            The step's pose transition and motion noise.
+            The error form (:mod:`visla_edu.filters._forms`), whose ``predict`` holds the formula.
+        world_T_imu, p_active, F, W
+            As the error forms' ``predict``.
         """
         form.predict(self.Sigma, world_T_imu, p_active, F, W)
 
@@ -140,24 +128,19 @@ class ActiveSet:
     def correct(self, ids, z, noise_var, prediction, rows):
         """The joint update with stereo observations of landmarks ``ids`` in the state; ``(delta, nis)``.
 
-        :func:`visla_edu.ekf.joint_correction` on :attr:`Sigma` with the slots of ``ids``
-        (its parameters: ``z`` (k, 4), ``prediction`` ``(z_pred, J_landmark, J_pose)``, ``rows``
-        the rig's stereo rows).
+        :func:`visla_edu.ekf.joint_correction` on their slots (``z`` (k, 4), ``prediction``
+        ``(z_pred, J_landmark, J_pose)``, ``rows`` the rig's stereo rows).
         """
         return ekf.joint_correction(self.Sigma, self.slot_of[ids], z, noise_var, prediction, rows)
 
     def landmark_covs(self, form, ids, means):
-        """Marginal covariances of the errors ``m - mu_m`` of landmarks ``ids`` in the state, (k, 3, 3).
-
-        ``form.landmark_covs`` (the error form's map from its state coordinates) on the slots of
-        ``ids``; ``means`` (k, 3) are their means.
-        """
+        """Marginal covariances (k, 3, 3) of ``m - mu_m`` of landmarks ``ids``, means (k, 3): ``form.landmark_covs``."""
         return form.landmark_covs(self.Sigma, self.columns(ids), means)
 
     def enter(self, ids):
-        """Append one slot per landmark of ``ids`` (zero rows and columns, filled by :meth:`augment`).
+        """Append one slot per landmark of ``ids`` after the last landmark slot, before the clones.
 
-        The new slots follow the last landmark slot, before the clones.
+        Its rows and columns are zero until :meth:`augment` or :meth:`augment_delayed` fills them.
         """
         ids = np.asarray(ids, dtype=np.int64)
         self.Sigma = _insert_zeros(self.Sigma, self.landmark_end, 3 * len(ids))
@@ -165,13 +148,10 @@ class ActiveSet:
         self.active_ids = np.concatenate([self.active_ids, ids])
 
     def augment(self, ids, G_pose, C_new):
-        """Fill the rows of new landmarks placed from the current pose.
+        """Fill the rows of new landmarks placed from the current pose (:func:`visla_edu.ekf.initialize_landmarks`).
 
-        A landmark placed as ``m = f(pose, z)`` with pose sensitivity ``G_pose`` and pixel
-        covariance ``C_new`` (see :func:`visla_edu.ekf.initialize_landmarks`) has::
-
-            Sigma_new,x   = G_pose Sigma_pose,x          (every state entry x)
-            Sigma_new,new = G_pose Sigma_pp G_pose^T + C_new   (C_new block diagonal)
+        ``Sigma_new,x = G_pose Sigma_pose,x`` for every state entry ``x``, and
+        ``Sigma_new,new = G_pose Sigma_pp G_pose^T + C_new`` (``C_new`` block diagonal).
 
         Parameters
         ----------
@@ -197,7 +177,7 @@ class ActiveSet:
         Parameters
         ----------
         ids : ndarray of int, shape (k,)
-            Landmarks already in the state (:meth:`enter`), never updated since.
+            As in :meth:`augment`.
         cross : ndarray, shape (3k, D)
             ``Sigma_new,x`` for every state entry ``x`` (the new rows' own columns are ignored).
         block : ndarray, shape (3k, 3k)
@@ -221,10 +201,7 @@ class ActiveSet:
         del self.clone_frames[k]
 
     def retire(self, ids):
-        """Marginalise landmarks ``ids`` out of the state (delete their rows and columns).
-
-        Marginalising a Gaussian in covariance form is deleting rows and columns, so the
-        remaining entries are unchanged; the slots after a deleted one move down.
+        """Marginalise landmarks ``ids`` out of the state: delete their rows and columns; later slots move down.
 
         Parameters
         ----------

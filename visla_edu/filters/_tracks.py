@@ -2,9 +2,8 @@
 
 A landmark that is not in the joint state keeps its observations in a :class:`TrackBuffer`
 while the frames they were made from are *cloned* in the state (copies of past poses,
-:meth:`visla_edu.filters.ActiveSet.clone_pose`). When its track ends, or when it has been seen
-for the whole clone window, its observations are used all at once (Mourikis and Roumeliotis
-2007; OpenVINS):
+:meth:`visla_edu.filters.ActiveSet.clone_pose`); when they are used is
+:mod:`visla_edu.filters._clones`'s. Then, all at once (Mourikis and Roumeliotis 2007; OpenVINS):
 
 1. **Triangulation** from every observation and the clones' means (:func:`triangulate_tracks`):
    Gauss-Newton on the inverse depth ``(x/z, y/z, 1/z)`` in the camera of the observation with
@@ -12,16 +11,17 @@ for the whole clone window, its observations are used all at once (Mourikis and 
    well posed as a near one.
 2. **Linearisation** (:func:`track_systems`): the stacked residual ``r`` (4 rows per observation)
    of ``z = h(T_k, m)`` with Jacobians ``H_x`` on the clones (the error form's
-   :meth:`clone_jacobian`) and ``H_m`` on the point.
+   ``clone_jacobian``) and ``H_m`` on the point.
 3. **Null space** (:func:`project_out_point`): with ``H_m = [Q1 Q2] [R1; 0]`` (QR), ``Q2^T r =
    Q2^T H_x x + Q2^T n`` no longer involves the point: an EKF update of the clones (and so of
-   the pose and everything correlated with them) that never puts the point in the state, with
-   ``4 n - 3`` rows and a whole-track chi-square gate (a track that is wrong as a whole, a moving
-   car or a mismatch, is refused as a whole).
+   everything correlated with them) with ``4 n - 3`` rows and a whole-track chi-square gate (a
+   track that is wrong as a whole, a moving car or a mismatch, is refused as a whole).
 4. **Delayed entry** of a long track as a SLAM landmark: the ``Q1`` rows give its covariance and
    its correlation with the state (:func:`delayed_entry`), the ``Q2`` rows update the state as in 3.
 
-Everything is batched over the tracks of a frame.
+Everything is batched over the tracks of a frame, as arrays over their ``N`` observations:
+``world_T_imu`` (N, 4, 4) the clone mean each was made from, ``z`` (N, 4) its stereo pixels
+(disparity positive), ``owner`` (N,) its track, ``0 .. count - 1``, sorted.
 """
 
 import numpy as np
@@ -46,13 +46,7 @@ MIN_POINT_DEPTH = 0.1
 
 
 class TrackBuffer:
-    """Observations ``(frame, z)`` of the landmarks outside the state, per landmark.
-
-    Attributes
-    ----------
-    frames : dict of int -> list of int
-    pixels : dict of int -> list of ndarray, shape (4,)
-    """
+    """Observations ``(frame, z)`` of the landmarks outside the state: ``frames[lm]`` and ``pixels[lm]`` (4,) lists."""
 
     def __init__(self):
         self.frames, self.pixels = {}, {}
@@ -122,26 +116,11 @@ def _from_inverse_depth(world_T_cam, psi):
 
 
 def triangulate_tracks(camera, world_T_imu, z, owner, count, sigma_pixel):
-    """Least-squares points of ``count`` tracks from their observations and the poses they were made from.
+    """Least-squares points ``p_world`` (count, 3) of ``count`` tracks, and ``ok`` (count,) bool.
 
-    Parameters
-    ----------
-    camera : visla_edu.camera.StereoCamera
-    world_T_imu : ndarray, shape (N, 4, 4)
-        The pose (clone mean) of each observation.
-    z : ndarray, shape (N, 4)
-        Stereo pixels, every disparity positive.
-    owner : ndarray of int, shape (N,)
-        Track of each observation, ``0 .. count - 1``, sorted, every track at least once.
-    count : int
-    sigma_pixel : float
-        Scale of the Huber weights (:data:`HUBER_SIGMAS`).
-
-    Returns
-    -------
-    p_world : ndarray, shape (count, 3)
-    ok : ndarray of bool, shape (count,)
-        Finite, and at least :data:`MIN_POINT_DEPTH` in front of every camera that saw it.
+    From the observations ``world_T_imu``, ``z`` and ``owner`` (module docstring; every track at
+    least once); ``sigma_pixel`` scales the Huber weights (:data:`HUBER_SIGMAS`). ``ok``: finite,
+    and at least :data:`MIN_POINT_DEPTH` in front of every camera that saw it.
     """
     disparity = camera.disparity(z)
     anchor = np.zeros(count, dtype=np.int64)
@@ -183,21 +162,11 @@ def track_systems(camera, form, world_T_imu, z, owner, p_world):
 
 
 def project_out_point(r, H_point):
-    """The null-space rows of one track: ``Q2^T`` applied to its stacked rows, and ``(Q1, R1)``.
+    """The null-space rows of ``B`` tracks of ``n`` observations each: ``Q2^T``, and ``(Q1^T, R1)`` of the point.
 
-    Parameters
-    ----------
-    r : ndarray, shape (B, n, 4)
-        Residuals of ``B`` tracks of ``n`` observations each.
-    H_point : ndarray, shape (B, n, 4, 3)
-
-    Returns
-    -------
-    Q2T : ndarray, shape (B, 4n - 3, 4n)
-        Rows orthogonal to the point's columns: ``Q2T @ H_point.reshape(B, 4n, 3) = 0``.
-    Q1T : ndarray, shape (B, 3, 4n)
-    R1 : ndarray, shape (B, 3, 3)
-        ``Q1T @ H_point = R1`` (upper triangular).
+    ``r`` (B, n, 4), ``H_point`` (B, n, 4, 3); returns ``Q2T`` (B, 4n - 3, 4n) with
+    ``Q2T @ H_point.reshape(B, 4n, 3) = 0``, ``Q1T`` (B, 3, 4n) and ``R1`` (B, 3, 3), upper
+    triangular, ``Q1T @ H_point = R1``.
     """
     B, n = r.shape[:2]
     Q, R = np.linalg.qr(H_point.reshape(B, 4 * n, 3), mode="complete")
@@ -222,25 +191,12 @@ def delayed_entry(r1, R1, H1_Sigma, H1_Sigma_H1T, noise_var):
     From the point's rows ``Q1^T r = H1 x + R1 e + Q1^T n`` (``e`` the point's error, ``x`` the
     state's), to first order ``e = R1^-1 (Q1^T r - H1 x - Q1^T n)``, so::
 
-        mean    R1^-1 Q1^T r
-        cross   Sigma_e,x = -R1^-1 H1 Sigma
-        block   R1^-1 (H1 Sigma H1^T + noise_var I) R1^-T
+        mean    R1^-1 Q1^T r                                  (3,)
+        cross   Sigma_e,x = -R1^-1 H1 Sigma                   (3, D)
+        block   R1^-1 (H1 Sigma H1^T + noise_var I) R1^-T     (3, 3)
 
-    Parameters
-    ----------
-    r1 : ndarray, shape (3,)
-        ``Q1^T r``.
-    R1 : ndarray, shape (3, 3)
-    H1_Sigma : ndarray, shape (3, D)
-        ``H1 Sigma``, every state column.
-    H1_Sigma_H1T : ndarray, shape (3, 3)
-    noise_var : float
-
-    Returns
-    -------
-    mean : ndarray, shape (3,)
-    cross : ndarray, shape (3, D)
-    block : ndarray, shape (3, 3)
+    from ``r1 = Q1^T r`` (3,), ``R1`` (3, 3), ``H1_Sigma`` (3, D) over every state column and
+    ``H1_Sigma_H1T`` (3, 3).
     """
     R1_inv = np.linalg.inv(R1)
     block = R1_inv @ (H1_Sigma_H1T + noise_var * np.eye(3)) @ R1_inv.T

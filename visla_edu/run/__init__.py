@@ -1,21 +1,15 @@
-"""One driver for every filter mode: a step iterator and a whole-run function.
+"""One driver for every filter mode and the smoothers: build, step, run, evaluate, save.
 
-:func:`make_filter` builds a mode by name (:data:`MODES`, from :mod:`visla_edu.codes`),
-:func:`iterate_filter` steps it, :func:`run_filter` runs it to the end into a
-:class:`RunResult` (per-frame arrays in a :class:`RunArrays`), :func:`save_result` and
-:func:`load_result` write and read its file (:mod:`visla_edu.run._results`). How
-the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
-(:func:`limit_blas_threads`) and the progress bar. :func:`run_smoother` runs the batch or the
-sliding-window smoother (:mod:`visla_edu.smoother`) into the same :class:`RunResult`.
-:mod:`visla_edu.run.workload` says what a run will cost before it starts and names the likely cause
-when one fails.
+How the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
+(:func:`limit_blas_threads`) and the progress bar. Results and their file:
+:mod:`visla_edu.run._results`; cost and failure hints: :mod:`visla_edu.run.workload`.
 
 **"auto" settings.** Every run first measures the settings left at ``"auto"`` from the data
 (:func:`resolve_config`): the velocity noise and the IMU lag by
 :func:`visla_edu.diagnostics.calibrate` (cached by the data's content, applied by
 :meth:`~visla_edu.filters.FilterConfig.resolve`), and ``extrinsic_correction`` with the camera,
-from the same calibration (:func:`visla_edu.diagnostics.resolve_extrinsics`; ``verbose``
-prints its evidence). The smoothers take the resolved values
+from the same calibration (:func:`visla_edu.diagnostics.resolve_extrinsics`; ``verbose`` prints
+its evidence). The smoothers take the resolved values
 (:meth:`~visla_edu.smoother.SmootherConfig.from_filter_config`).
 
 >>> from visla_edu import data, run
@@ -55,6 +49,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     mode : {"deadreckon", "mapping", "vio", "slam"}
         One of :data:`visla_edu.codes.MODES`.
     config : visla_edu.filters.FilterConfig, optional
+        Default ``FilterConfig()``.
     dense : bool
         Textbook joint EKF over all (strided) landmarks; only for ``mode="slam"``.
     verbose : bool
@@ -68,16 +63,15 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     Raises
     ------
     ValueError
-        A bad mode, ``dense`` without ``"slam"``, a dataset without observations for a mode
-        that needs them, or a dataset with an implausible calibration
-        (:func:`visla_edu.data.calibration_problems`: in-memory datasets are held to the
-        ranges the loader enforces on files, since the filter would silently turn an absurd
-        focal length, baseline or extrinsic into inf/NaN covariances or a garbage map).
+        A bad mode, ``dense`` without ``"slam"``, a dataset without observations for a mode that
+        needs them, or an implausible calibration (:func:`visla_edu.data.calibration_problems`).
     """
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if dense and mode != SLAM:
         raise ValueError(f"dense=True is the textbook joint filter and needs mode='slam', got mode={mode!r}")
+    # In-memory datasets are held to the ranges the loader enforces on files: the filter would silently turn
+    # an absurd focal length, baseline or extrinsic into inf/NaN covariances or a garbage map.
     problems = data.calibration_problems(dataset)
     if problems:
         raise ValueError(f"cannot run the filter: {problems[0]}")
@@ -90,11 +84,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
 
 
 def _check_enough_data(dataset, mode):
-    """Refuse a mode the dataset cannot feed.
-
-    Every mode but dead reckoning needs observations; the smoothers need at least two frames
-    (one motion factor).
-    """
+    """Refuse a mode the dataset cannot feed: all but dead reckoning need observations, the smoothers two frames."""
     if mode == DEADRECKON:
         return
     if dataset.num_observations == 0:
@@ -108,17 +98,15 @@ def _check_enough_data(dataset, mode):
 def resolve_config(dataset, config):
     """``config`` with its ``"auto"`` settings measured from ``dataset`` (module docstring).
 
-    ``extrinsic_correction="auto"`` stays as it is: it is resolved with the camera (:func:`_imu_T_cam`).
-
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    config : visla_edu.filters.FilterConfig
+    dataset, config
+        As :func:`make_filter` (``config`` not optional).
 
     Returns
     -------
     visla_edu.filters.FilterConfig
-        The same object when nothing was ``"auto"``.
+        The same object when nothing was ``"auto"``; ``extrinsic_correction`` is left to the camera.
     """
     if config.resolved:
         return config
@@ -137,24 +125,17 @@ def _imu_T_cam(dataset, config, verbose):
 
 
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
-    """Yield one :class:`~visla_edu.filters.StepRecord` per frame.
+    """Yield one :class:`~visla_edu.filters.StepRecord` per frame, ``t = 0 .. T - 1``.
 
     Parameters
     ----------
     dataset, mode, config, dense, blas_threads
-        As in :func:`run_filter` (no progress bar, nothing printed); the BLAS thread limit
-        holds while the generator runs.
+        As in :func:`run_filter` (no progress bar, nothing printed); the BLAS thread limit holds
+        while the generator runs, and its errors come at the first ``next()``.
 
     Yields
     ------
     visla_edu.filters.StepRecord
-        One per frame, ``t = 0 .. T - 1``.
-
-    Raises
-    ------
-    ValueError, visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError
-        As :func:`run_filter`; being a generator, it raises them at the first ``next()``,
-        not when called.
     """
     flt = make_filter(dataset, mode, config, dense)
     with limit_blas_threads(blas_threads):
@@ -167,15 +148,13 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
 
     Parameters
     ----------
-    dataset, mode, config, dense
+    dataset, mode, config, dense, verbose
         As :func:`make_filter`.
     progress : bool, optional
         Show a tqdm progress bar; by default only for runs longer than 500 frames.
-    verbose : bool
-        Print the evidence of an automatic extrinsic correction.
     blas_threads : int or None
-        BLAS threads while the filter runs (the per-step matrices are small, so 1 is
-        fastest); None leaves numpy's setting alone. See :func:`limit_blas_threads`.
+        BLAS threads while the filter runs (1 is fastest for its small matrices); None leaves
+        numpy's setting alone. See :func:`limit_blas_threads`.
 
     Returns
     -------
@@ -222,17 +201,16 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     """Run a smoother over the whole dataset, into the same :class:`RunResult` as the filters.
 
     ``"smooth"``: the batch smoother (:func:`visla_edu.smoother.smooth`) started from the joint
-    EKF's trajectory and map (:func:`run_filter` with ``"slam"``, kept as
-    ``start_world_T_imu``). ``"window"``: the fixed-lag sliding window
-    (:func:`visla_edu.smoother.smooth_window`). Both use the filter's model: the resolved
-    ``config`` and its camera calibration (module docstring).
+    EKF's trajectory and map (:func:`run_filter`, ``"slam"``; kept as ``start_world_T_imu``);
+    ``"window"``: the fixed-lag sliding window (:func:`visla_edu.smoother.smooth_window`). Both use
+    the filter's model: the resolved ``config`` and its camera calibration (module docstring).
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
+    dataset, config
+        As :func:`make_filter`.
     mode : {"smooth", "window"}
         One of :data:`visla_edu.codes.SMOOTHER_MODES`.
-    config : visla_edu.filters.FilterConfig, optional
     smoother_config : visla_edu.smoother.SmootherConfig, optional
         Default: :meth:`~visla_edu.smoother.SmootherConfig.from_filter_config` of ``config``.
     progress, verbose, blas_threads
@@ -244,10 +222,7 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
     Returns
     -------
     RunResult
-        ``nis`` is NaN (a smoother has no innovations); ``status_counts`` count per frame the
-        observations the smoother used (``used``), rejected as outliers (``gated``), could not
-        use (``no depth``) or left out (``ignored``: repeated frames; ``dropped``: their
-        landmark was left out of the estimate).
+        ``nis`` is NaN; ``status_counts`` hold the smoother's codes (``ignored``: repeated frames).
     """
     from visla_edu import smoother
 
@@ -275,11 +250,10 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
 
 
 def _best_start(dataset, config, settings, progress, verbose, blas_threads):
-    """The batch smoother's start: the joint EKF, or (``start="best"``) the lowest objective of dead reckoning, VIO and it.
+    """The batch smoother's start (a RunResult, its ``mode`` naming it) and a line of the candidates' costs.
 
-    Each candidate is a :class:`RunResult` (dead reckoning with no map: the smoother
-    triangulates it); :func:`visla_edu.smoother.start_cost` prices them on the same
-    observations. Returns the chosen result (its ``mode`` names it) and a line of the costs.
+    The joint EKF, or with ``start="best"`` the lowest :func:`visla_edu.smoother.start_cost` of dead
+    reckoning (no map: the smoother triangulates it), VIO and the joint EKF.
     """
     from visla_edu import smoother
 
@@ -294,28 +268,10 @@ def _best_start(dataset, config, settings, progress, verbose, blas_threads):
 
 
 def _smoother_settings(config, mode, own=None):
-    """The smoother's model from the filter's resolved settings and its own, or a ValueError saying which.
+    """The smoother's model from the filter's resolved settings and its own ``own``; a ValueError names ``mode``.
 
-    Parameters
-    ----------
-    config : visla_edu.filters.FilterConfig
-        Resolved.
-    mode : str
-        Names the mode in the message.
-    own : dict, optional
-        Settings of the smoother's own (checked by
-        :func:`visla_edu.smoother.check_own_settings` already).
-
-    Returns
-    -------
-    visla_edu.smoother.SmootherConfig
-
-    Raises
-    ------
-    ValueError
-        A filter setting the smoother cannot take (e.g. a velocity noise of 0, which the
-        filters accept and the smoother's motion factors cannot weigh), or a bad value of its
-        own (named as the smoother's).
+    E.g. a velocity noise of 0, which the filters accept and the smoother's motion factors cannot
+    weigh.
     """
     from visla_edu import smoother
 
@@ -347,7 +303,7 @@ def _smoother_run_result(dataset, config, solved, start):
 def evaluate_result(result, ground_truth):
     """ATE and KITTI drift of a run's estimate and of its dead reckoning against the ground truth.
 
-    Stores the figures in ``result.evaluation`` (:attr:`RunResult.evaluation`).
+    Also stores the figures in ``result.evaluation`` (:attr:`RunResult.evaluation`).
 
     Parameters
     ----------
@@ -358,8 +314,7 @@ def evaluate_result(result, ground_truth):
     Returns
     -------
     dict of str to visla_edu.metrics.TrajectoryEvaluation
-        ``{"estimate": ..., "dead_reckoning": ...}`` and, for the batch smoother, ``"start"``
-        (the joint EKF it started from).
+        ``{"estimate": ..., "dead_reckoning": ...}`` and, for the batch smoother, ``"start"``.
     """
     truth = ground_truth.world_T_imu
     evaluations = {"estimate": metrics.evaluate(result.world_T_imu, truth),

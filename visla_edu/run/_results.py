@@ -1,18 +1,14 @@
-"""A whole run's result, its per-frame arrays, and its file: :class:`RunResult`, :class:`RunArrays`.
+"""A whole run's result, its per-frame arrays, and its file (re-exported by :mod:`visla_edu.run`).
 
-:mod:`visla_edu.run` produces them and re-exports all four.
-
-**The file** (``.npz``, no pickle; :func:`save_result` writes it atomically,
-:func:`visla_edu._files.atomic_write`, and :func:`load_result` reads it): one key per array
-field of :class:`RunResult` (``time_stamps`` (T,), ``world_T_imu`` (T, 4, 4), ``landmarks``
-(M, 3), ...; ``start_world_T_imu`` only from the batch smoother), ``name``, ``mode``,
-``dense``, ``notes`` and ``start_mode``; ``config_<name>`` for every setting used (None stored
-as an empty array; files of earlier versions hold ``blas_threads`` so), ``eval_<name>`` for
+**The file** (``.npz``, no pickle; written atomically by :func:`save_result`, read by
+:func:`load_result`): one key per array field of :class:`RunResult` (``start_world_T_imu`` only
+from the batch smoother), ``name``, ``mode``, ``dense``, ``notes`` and ``start_mode``;
+``config_<name>`` for every setting used (None stored as an empty array), ``eval_<name>`` for
 :attr:`RunResult.evaluation`, ``track_<name>`` for :attr:`RunResult.track_counts`, and
 ``status_names``, the name of each column of ``status_counts``. Codes are only appended, so a
-file of an earlier version (fewer columns, or no ``status_names``: the first codes) loads
-with zeros in the missing ones; its smoother runs counted the observations of dropped
-landmarks as ``ignored`` (they stay there: the file cannot tell them apart).
+file of an earlier version (fewer columns, or no ``status_names``: the first codes) loads with
+zeros in the missing ones; its smoother runs counted the observations of dropped landmarks as
+``ignored`` (the file cannot tell them apart).
 """
 
 from dataclasses import dataclass, field
@@ -44,9 +40,11 @@ class RunResult:
     dead_reckoning : ndarray, shape (T, 4, 4)
         The IMU-only trajectory, for comparison.
     nis, nis_dof : ndarray, shape (T,)
+        NaN (0) where there was no update.
     status_counts : ndarray of int, shape (T, len(STATUS_NAMES))
         Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
     step_seconds : ndarray, shape (T,)
+        Wall time of each step.
     config : dict
     imu_T_cam : ndarray, shape (4, 4)
         The calibration used (after any correction).
@@ -60,8 +58,8 @@ class RunResult:
     track_counts : dict of str -> int
         Joint SLAM with clones: :attr:`visla_edu.filters.JointSlam.track_counts` (empty otherwise).
     start_mode : str
-        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``, the
-        lowest objective of the three), else ``""``.
+        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``), else
+        ``""``.
     notes : str
         Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
     """
@@ -90,9 +88,9 @@ class RunResult:
     def status_totals(self):
         """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``.
 
-        With clones, the ``delayed`` observations of the tracks that were used or gated later
-        count as ``used`` or ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (tracks
-        too short, without a point in front of their cameras, or still open at the end).
+        With clones, the ``delayed`` observations of tracks used or gated later count as ``used`` or
+        ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (short, failed or still open
+        tracks).
         """
         totals = dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
         used, gated = (int(self.track_counts.get(k, 0)) for k in ("observations_used", "observations_gated"))
@@ -140,10 +138,7 @@ class RunResult:
 
 
 class RunArrays:
-    """Per-frame arrays of a run, filled one :class:`~visla_edu.filters.StepRecord` at a time.
-
-    The whole-run driver (:func:`run_filter`) and the stepper (:class:`visla_edu.stepper.Stepper`)
-    both keep their per-frame figures here.
+    """Per-frame arrays of a run (of :func:`run_filter` and the stepper), filled one StepRecord at a time.
 
     Parameters
     ----------
@@ -152,15 +147,8 @@ class RunArrays:
 
     Attributes
     ----------
-    world_T_imu : ndarray, shape (T, 4, 4)
-    pose_cov : ndarray, shape (T, 6, 6)
-    nis : ndarray, shape (T,)
-        NaN where there was no update.
-    nis_dof : ndarray of int, shape (T,)
-    status_counts : ndarray of int, shape (T, len(STATUS_NAMES))
-        Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
-    step_seconds : ndarray, shape (T,)
-        Wall time of each filter step.
+    world_T_imu, pose_cov, nis, nis_dof, status_counts, step_seconds
+        As :class:`RunResult`'s (:attr:`FIELDS`).
     """
 
     #: The arrays, in the order :class:`RunResult` lists them.
@@ -226,12 +214,11 @@ def _setting(array):
 
 
 def load_result(path):
-    """Load a :class:`RunResult` written by :func:`save_result`.
+    """Load a :class:`RunResult` written by :func:`save_result` (or ``visla-edu run --out``).
 
     Parameters
     ----------
     path : str or os.PathLike
-        The ``.npz`` that :func:`save_result` (or ``visla-edu run --out``) wrote.
 
     Returns
     -------
@@ -241,8 +228,8 @@ def load_result(path):
     Raises
     ------
     FileNotFoundError, ValueError, KeyError
-        As :func:`numpy.load` for a missing or broken file, or a file without the keys a
-        result has; a ValueError for statuses this version does not know (a newer file).
+        As :func:`numpy.load` for a missing or broken file, or a file without the keys a result
+        has; a ValueError for statuses this version does not know (a newer file).
     """
     with np.load(path, allow_pickle=False) as f:
         config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}

@@ -22,10 +22,7 @@ __all__ = ["WorkEstimate", "estimate_work", "divergence_hint", "WORK_LIMIT_BYTES
 #: update with a D-dimensional state and m observation rows costs ``D^2 (a + b m)`` seconds (the
 #: covariance update ``Sigma -= A^T A`` streams the D x D covariance and multiplies (D, m) by
 #: (m, D)); factorising and assembling an m x m innovation covariance ``c m^3 + d m^2``; every
-#: frame some milliseconds more. Estimated/measured time on 40-frame runs (a loaded 2-core
-#: machine): 0.7 to 2.5 for dense SLAM (strides 2 to 8, simulated and dataset 03), 0.8 for
-#: active-set SLAM and 2.8 for VIO with about 700 landmarks in view; dense SLAM on every
-#: landmark of dataset 03 (D = 15321) measured 2.2 s a frame against 3.3 s estimated.
+#: frame some milliseconds more. The estimates stay within a factor of 3 of the measured times.
 SECONDS_PER_ENTRY = 1e-8  # a
 SECONDS_PER_ENTRY_ROW = 2e-11  # b
 SECONDS_PER_ROW_CUBED = 4e-11  # c
@@ -52,11 +49,10 @@ class WorkEstimate:
         Largest state: ``6 + 3 n`` with n the landmarks in the joint state (SLAM), else 6.
     frames : int
     max_rows : int
-        Most observation rows of one update (3 per observation in SLAM, 4 in VIO).
+        Most observation rows of one update.
     peak_bytes : int
-        The largest matrices at once: in SLAM the covariance and the same-size product of its
-        update (``2 D^2 8`` bytes) and the (D, m) and (m, m) blocks of the update, in VIO the
-        innovation covariance and its factor.
+        The largest matrices at once: in SLAM the covariance and its update's same-size product
+        (``2 D^2 8`` bytes) and (D, m) and (m, m) blocks, in VIO the innovation covariance and factor.
     seconds : float
         See :data:`SECONDS_PER_ENTRY`.
     """
@@ -70,10 +66,7 @@ class WorkEstimate:
     seconds: float
 
     def over_limits(self, max_bytes=None, max_seconds=None):
-        """What exceeds the limits (default :data:`WORK_LIMIT_BYTES`, :data:`WORK_LIMIT_SECONDS`), as phrases.
-
-        Empty when the run is within them.
-        """
+        """What exceeds the limits (default :data:`WORK_LIMIT_BYTES`, :data:`WORK_LIMIT_SECONDS`), as phrases."""
         max_bytes = WORK_LIMIT_BYTES if max_bytes is None else max_bytes
         max_seconds = WORK_LIMIT_SECONDS if max_seconds is None else max_seconds
         over = []
@@ -94,17 +87,15 @@ class WorkEstimate:
 def estimate_work(dataset, mode=SLAM, config=None, dense=False):
     """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
 
-    The dense filter carries every (strided) landmark; the active set those whose track
-    spans the frame; both update with 3 rows per observation. VIO solves one 4-row block
-    per observation; mapping and dead reckoning work in 3x3 and 6x6 blocks (cheap).
+    The dense filter carries every (strided) landmark, the active set those whose track spans the
+    frame, both with 3 rows per observation; VIO solves a 4-row block per observation; mapping and
+    dead reckoning work in cheap 3x3 and 6x6 blocks. The smoothers: the joint EKF's estimate times
+    :data:`SMOOTHER_FACTOR`, plus their memory per observation.
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    mode : str
-    config : visla_edu.filters.FilterConfig, optional
-        Its ``landmark_stride`` decides the landmarks used.
-    dense : bool
+    dataset, mode, config, dense
+        As :func:`visla_edu.run.run_filter`; ``config.landmark_stride`` decides the landmarks used.
 
     Returns
     -------
@@ -153,12 +144,13 @@ def divergence_hint(dataset, config, frame=None):
     """The likely cause of a filter failure at ``frame``, as one sentence.
 
     Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`:
-    calibration, time stamps, velocities), else the step into ``frame`` and the settings.
+    calibration, time stamps, velocities), else the step into ``frame`` and then an angular rate
+    beyond a car's (deg/s given as rad/s?) or the settings.
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    config : visla_edu.filters.FilterConfig
+    dataset, config
+        As :func:`visla_edu.run.run_filter`.
     frame : int, optional
 
     Returns
