@@ -1,14 +1,10 @@
-"""Matplotlib views: top-down trajectory and map, covariance ellipses, image-plane view.
+"""Matplotlib views: top-down trajectory and map, covariance ellipses, image-plane view, NIS.
 
-All functions draw into a given ``Axes`` (or a new figure) and return it; nothing is shown
-or saved unless asked, so notebooks, the CLI and the widgets share them.
-
-Colours come from one colour-blind-safe palette, :data:`PALETTE` (Okabe and Ito's eight
-colours and a neutral grey), and every role has one style, :data:`STYLES` (estimate, dead
-reckoning, ground truth, smoother, window, landmarks...): trajectories differ in colour *and*
-line style, so they stay apart in greyscale and for every kind of colour blindness.
-:func:`course_style` makes matplotlib's own colour cycle (``"C0"``, ``"C1"``...) follow the
-palette, with a different line style per series, for the notebooks' own plots.
+Every function draws into a given ``Axes`` (or a new figure) and returns it; nothing is shown
+or saved unless asked, so notebooks, the CLI and the widgets share them. Every role has one
+style (:data:`STYLES`) from one colour-blind-safe palette (:data:`PALETTE`), trajectories
+differing in colour *and* line style, which keeps them apart in greyscale and for every kind
+of colour blindness; :func:`course_style` does the same for matplotlib's colour cycle.
 """
 
 
@@ -23,15 +19,13 @@ __all__ = ["PALETTE", "STYLES", "SERIES_COLORS", "SERIES_LINESTYLES", "series_st
 
 
 def figure_suffixes():
-    """File suffixes matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
-
-    ``.pgf`` is left out: it needs a LaTeX installation.
+    """Suffixes matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
 
     Returns
     -------
     tuple of str
-        Lower-case suffixes with the dot: the three above, then the other formats of
-        ``FigureCanvasBase.get_supported_filetypes()`` in alphabetical order.
+        Lower case with the dot, the rest of ``FigureCanvasBase.get_supported_filetypes()`` in
+        alphabetical order, without ``.pgf`` (it needs LaTeX).
     """
     from matplotlib.backend_bases import FigureCanvasBase
 
@@ -41,29 +35,23 @@ def figure_suffixes():
 
 
 def save_figure(fig, path, dpi=120):
-    """Save ``fig`` to ``path`` atomically (format from the suffix); return the absolute path.
-
-    The image is written to a temporary file and renamed over ``path``
-    (:func:`visla_edu._files.atomic_write`), so a failed save never leaves a broken image.
+    """Save ``fig`` to ``path`` atomically (a temporary file renamed over it); return the absolute path.
 
     Parameters
     ----------
     fig : matplotlib Figure
     path : str or os.PathLike
-        Target file; ``~`` is expanded. Its suffix (case-insensitive) is the format, one of
-        :func:`figure_suffixes`; no suffix saves a PNG under that name.
+        ``~`` is expanded. Its suffix (any case) is the format, one of :func:`figure_suffixes`;
+        no suffix saves a PNG under that name.
     dpi : float
-        Resolution of raster formats (dots per inch).
+        Resolution of raster formats.
 
     Returns
     -------
     pathlib.Path
-        The absolute path written.
 
     Raises
     ------
-    FileNotFoundError
-        The target's folder does not exist.
     ValueError
         ``path`` is a folder, or matplotlib does not know the suffix's format.
     """
@@ -114,7 +102,7 @@ SERIES_LINESTYLES = ("-", "--", "-.", ":", (0, (8, 3)), (0, (3, 1, 1, 1, 1, 1)),
 
 
 def series_style(index):
-    """Colour and line style of the ``index``-th series of a plot (cycling after eight).
+    """``{"color", "linestyle"}`` (``Axes.plot`` keywords) of the ``index``-th series, cycling after eight.
 
     Parameters
     ----------
@@ -123,18 +111,16 @@ def series_style(index):
     Returns
     -------
     dict
-        ``{"color": ..., "linestyle": ...}``, keyword arguments of ``Axes.plot``.
     """
     k = int(index) % len(SERIES_COLORS)
     return {"color": SERIES_COLORS[k], "linestyle": SERIES_LINESTYLES[k]}
 
 
 def course_style():
-    """Make matplotlib's colour cycle follow the course palette, with a line style per series.
+    """Make matplotlib's colour cycle :data:`SERIES_COLORS`, with :data:`SERIES_LINESTYLES`.
 
-    After this call ``"C0"``, ``"C1"``... are :data:`SERIES_COLORS` and successive ``plot``
-    calls on one Axes differ in colour and line style. It changes ``matplotlib.rcParams``
-    (call it once, at the top of a notebook); nothing happens at import.
+    Successive ``plot`` calls on one Axes then differ in colour and line style. It sets
+    ``matplotlib.rcParams`` (call it once, at the top of a notebook); nothing happens at import.
     """
     import matplotlib
     from cycler import cycler
@@ -182,26 +168,18 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
         NaN rows are skipped.
     ax : matplotlib Axes, optional
     label : str
-    color : matplotlib colour, optional
-        Of the estimate (default: ``STYLES["estimate"]``).
-    landmark_color : matplotlib colour, optional
-        Default: ``STYLES["landmarks"]`` (grey).
+    color, landmark_color : matplotlib colour, optional
+        Default: ``STYLES["estimate"]``, ``STYLES["landmarks"]``.
     reference : ndarray, shape (T, 4, 4), optional
-        A second trajectory (e.g. dead reckoning), drawn in ``STYLES["dead_reckoning"]``.
+        A second trajectory (e.g. dead reckoning), in ``STYLES["dead_reckoning"]``.
     reference_label : str
-        Legend entry of ``reference`` (unused without it).
     ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
-        True trajectory, drawn in :data:`GROUND_TRUTH_STYLE` (bluish green, dash-dot) with a
-        legend entry; it may cover fewer frames than the estimate.
+        In :data:`GROUND_TRUTH_STYLE`, with a legend entry; it may cover fewer frames than
+        the estimate. Anything else is a ValueError.
 
     Returns
     -------
     matplotlib Axes
-
-    Raises
-    ------
-    ValueError
-        ``ground_truth`` is neither a GroundTruth nor poses of shape (n, 4, 4).
     """
     ax = _axes(ax)
     if landmarks is not None:
@@ -254,10 +232,9 @@ def plot_result(result, path=None, ground_truth=None, title=None):
     ----------
     result : visla_edu.run.RunResult
     path : str or Path, optional
-        Save the figure there (format from the suffix, see :func:`figure_suffixes`; 120 dpi),
-        atomically (:func:`save_figure`).
+        Save the figure there (:func:`save_figure`).
     ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
-        Drawn in :data:`GROUND_TRUTH_STYLE` with a legend entry.
+        As in :func:`plot_trajectory_map`.
     title : str, optional
 
     Returns
@@ -285,7 +262,7 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
     z : ndarray, shape (k, 4)
         Observed ``[uL, vL, uR, vR]``.
     z_pred : ndarray, shape (k, 4), optional
-        Predicted pixels (NaN rows skipped); a line joins each prediction to its observation.
+        Predicted (NaN rows skipped), each joined to its observation by a line.
     status : ndarray of int, shape (k,), optional
         ``OBS_*`` codes (:mod:`visla_edu.codes`); gated observations are drawn as red crosses.
     image_size : (width, height)
@@ -314,8 +291,7 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
 
 
 def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
-    """Points of the ``n_sigma`` ellipses of many 2-D Gaussians at once (batched
-    :func:`covariance_ellipse`, e.g. for a ``LineCollection``).
+    """:func:`covariance_ellipse` of many 2-D Gaussians at once (e.g. for a ``LineCollection``).
 
     Parameters
     ----------
@@ -344,9 +320,8 @@ def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
 def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     """NIS per degree of freedom over time, with the ``probability`` band of ``chi2(dof)/dof``.
 
-    A consistent filter keeps NIS/dof inside the band (:func:`visla_edu.metrics.nis_band`)
-    about ``probability`` of the time; above it the filter is over-confident (noise too
-    small), below it too cautious.
+    A consistent filter stays inside it (:func:`visla_edu.metrics.nis_band`) about ``probability``
+    of the time; above it, it is over-confident (noise too small), below it too cautious.
 
     Parameters
     ----------

@@ -17,21 +17,18 @@ OUTLIER_KINDS = ("offset", "uniform")
 class SimulationConfig:
     """Every parameter of a simulated drive (defaults: the ``"course"`` preset).
 
-    Lengths in metres, times in seconds, angles in radians, pixels in pixels.
-    Pairs ``(lo, hi)`` are ranges sampled uniformly unless said otherwise.
+    Lengths in metres, times in seconds, angles in radians; a pair ``(lo, hi)`` is a range
+    sampled uniformly.
 
     Attributes
     ----------
     num_frames : int
-        T, number of time stamps (ignored by the stand-in: the file decides).
-    time_step, time_step_jitter : float
-        Mean step between time stamps and the standard deviation of its jitter.
-    start_time : float
-        First time stamp.
-    speed_range : (float, float)
-        Forward speed band; the speed is ``mid + half_width * tanh(smooth noise)``.
-    speed_timescale : float
-        Correlation time of the speed changes.
+        T (ignored by the stand-in: the file decides).
+    time_step, time_step_jitter, start_time : float
+        Mean step between time stamps, the standard deviation of its jitter, the first stamp.
+    speed_range, speed_timescale : (float, float), float
+        Forward speed ``mid + half_width * tanh(smooth noise)`` in the band; the noise's
+        correlation time.
     yaw_rate_sigma, yaw_timescale : float
         Gentle curves: smooth yaw-rate noise, its standard deviation and correlation time.
     turn_interval : float
@@ -47,70 +44,49 @@ class SimulationConfig:
     gyro_bias : (float, float, float)
         Constant bias added to the measured angular velocity.
     imu_lag : int
-        The recorded velocity sample ``t + imu_lag`` is the one that moves frame ``t`` to
-        ``t + 1`` (as on the KITTI raw drives, where it is 1): the measured velocities are the
-        true ones shifted, ``measured[k] = true[k - imu_lag]`` (edge samples repeated), plus
-        noise. 0 is the course's convention.
+        ``measured[k] = true[k - imu_lag]`` (edge samples repeated) + noise: sample ``t + imu_lag``
+        moves frame ``t`` to ``t + 1``. 1 on the KITTI raw drives; 0 is the course's convention.
     K, b, imu_T_cam : ndarray (3, 3), float, ndarray (4, 4), or None
         Calibration; None means :func:`default_rig` (stand-in: the calibration file).
-    reported_imu_T_cam : ndarray (4, 4) or None
-        The extrinsic the dataset *reports*, when it differs from the one the tracks were
-        simulated with (``imu_T_cam``), e.g. with flipped axes like course dataset 3's file;
-        the true one is kept in ``extra["simulated_imu_T_cam"]``. None: the true one.
-    image_size : (int, int)
-        Image width and height in pixels.
-    num_landmarks : int
-        Target number of landmark tracks M (the per-frame cap may remove a few).
-    candidate_factor : float
-        Landmarks placed per wanted track (some are never seen, or only once).
-    imu_height : float
-        Height of the IMU above the road.
-    ahead_range : (float, float)
-        Roadside landmarks sit this far along the road ahead of their anchor pose...
-    lateral_range : (float, float)
-        ...this far to the left or right of the path...
-    height_range : (float, float)
-        ...and this high above the road.
-    far_share : float
-        Share of far landmarks (buildings, trees, hills): tiny disparity.
-    far_range, far_height_range : (float, float)
-        Far landmarks: distance from the anchor pose, height above the road.
-    far_bearing : float
-        Largest bearing (left or right of straight ahead) of a far landmark.
-    scene_speed_floor : float
-        The scene changes by ``distance + floor * time`` per step: new landmarks appear
-        and tracks are lost in proportion to it.
-    depth_range : (float, float)
-        A landmark is visible only at depths within this range (m, camera z).
-    track_loss_probability : float
-        Probability that the detector loses a track per frame of average scene change
-        (exponential lifetimes in scene-change units, mean ``1 / p`` frames, plus
-        ``min_track_length`` guaranteed frames).
-    min_track_length : int
-        Shorter tracks are dropped.
-    max_start_delay : int
-        Frames after its appearance a landmark may become visible, else it is dropped.
-    max_observations_per_frame : int
-        Cap on the observations of one frame; the farthest are dropped.
-    pixel_sigma : float
-        Standard deviation of the pixel noise on each of ``[uL, vL, uR, vR]``.
-    outlier_share : float
-        Share of landmark tracks that are gross outliers.
-    outlier_kind : {"offset", "uniform"}
-        ``"offset"``: an outlier track is the true track shifted by a constant offset (see
-        ``outlier_offset_range``). ``"uniform"``: every observation of an outlier track is
-        random pixels, ``uL``, ``uR`` uniform in the image width with ``uL > uR``, ``vL``
-        uniform in its height, ``vR = vL`` plus pixel noise (a match that still passes the
-        rectified-stereo check).
-    outlier_offset_range : (float, float)
-        Size of an outlier's constant offset: both images (wrong feature), or the right
-        image's u only (wrong stereo match), half of the outliers each.
-    nonpositive_disparity_share : float
-        Share of observations with ``uL - uR <= 0``: noise on far points, topped up by
-        forcing the farthest inlier observations to disparities in ``(-1, 0]``.
     K_right : ndarray (3, 3) or None
         The right camera's own intrinsics (a rig with two, as a 2025+ file describes:
         :class:`visla_edu.camera.StereoCamera`); None: the same as ``K``.
+    reported_imu_T_cam : ndarray (4, 4) or None
+        The extrinsic the dataset *reports*, when it differs from the simulated ``imu_T_cam``
+        (e.g. flipped axes like dataset 3's); the true one is kept in
+        ``extra["simulated_imu_T_cam"]``. None: the true one.
+    image_size : (int, int)
+        Width and height.
+    num_landmarks, candidate_factor : int, float
+        Target number of tracks M (the per-frame cap may remove a few); landmarks placed per
+        wanted track (some are never seen, or only once).
+    imu_height, ahead_range, lateral_range, height_range : float, (float, float) x 3
+        A roadside landmark sits this far along the road ahead of its anchor pose, to the left
+        or right of the path, and above the road (``imu_height`` below the IMU).
+    far_share : float
+        Share of far landmarks (buildings, trees, hills): tiny disparity.
+    far_range, far_height_range, far_bearing : (float, float), (float, float), float
+        Far landmarks: distance from the anchor pose, height above the road, largest bearing
+        left or right of straight ahead.
+    scene_speed_floor, depth_range, track_loss_probability : float, (float, float), float
+    min_track_length, max_start_delay, max_observations_per_frame : int
+        The track model's (:mod:`visla_edu.simulate`, steps 1-3); the lifetimes are exponential
+        in scene-change units, mean ``1 / track_loss_probability`` frames, plus
+        ``min_track_length`` guaranteed frames.
+    pixel_sigma : float
+        Standard deviation of the noise on each of ``[uL, vL, uR, vR]``.
+    outlier_share : float
+        Share of landmark tracks that are gross outliers.
+    outlier_kind : {"offset", "uniform"}
+        ``"offset"``: the true track shifted by a constant offset (``outlier_offset_range``).
+        ``"uniform"``: random pixels at every observation, ``uL > uR`` uniform in the width,
+        ``vL`` in the height, ``vR = vL`` + noise (a match that passes the rectified-stereo check).
+    outlier_offset_range : (float, float)
+        Size of the offset: in both images (wrong feature), or the right image's u only (wrong
+        stereo match), half of the outliers each.
+    nonpositive_disparity_share : float
+        Share of observations with ``uL - uR <= 0``: noise on far points, topped up by forcing
+        the farthest inlier observations to disparities in ``(-1, 0]``.
     """
 
     num_frames: int = 1010
@@ -217,13 +193,12 @@ PRESET_NAMES = {"tiny": "sim-tiny", "small": "sim-small", "course": "sim"}
 
 
 def make_config(preset="course", **overrides):
-    """The configuration of a preset with some fields replaced.
+    """The configuration of a preset with some fields replaced, validated.
 
     Parameters
     ----------
     preset : {"tiny", "small", "course"}
-        ``"tiny"``: 60 frames, ~150 landmarks (unit tests); ``"small"``: 300 frames,
-        ~1000 landmarks; ``"course"``: dataset-3 scale, 1010 frames, ~5000 landmarks.
+        A key of :data:`PRESETS`: ``"tiny"`` for unit tests, ``"course"`` at dataset-3 scale.
     **overrides
         Any :class:`SimulationConfig` field.
 
@@ -245,8 +220,8 @@ def default_rig():
     """A KITTI-like stereo rig (made up for visla-edu, not taken from any course file).
 
     Left camera: ``fsu = fsv = 550`` px, principal point ``(680, 240)``, 1400x500 images,
-    baseline 0.6 m, mounted 1.5 m ahead of and 0.6 m above the IMU, looking forward
-    (camera x = -IMU y, camera y = -IMU z, camera z = IMU x) with a ~1 degree misalignment.
+    baseline 0.6 m, 1.5 m ahead of and 0.6 m above the IMU, looking forward (camera x = -IMU y,
+    camera y = -IMU z, camera z = IMU x) with a ~1 degree misalignment.
 
     Returns
     -------

@@ -1,7 +1,5 @@
-"""Whole simulated drives with ground truth.
-
-:func:`simulate_drive` invents the motion; :func:`simulate_along_drive` takes a given true
-motion (e.g. a real IMU drive). Both place landmarks, simulate tracks and add IMU noise.
+"""Whole simulated drives with ground truth: :func:`simulate_drive` invents the motion,
+:func:`simulate_along_drive` takes a given one (the pipeline: :mod:`visla_edu.simulate`).
 """
 
 import math
@@ -62,19 +60,17 @@ def simulate_drive(preset="course", seed=0, **overrides):
     Parameters
     ----------
     preset : {"tiny", "small", "course"}
-        Scale, see :data:`PRESETS` (``"course"``: 1010 frames, ~5000 landmarks,
-        ~65,000 observations, like course dataset 3).
+        Scale, see :func:`make_config` (``"course"``: ~65,000 observations, like dataset 3).
     seed : int
-        Same seed, same arrays. Motion, landmarks, tracks and IMU noise draw from
-        separate streams, so e.g. changing ``pixel_sigma`` keeps the drive and the map.
+        Motion, landmarks, tracks and IMU noise draw from separate streams, so e.g. changing
+        ``pixel_sigma`` keeps the drive and the map.
     **overrides
-        :class:`SimulationConfig` fields, including ``K``, ``b`` and ``imu_T_cam``.
+        :class:`SimulationConfig` fields.
 
     Returns
     -------
     Dataset
-        Named ``"sim"`` (``"sim-small"``, ``"sim-tiny"``), with ``ground_truth`` and
-        ``extra = {"preset", "seed", "config"}``.
+        Named ``"sim"`` (``"sim-small"``, ``"sim-tiny"``); ``extra = {"preset", "seed", "config"}``.
     """
     config = make_config(preset, **overrides)
     time_stamps, true_v, true_w = simulate_motion(config, _streams(seed)[0])
@@ -91,12 +87,7 @@ def simulate_drive(preset="course", seed=0, **overrides):
 
 def simulate_along_drive(time_stamps, linear_velocity, angular_velocity, config, calibration, seed=0,
                          **fields):
-    """A drive with ground truth simulated along given true body velocities.
-
-    The true poses are the velocities dead-reckoned (:func:`visla_edu.motion.dead_reckon`,
-    ``world`` = the IMU frame at the first time stamp); landmarks are placed along them and
-    tracked by the stereo rig as in :func:`simulate_drive`; the measured IMU is the true
-    velocities plus the noise and gyro bias of ``config``.
+    """A drive with ground truth simulated along given true body velocities (dead-reckoned poses).
 
     Parameters
     ----------
@@ -105,16 +96,13 @@ def simulate_along_drive(time_stamps, linear_velocity, angular_velocity, config,
     linear_velocity, angular_velocity : array_like, shape (T, 3)
         True body-frame velocities; the step ``t -> t+1`` uses sample ``t``.
     config : SimulationConfig
-        Landmark, track and noise settings (its motion fields and ``num_frames`` are unused).
+        Its motion fields and ``num_frames`` are unused.
     calibration : tuple
-        ``(K (3, 3), b, imu_T_cam (4, 4))``, used where ``config.K``, ``config.b`` or
-        ``config.imu_T_cam`` is None.
+        ``(K (3, 3), b, imu_T_cam (4, 4))``, used where the config's is None.
     seed : int
-        Landmarks, tracks and IMU noise draw from the same streams as
-        :func:`simulate_drive` with this seed.
+        Landmarks, tracks and IMU noise draw from the streams of :func:`simulate_drive`'s seed.
     **fields
-        Remaining :class:`~visla_edu.dataset.Dataset` fields: ``name``, ``source``, and
-        optionally ``label``, ``extra``.
+        :class:`~visla_edu.dataset.Dataset` fields: ``name``, ``source``, optionally ``label``, ``extra``.
 
     Returns
     -------

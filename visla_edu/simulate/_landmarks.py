@@ -6,24 +6,10 @@ __all__ = ["place_landmarks", "scene_change", "default_time_stamps", "check_pose
 
 
 def scene_change(world_T_imu, time_stamps, config):
-    """How much the view changes per step: distance + ``scene_speed_floor`` * time, shape (T-1,).
+    """Scene change per step over its mean, (T-1,), of poses (T, 4, 4) and stamps (T,).
 
-    Normalised to mean 1 (all ones when every change is 0: a car that never moves with
-    ``scene_speed_floor = 0``). New features appear and tracks are lost at rates proportional
-    to it, so a stopped car keeps its features.
-
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (T, 4, 4)
-        True IMU poses.
-    time_stamps : ndarray, shape (T,)
-    config : SimulationConfig
-        Its ``scene_speed_floor`` (m/s).
-
-    Returns
-    -------
-    ndarray, shape (T - 1,)
-        ``|p_{t+1} - p_t| + scene_speed_floor (t_{t+1} - t_t)``, divided by its mean.
+    ``|p_{t+1} - p_t| + scene_speed_floor (t_{t+1} - t_t)``; all ones when every change is 0 (a car
+    that never moves, ``scene_speed_floor = 0``).
     """
     step_len = np.linalg.norm(np.diff(world_T_imu[:, :3, 3], axis=0), axis=1)
     change = step_len + config.scene_speed_floor * np.diff(time_stamps)
@@ -31,25 +17,7 @@ def scene_change(world_T_imu, time_stamps, config):
 
 
 def default_time_stamps(time_stamps, T, config):
-    """``time_stamps`` checked to have shape (T,), or uniform steps of ``config.time_step`` if None.
-
-    Parameters
-    ----------
-    time_stamps : array_like, shape (T,), or None
-    T : int
-    config : SimulationConfig
-
-    Returns
-    -------
-    ndarray, shape (T,)
-        ``time_stamps`` as float, or ``config.time_step * [0, 1, ..., T - 1]`` (starting at 0,
-        not at ``config.start_time``).
-
-    Raises
-    ------
-    ValueError
-        ``time_stamps`` does not have shape (T,).
-    """
+    """``time_stamps`` as floats checked to be (T,), or ``config.time_step * arange(T)`` (from 0) if None."""
     if time_stamps is None:
         return config.time_step * np.arange(T)
     stamps = np.asarray(time_stamps, dtype=float)
@@ -95,22 +63,15 @@ def _far_points(world_T_imu, anchor, config, rng):
 
 
 def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):
-    """Place landmarks along a true trajectory.
+    """Place landmarks along a true trajectory, each anchored to a frame (the track model's step 1).
 
-    Each landmark gets an anchor frame (spread over the drive in proportion to distance
-    travelled plus ``scene_speed_floor`` times elapsed time, with a burst of about one
-    mean track lifetime's worth at frame 0).
-    A share ``1 - far_share`` stands beside the road ``ahead_range`` metres along the path
-    ahead of its anchor pose, ``lateral_range`` to the left or right, ``height_range``
-    above the road (the road is ``imu_height`` below the IMU, in the local body frame);
-    the rest are far points ``far_range`` metres in front of the anchor pose.
+    A share ``1 - far_share`` stands beside the road ahead of its anchor pose, the rest are far
+    points in front of it (the ranges of :class:`SimulationConfig`, in the anchor's body frame).
 
     Parameters
     ----------
     world_T_imu : array_like, shape (T, 4, 4)
-        True IMU poses.
     num_landmarks : int
-        n, the number of landmarks to place.
     config : SimulationConfig
     rng : numpy.random.Generator
     time_stamps : array_like, shape (T,), optional
@@ -118,9 +79,8 @@ def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):
 
     Returns
     -------
-    landmarks : ndarray, shape (n, 3)
-        World positions.
-    appear : ndarray of int, shape (n,)
+    landmarks : ndarray, shape (num_landmarks, 3)
+    appear : ndarray of int, shape (num_landmarks,)
         Anchor frames: a landmark's track may start at this frame or a few later.
     """
     world_T_imu = check_poses(world_T_imu, "place_landmarks")
@@ -136,25 +96,7 @@ def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):
 
 
 def check_poses(world_T_imu, where):
-    """``world_T_imu`` as a float array of shape (T, 4, 4), T >= 2; ``where`` names the caller.
-
-    Only the shape is checked (not that the poses are rigid or finite).
-
-    Parameters
-    ----------
-    world_T_imu : array_like, shape (T, 4, 4)
-    where : str
-        Starts the error message.
-
-    Returns
-    -------
-    ndarray, shape (T, 4, 4)
-
-    Raises
-    ------
-    ValueError
-        Another shape, or fewer than 2 poses.
-    """
+    """``world_T_imu`` as floats, shape (T, 4, 4) with T >= 2 (only the shape is checked), else a ValueError."""
     poses = np.asarray(world_T_imu, dtype=float)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) < 2:
         raise ValueError(f"{where}: world_T_imu must have shape (T, 4, 4) with T >= 2, got {poses.shape}")

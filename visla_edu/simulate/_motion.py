@@ -47,11 +47,7 @@ def _time_stamps(config, rng):
 
 
 def simulate_motion(config, rng):
-    """True time stamps and body velocities of a car-like drive.
-
-    Forward speed varies smoothly within ``speed_range``; the yaw rate is smooth noise
-    plus a few turns; roll and pitch stay within about ``roll_pitch_amplitude``; lateral
-    and vertical velocities are near zero (body x forward, y left, z up).
+    """True time stamps and body velocities (x forward, y left, z up) of a car-like drive.
 
     Parameters
     ----------
@@ -79,17 +75,13 @@ def simulate_motion(config, rng):
     return t, linear, angular
 
 def add_imu_noise(linear_velocity, angular_velocity, config, rng):
-    """Measured IMU velocities: true, recorded with a lag, + white noise (+ constant gyro bias).
-
-    ``measured[k] = true[k - imu_lag] + noise`` (:func:`lag_samples`), so the sample
-    ``t + imu_lag`` is the one that moves frame ``t`` to ``t + 1``.
+    """Measured IMU velocities: ``lag_samples(true, imu_lag)`` + white noise (+ ``gyro_bias``).
 
     Parameters
     ----------
     linear_velocity, angular_velocity : ndarray, shape (T, 3)
         True velocities; the step ``t -> t+1`` uses sample ``t``.
     config : SimulationConfig
-        ``linear_velocity_sigma``, ``angular_velocity_sigma``, ``gyro_bias``, ``imu_lag``.
     rng : numpy.random.Generator
 
     Returns
@@ -104,21 +96,18 @@ def add_imu_noise(linear_velocity, angular_velocity, config, rng):
 
 
 def lag_samples(samples, lag):
-    """Samples recorded ``lag`` steps late: ``out[k] = samples[clip(k - lag, 0, T - 1)]``, shape (T, ...).
+    """Samples recorded ``lag`` steps late (negative: early), ``out[k] = samples[clip(k - lag, 0, T - 1)]``.
 
-    The inverse of :func:`visla_edu.motion.select_twists` with the same ``lag`` (away from the ends).
+    The inverse of :func:`visla_edu.motion.select_twists` with the same ``lag``, away from the ends.
 
     Parameters
     ----------
     samples : array_like, shape (T, ...)
-        E.g. the true velocities (T, 3).
     lag : int
-        Steps of delay; negative values shift the other way.
 
     Returns
     -------
     ndarray, shape (T, ...)
-        The edge samples are repeated.
     """
     samples = np.asarray(samples)
     index = np.clip(np.arange(len(samples)) - int(lag), 0, len(samples) - 1)

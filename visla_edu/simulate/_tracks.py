@@ -19,13 +19,13 @@ class SimulatedTracks:
     Attributes
     ----------
     landmarks : ndarray, shape (M, 3)
-        True positions of the tracked landmarks, id order (by first observation frame).
+        True positions of the tracked landmarks, in id order (by first observation frame).
     source_index : ndarray of int, shape (M,)
         Row of each landmark in the ``landmarks`` given to :func:`simulate_tracks`.
     frame_ptr : ndarray of int, shape (T + 1,)
     obs_ids : ndarray of int, shape (N,)
     obs_z : ndarray, shape (N, 4)
-        Measured pixels ``[uL, vL, uR, vR]``, frame-major, ids increasing within a frame.
+        Measured pixels, frame-major, ids increasing within a frame.
     outlier : ndarray of bool, shape (M,)
         Tracks corrupted on purpose.
     """
@@ -57,11 +57,10 @@ def _visible(q, Ks, config):
 
 
 def _march(cam_T_world, landmarks, appear, clock, budget, Ks, config):
-    """Follow every landmark from its appearance frame until its track ends.
+    """Follow every landmark from its appearance frame until its track ends (not visible, or the
+    detector ``clock`` (T,) advanced by its ``budget`` (n,) after ``min_track_length`` frames).
 
-    A track ends when the landmark is no longer visible, or (after ``min_track_length``
-    frames) when the detector ``clock`` (T,) has advanced by the track's ``budget`` (n,).
-    Returns the observations as ``(landmark row, frame, q)``, shapes (N,), (N,), (N, 3).
+    Returns the observations ``(landmark row, frame, q)``, shapes (N,), (N,), (N, 3).
     """
     T = len(cam_T_world)
     start = np.full(len(landmarks), -1)
@@ -136,17 +135,7 @@ def _select_tracks(rows, frames, q, n_candidates, max_landmarks, config, rng):
 
 
 def _outlier_offsets(num_landmarks, config, rng):
-    """Outlier tracks and their constant pixel offsets.
-
-    Half are a wrong feature (the same offset in both images), half a wrong stereo match
-    (the right image's u shifted along the epipolar line).
-
-    Returns
-    -------
-    offsets : ndarray, shape (M, 4)
-        Zero rows for inliers.
-    outlier : ndarray of bool, shape (M,)
-    """
+    """``offsets`` (M, 4), zero for inliers, and ``outlier`` (M,) bool: wrong features, wrong matches."""
     outlier = np.zeros(num_landmarks, dtype=bool)
     n_out = int(round(config.outlier_share * num_landmarks))
     outlier[rng.choice(num_landmarks, size=n_out, replace=False)] = True
@@ -221,25 +210,19 @@ def _renumber(rows, frames, n_candidates):
 
 def simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng, appear=None,
                     max_landmarks=None, time_stamps=None):
-    """Simulated stereo feature tracks of known landmarks seen from known poses.
-
-    See the module docstring for the track model (appearance, visibility, random loss,
-    per-frame cap, ids by first frame, pixel noise, outliers, non-positive disparities).
+    """Simulated stereo feature tracks of known landmarks seen from known poses (the track model).
 
     Parameters
     ----------
     world_T_imu : array_like, shape (T, 4, 4)
-        True IMU poses.
     landmarks : array_like, shape (n, 3)
-        Candidate landmark positions (world); those never tracked are left out.
-    K : array_like, shape (3, 3)
-    b : float
-    imu_T_cam : array_like, shape (4, 4)
+        Candidate world positions; those never tracked are left out.
+    K, b, imu_T_cam : array_like (3, 3), float, array_like (4, 4)
+        The rig (:class:`visla_edu.camera.StereoCamera`, with ``config.K_right``).
     config : SimulationConfig
     rng : numpy.random.Generator
     appear : array_like of int, shape (n,), optional
-        Frame from which each landmark may be detected (default 0: from its first
-        visible frame).
+        Frame from which each landmark may be detected (default 0).
     max_landmarks : int, optional
         Keep a random subset of at most this many tracks.
     time_stamps : array_like, shape (T,), optional
@@ -248,7 +231,7 @@ def simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng, appear
     Returns
     -------
     SimulatedTracks
-        With M <= n tracks and N observations.
+        M <= n tracks, N observations.
     """
     world_T_imu = check_poses(world_T_imu, "simulate_tracks")
     landmarks = np.asarray(landmarks, dtype=float).reshape(-1, 3)

@@ -9,22 +9,18 @@ world frame) and landmarks ``m_j`` (world xyz)::
 with the stereo model ``h`` of :mod:`visla_edu.camera`, ``V = sigma_pixel^2 I4``,
 ``W_t = tau_t^2 diag(sigma_v^2 I3, sigma_w^2 I3)`` (:func:`visla_edu.motion.motion_noise`),
 the twist ``u_t = [v; w]`` of the step ``t -> t+1`` (:func:`visla_edu.motion.select_twists`)
-and a robust loss ``rho``. Gauss-Newton / Levenberg-Marquardt in the perturbations of
-:mod:`visla_edu.lie`; the landmarks are eliminated by the Schur
-complement and the reduced pose system is solved by a block envelope Cholesky factor, which
-also gives the marginal covariances.
+and a robust loss ``rho`` (:func:`robust_loss`). Levenberg-Marquardt in the perturbations of
+:mod:`visla_edu.lie`; the landmarks are eliminated by the Schur complement and the reduced
+pose system is solved by a block envelope Cholesky factor, which also gives the marginals.
 
 * :func:`smooth` -- the batch smoother over the whole drive, started from a trajectory
   (the EKF's, or dead reckoning) and optionally a map; rounds of outlier rejection.
-* :func:`smooth_window` -- the fixed-lag sliding window (the last ``window_size`` frames),
-  frame by frame, the real-time middle ground between the filter and the batch.
+* :func:`smooth_window` -- the fixed-lag sliding window, the real-time middle ground
+  between the filter and the batch.
 
-Both return a :class:`SmootherResult` (trajectory, map, marginal covariances, per-iteration
-history, rejection counts, per-observation status in the filters' codes, :mod:`visla_edu.codes`,
-timing); :class:`SmootherConfig` holds every setting and validates it.
-:func:`normal_equations` gives the full sparse Gauss-Newton
-system of the batch problem at a state (for teaching: notebook 13's spy plot and Schur
-complement; the smoothers never form it).
+Both return a :class:`SmootherResult`; :class:`SmootherConfig` holds every setting.
+:func:`normal_equations` gives the full sparse Gauss-Newton system at a state (for teaching:
+notebook 13's spy plot and Schur complement; the smoothers never form it).
 
     >>> from visla_edu import data, run, smoother
     >>> ds = data.load("sim-tiny")
@@ -33,14 +29,11 @@ complement; the smoothers never form it).
     >>> result.world_T_imu.shape == (ds.num_frames, 4, 4)
     True
 
-Modules (private; the public names are re-exported here): ``_config``
-(:class:`SmootherConfig`), ``_factors`` (the motion residual and its Jacobians, robust losses),
-``_problem`` (observations and structure), ``_envelope`` (the block envelope Cholesky, solve and
-selected inverse), ``_normal`` (linearisation, the Schur step, marginals), ``_result``
-(:class:`SmootherResult`), ``_batch`` (:func:`smooth`, :func:`normal_equations`), ``_window``
-(:func:`smooth_window`). The reprojection factor and its Jacobians are the camera's
-(:func:`visla_edu.camera.stereo_projection`, re-exported here as ``reprojection``), the SE(3)
-right Jacobians lie's (re-exported for notebooks 13-14).
+Modules (private; the public names are re-exported here): ``_config``, ``_factors`` (motion
+residual, robust losses), ``_problem``, ``_envelope`` (the block envelope Cholesky),
+``_normal`` (linearisation, Schur step, marginals), ``_result``, ``_batch``, ``_window``. The
+reprojection factor is the camera's (:func:`visla_edu.camera.stereo_projection`, re-exported
+as ``reprojection``), the SE(3) right Jacobians lie's (re-exported for notebooks 13-14).
 """
 
 from visla_edu.smoother._batch import NormalEquations, normal_equations, smooth, start_cost

@@ -1,20 +1,19 @@
 """The batch smoother: Levenberg-Marquardt over all poses and landmarks, with outlier rounds.
 
 One round is Levenberg-Marquardt on the robust cost (IRLS weights refreshed at every
-accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's rule).
-A landmark that a step would bring behind a camera observing it (no finite cost) is dropped
-on the spot: kept, it would force the damping up and shrink every step. After a round,
-observations whose squared whitened error exceeds the chi-square (4 dof) quantile are
-rejected, landmarks left with too few observations, too close to a camera or too far are
-dropped, and the next round starts from the current estimate. Rounds followed by a rejection
-are rough (100 times the function tolerance, half the iterations): they only have to
-separate outliers from inliers. The first pose is held: it defines the world frame.
+accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's rule). A
+landmark that a step would bring behind a camera observing it is dropped on the spot: kept,
+it would force the damping up and shrink every step. After a round, outliers are rejected
+(:func:`reject_outliers`), landmarks dropped (:func:`drop_landmarks`), and the next round
+starts from the current estimate. Rounds followed by a rejection are rough (:data:`ROUGH`,
+:data:`ROUGH_ITERATIONS`): they only have to separate outliers from inliers.
+
+The helpers take a :class:`~._problem.Problem`, ``world_T_imu`` (T, 4, 4) by dataset frame
+and ``landmarks`` (L, 3), the problem's, in its local order.
 
 Measured on simulated drives (preset "small", 5% outlier tracks, seeds 0-4, from the EKF):
-one rejection round gives the same ATE as two (0.078/0.199/0.094/0.518/0.172 m against
-0.078/0.193/0.095/0.532/0.168 m) with fewer iterations; capping the rough round at half the
-iterations costs nothing on four seeds and 0.17 -> 0.25 m on seed 4, and saves a quarter of
-dataset 03's time (its 20 s whole-process budget).
+one rejection round gives the ATE of two with fewer iterations; halving the rough round's
+iterations costs only seed 4 (0.17 -> 0.25 m) and saves a quarter of dataset 03's time.
 """
 
 import time
@@ -47,23 +46,7 @@ ROUGH_ITERATIONS = 2
 
 
 def motion_information(tau, config):
-    """Diagonal of ``W_t^{-1/2}`` for each step: ``1 / (tau_t sigma)``, shape (K, 6).
-
-    With ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` (:func:`visla_edu.motion.motion_noise`),
-    the whitened motion residual is ``W_t^{-1/2} e_t``.
-
-    Parameters
-    ----------
-    tau : array_like, shape (K,)
-        The steps' durations (s).
-    config : SmootherConfig
-        Its :attr:`~SmootherConfig.velocity_sigmas` ``[sigma_v (3); sigma_w (3)]``.
-
-    Returns
-    -------
-    ndarray, shape (K, 6)
-        ``1 / (tau_t sigma_i)``, linear axes first.
-    """
+    """``1 / (tau_t sigma)``, the diagonal of ``W_t^{-1/2}`` (linear axes first), (K, 6), for ``tau`` (K,) s."""
     return 1.0 / (np.asarray(tau)[:, None] * config.velocity_sigmas)
 
 
@@ -75,37 +58,13 @@ def _state_norm(problem, world_T_imu, landmarks):
 
 def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_index=0, max_iterations=None,
                         function_tolerance=None, final_linearization=True, stops=None):
-    """Minimise the robust cost of ``problem`` from the given state.
+    """One round: minimise the robust cost of ``problem`` from the given state.
 
-    Parameters
-    ----------
-    problem : Problem
-    world_T_imu : ndarray, shape (T, 4, 4)
-    landmarks : ndarray, shape (L, 3)
-        The problem's landmarks (local order).
-    config : SmootherConfig
-        Stopping rules and the first damping.
-    history : dict of list
-        Appended to, one record per iteration (see ``HISTORY_FIELDS``).
-    round_index : int
-    max_iterations : int, optional
-        Default ``config.max_iterations``.
-    function_tolerance : float, optional
-        Default ``config.function_tolerance``.
-    final_linearization : bool
-        Relinearise after a step accepted in the last allowed iteration (for covariances);
-        without it the returned ``lin`` may be from the state before that step.
-    stops : list of str, optional
-        Appended to: why the iterations stopped, one of :data:`~._result.STOP_REASONS`.
-
-    Returns
-    -------
-    world_T_imu, landmarks : ndarray
-        The estimate.
-    lin : Linearization
-        At the estimate (for covariances).
-    factor : EnvelopeFactor or None
-        Of the last step solved (None if none was).
+    Appends one record per iteration to ``history`` (:data:`~._result.HISTORY_FIELDS`) and why it
+    stopped to ``stops`` (:data:`~._result.STOP_REASONS`); ``max_iterations``, ``function_tolerance``
+    default to the config's. Returns ``(world_T_imu, landmarks, lin, factor)``: the estimate, its
+    :class:`~._normal.Linearization` (without ``final_linearization``, maybe from before a step
+    accepted in the last iteration), the :class:`~._envelope.EnvelopeFactor` of the last step or None.
     """
     lin = _normal.linearize(problem, world_T_imu, landmarks)
     damping, nu = config.initial_damping, 2.0
@@ -158,27 +117,7 @@ def _record(history, round_index, cost, step_norm, accepted, damping):
 
 
 def reject_outliers(problem, world_T_imu, landmarks, probability):
-    """Deactivate observations with ``s > chi2.ppf(probability, 4)``.
-
-    ``s = |h - z|^2 / sigma^2`` (:func:`~._normal.observation_errors`); ``problem.active`` is
-    cleared in place for the rejected ones.
-
-    Parameters
-    ----------
-    problem : Problem
-        Modified in place.
-    world_T_imu : ndarray, shape (T, 4, 4)
-        IMU poses in the world frame.
-    landmarks : ndarray, shape (L, 3)
-        The problem's landmarks (local order).
-    probability : float
-        Chi-square (4 dof) quantile of the threshold; 1 or more rejects nothing.
-
-    Returns
-    -------
-    ndarray of bool, shape (N,)
-        The observations rejected now.
-    """
+    """Clear ``problem.active`` where ``s > chi2.ppf(probability, 4)`` (not if ``probability >= 1``): (N,) bool."""
     bad = np.zeros(len(problem.active), dtype=bool)
     if probability < 1:
         s, _ = _normal.observation_errors(problem, world_T_imu, landmarks)
@@ -188,30 +127,13 @@ def reject_outliers(problem, world_T_imu, landmarks, probability):
 
 
 def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
-    """Drop active landmarks with too few active observations, too close to a camera, or too far.
+    """Drop active landmarks behind a camera, too far, or with too few active observations, in place.
 
-    Too far: the largest predicted disparity ``fsu b / depth`` over its active observations is
-    below ``min_disparity / 2``.
-
-    Too close: an active observation with depth below ``problem.min_depth`` (or not finite).
-    Each landmark counts once, checked in that order: behind the camera, too far, too few.
-    ``problem.landmark_active`` and ``problem.active`` are cleared in place.
-
-    Parameters
-    ----------
-    problem : Problem
-        Modified in place; ``min_depth`` and ``min_disparity`` come from it.
-    world_T_imu : ndarray, shape (T, 4, 4)
-        IMU poses in the world frame.
-    landmarks : ndarray, shape (L, 3)
-        The problem's landmarks (local order).
-    min_observations : int
-        Fewest active observations an active landmark keeps.
-
-    Returns
-    -------
-    dict of int
-        Landmarks dropped: ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far``.
+    Checked in that order, each landmark counted once: an active observation with a depth below
+    ``problem.min_depth`` (or not finite); a largest predicted disparity ``fsu b / depth`` below
+    ``problem.min_disparity / 2``; fewer than ``min_observations``. Clears
+    ``problem.landmark_active`` and ``problem.active``; returns the counts
+    ``landmarks_behind_camera``, ``landmarks_too_far``, ``landmarks_too_few``.
     """
     if problem.num_landmarks == 0:
         return _drop_counts(0, 0, 0)
@@ -251,43 +173,31 @@ def _setup(dataset, world_T_imu, landmarks, camera, config):
 
 
 def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None, blas_threads=1):
-    """Batch smoother: the course objective over all poses and landmarks.
+    """Batch smoother: the course objective (:mod:`visla_edu.smoother`) over all poses and landmarks.
 
-    Minimises ``sum_obs rho(|z - h(T_t, m_j)|^2_V) + sum_t |log((T_t exp(tau_t u_t^))^{-1} T_{t+1})|^2_{W_t}``
-    by Levenberg-Marquardt on SE(3) with the landmark Schur complement, in
-    ``config.rejection_rounds + 1`` rounds with outlier rejection in between (see the
-    module docstring), then computes the marginal covariances.
+    ``config.rejection_rounds + 1`` rounds of Levenberg-Marquardt on SE(3) with the landmark
+    Schur complement, outlier rejection in between (module docstring), then the marginals.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     world_T_imu : array_like, shape (T, 4, 4)
-        Initial trajectory, e.g. the EKF's (``RunResult.world_T_imu``) or dead reckoning.
-        Its first pose is held.
+        Initial trajectory, e.g. ``RunResult.world_T_imu`` or dead reckoning; the first pose is held.
     landmarks : array_like, shape (M, 3), optional
-        Initial map (e.g. ``RunResult.landmarks``); NaN rows and a missing map are
-        triangulated from each landmark's largest-disparity observation (an infinite entry is
-        a ValueError).
+        Initial map (e.g. ``RunResult.landmarks``); NaN rows or None: :func:`triangulate_landmarks`;
+        an infinite entry is a ValueError.
     imu_T_cam : array_like, shape (4, 4), optional
-        Calibration to use (e.g. ``RunResult.imu_T_cam``, after the extrinsic correction);
-        default the dataset's.
+        Calibration (e.g. ``RunResult.imu_T_cam``, extrinsic corrected); default the dataset's.
     config : SmootherConfig, optional
+        Anything else (e.g. a ``FilterConfig``) is a TypeError.
     blas_threads : int or None
-        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`): its dense blocks
-        are small (6x6 to a few hundred rows), where a second thread costs far more in
-        synchronisation than it saves (the 60-frame simulated drive: 0.46 s with one thread,
-        12 s with two on a busy 2-core machine); None leaves numpy's setting alone.
+        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`; None: numpy's
+        setting). One, as its dense blocks are small: on the 60-frame drive, 0.46 s with one
+        thread, 12 s with two on a busy 2-core machine.
 
     Returns
     -------
     SmootherResult
-
-    Raises
-    ------
-    ValueError
-        A bad initial trajectory, map or calibration.
-    TypeError
-        ``config`` is not a :class:`SmootherConfig` (e.g. a ``FilterConfig``).
     """
     config = as_smoother_config(config, "smooth")
     with limit_blas_threads(blas_threads):
@@ -339,14 +249,13 @@ class NormalEquations:
     Attributes
     ----------
     H : scipy.sparse.csr_matrix, shape (6 n + 3 L, 6 n + 3 L)
-        ``J^T W J``: the pose variables first (frames ``1 .. n``, 6 columns each, right
-        perturbations ``T <- T exp(delta^)``; frame 0 is held), then the landmarks (3 columns
-        each, in the order of :attr:`landmark_ids`). A landmark left out of the problem
-        (:attr:`landmark_active` False) has an identity block and no coupling.
+        ``J^T W J``: the pose variables (frames ``1 .. n``, 6 columns each, right perturbations;
+        frame 0 is held), then the landmarks (3 columns each, in :attr:`landmark_ids` order). A
+        landmark left out (:attr:`landmark_active` False) has an identity block and no coupling.
     g : ndarray, shape (6 n + 3 L,)
         ``J^T W r``.
     num_poses : int
-        ``n``, the pose variables (``T - 1``).
+        ``n = T - 1``.
     landmark_ids : ndarray of int, shape (L,)
         Dataset id of each landmark block.
     landmark_active : ndarray of bool, shape (L,)
@@ -365,30 +274,17 @@ class NormalEquations:
 def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
     """The full sparse normal equations of the batch problem at a state, for teaching and checks.
 
-    The problem is the one :func:`smooth` builds (the same observations, landmarks and
-    checks) linearised at ``world_T_imu`` and ``landmarks``, with the robust loss's IRLS
-    weights at that state. :func:`smooth` itself never forms this matrix: it eliminates the
-    landmarks block by block (the Schur complement).
+    The problem :func:`smooth` builds, linearised at the state with the IRLS weights there;
+    :func:`smooth` itself never forms it (it eliminates the landmarks: Schur complement).
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    world_T_imu : array_like, shape (T, 4, 4)
-        The state's poses (e.g. the EKF's trajectory, or the ground truth).
-    landmarks, imu_T_cam, config
-        As in :func:`smooth` (missing landmarks are triangulated).
+    dataset, world_T_imu, landmarks, imu_T_cam, config
+        As in :func:`smooth` (and refused as there); ``world_T_imu`` is the state's poses.
 
     Returns
     -------
     NormalEquations
-
-    Raises
-    ------
-    ValueError
-        ``world_T_imu`` is not (T, 4, 4) or not finite, ``landmarks`` is not (M, 3) or has
-        infinite entries, or ``imu_T_cam`` is not (4, 4).
-    TypeError
-        ``config`` is not a :class:`SmootherConfig` (e.g. a ``FilterConfig``).
     """
     config = as_smoother_config(config, "normal_equations")
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)
@@ -402,12 +298,11 @@ def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, confi
 
 
 def start_cost(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
-    """The batch objective at a candidate start, with what the start cannot explain counted as outliers.
+    """The batch objective at a candidate start, what the start cannot explain counted as outliers.
 
-    The problem is the one :func:`smooth` would build from this start (its landmarks, missing
-    ones triangulated, and its drops: landmarks behind a camera or too far). Starts drop
-    different landmarks, so each observation a start leaves out is charged what an outlier at
-    the rejection threshold costs, ``rho(chi2_4(rejection_probability))``: the costs of
+    The problem is the one :func:`smooth` would build from this start, with its drops. Starts
+    drop different landmarks, so each observation a start leaves out is charged an outlier's
+    cost at the rejection threshold, ``rho(chi2_4(rejection_probability))``: the costs of
     different starts compare the same observations.
 
     Parameters
@@ -418,8 +313,7 @@ def start_cost(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None
     Returns
     -------
     float
-        The robust cost plus the charge for the observations left out; ``inf`` when the start
-        puts an observation behind a camera.
+        ``inf`` when the start puts an observation behind a camera.
     """
     config = as_smoother_config(config, "start_cost")
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)

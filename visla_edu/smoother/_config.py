@@ -1,7 +1,5 @@
-"""Settings of the batch and sliding-window smoothers: :class:`SmootherConfig`.
-
-Declared field by field with :func:`visla_edu.settings.setting`, as the filters' settings are:
-the same spec checks a value given in Python and parses ``visla-edu run --smoother-set``.
+"""Settings of the smoothers, :class:`SmootherConfig`: declared with :func:`visla_edu.settings.setting`
+like the filters', so one spec checks a Python value and parses ``visla-edu run --smoother-set``.
 """
 
 from dataclasses import asdict, dataclass, fields
@@ -38,77 +36,58 @@ WINDOW_ONLY = ("window_size", "window_iterations", "window_mode")
 class SmootherConfig:
     """Noise model, robust loss, stopping rules and window settings of the smoothers.
 
-    The noise settings mean what they mean in :class:`visla_edu.filters.FilterConfig`. Its
-    velocity noise and lag default to ``"auto"`` (measured from the data); here they are the
-    course's fixed 0.5 m/s, 0.05 rad/s and lag 0. :meth:`from_filter_config` takes a filter's
-    resolved settings, which is how ``visla-edu run --mode smooth`` gives both the same model.
-
-    Defaults, units and ranges: the field declarations (and ``visla-edu run --help``).
+    The noise settings mean what they mean in :class:`visla_edu.filters.FilterConfig`, but
+    default to the course's fixed 0.5 m/s, 0.05 rad/s and lag 0 (the filters' are ``"auto"``,
+    measured); :meth:`from_filter_config` takes a filter's resolved settings, which is how
+    ``visla-edu run --mode smooth`` gives both the same model. Defaults, units and ranges: the
+    field declarations (and ``visla-edu run --help``).
 
     Attributes
     ----------
-    sigma_pixel : float
-        As the filters': ``V = sigma_pixel^2 I4``.
-    sigma_linear_velocity, sigma_angular_velocity : float or (float, float, float)
-        As the filters': ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)``
-        (:func:`visla_edu.motion.motion_noise`).
-    imu_lag : int
-        As the filters': the step ``t -> t+1`` uses the twist ``u[t + imu_lag]``.
+    sigma_pixel, sigma_linear_velocity, sigma_angular_velocity, imu_lag, skip_repeated_frames
+        As the filters': ``V = sigma_pixel^2 I4``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)``
+        (a velocity sigma may be per axis), the step ``t -> t+1`` uses ``u[t + imu_lag]``.
     loss : {"cauchy", "huber", "none"}
-        Robust loss ``rho(s)`` of the squared whitened reprojection error ``s = |r|^2 / sigma^2``:
-        Cauchy ``k^2 log(1 + s / k^2)``, Huber ``s`` up to ``k^2`` then ``2 k sqrt(s) - k^2``.
+        Robust loss of the squared whitened reprojection error, :func:`robust_loss`.
     loss_scale : float
-        ``k``, in units of the whitened error norm ``sqrt(s)`` (4 dof: inliers are below 3.1
-        with 95% probability).
+        Its ``k``, in whitened error norms (4 dof: inliers are below 3.1 with 95% probability).
     max_iterations : int
         Levenberg-Marquardt iterations of the final round (accepted or not); a rough round
-        before a rejection gets half. On drives with few landmarks and short tracks (``0020``)
-        the objective's own minimum lies away from the truth, from the EKF's start and from
-        the ground truth alike, and more iterations move the estimate towards it: the cap keeps
-        the result near its start in directions the data hardly constrain. On the simulated
-        drives, whose model is exact, the final round converges within it; on 03 and ``0020`` the
-        cost keeps falling slowly past it. ``python benchmarks/bench_smoother.py --cases
+        before a rejection gets half. Where the data hardly constrain the estimate (``0020``:
+        few landmarks, short tracks) the objective's own minimum lies away from the truth and
+        the cap keeps the result near its start; ``python benchmarks/bench_smoother.py --cases
         objective`` prints the ATE per iteration budget.
     function_tolerance : float
         Stop when an accepted step lowers the cost by less than this fraction.
     step_tolerance : float
-        Stop when the step norm is below ``step_tolerance * (1 + |state|)`` (state: the
-        pose translations and landmark positions, in metres).
+        Stop when the step norm is below ``step_tolerance * (1 + |state|)`` (poses' and landmarks' positions, m).
     initial_damping : float
-        First Levenberg-Marquardt damping ``lambda`` (``H + lambda diag(H)``).
+        First damping ``lambda`` of ``H + lambda diag(H)``.
     rejection_probability : float
-        After each round, observations whose squared whitened error exceeds the chi-square
-        (4 dof) quantile at this probability are dropped (1.0 disables rejection).
+        Observations beyond its chi-square (4 dof) quantile are dropped after each round (1.0: none).
     rejection_rounds : int
-        Rounds of "solve roughly, reject" before the final solve (0: solve once, reject
-        nothing).
+        Rounds of "solve roughly, reject" before the final solve.
     min_observations : int
         Landmarks with fewer usable observations are dropped from the problem.
     min_depth : float
         Landmarks predicted closer than this (camera z) in any observation are dropped.
     min_disparity : float
-        Landmarks never seen with at least this disparity ``uL - uR`` are left out, and
-        an estimate that drifts beyond twice that range (largest predicted disparity below
-        ``min_disparity / 2``) is dropped after a round. Their depth, beyond
-        ``fsu b / min_disparity``, is so poorly observed that Gauss-Newton on xyz landmarks
-        sends them off along their viewing rays (on dataset 03, landmarks at 300 m ran to
-        minus a million metres in six iterations), which stalls Levenberg-Marquardt.
-        :meth:`from_filter_config` takes the filters' ``min_init_disparity``.
-    skip_repeated_frames : bool
-        As the filters'.
+        Landmarks never seen with at least this disparity ``uL - uR`` are left out, and one whose
+        largest predicted disparity falls below ``min_disparity / 2`` is dropped after a round:
+        beyond ``fsu b / min_disparity`` Gauss-Newton sends xyz landmarks off along their viewing
+        rays (on 03, to minus a million metres in six iterations), which stalls
+        Levenberg-Marquardt. :meth:`from_filter_config` takes the filters' ``min_init_disparity``.
     pose_covariance, landmark_covariance : bool
         Compute the marginal covariances at the solution.
-    window_size : int
-        Frames N in the sliding window (20: see :mod:`visla_edu.smoother._window` for the
-        measurements behind the window defaults).
-    window_iterations : int
-        Gauss-Newton iterations per new frame in the sliding window.
+    window_size, window_iterations : int
+        Frames N in the sliding window; Gauss-Newton iterations per new frame (the measurements
+        behind both defaults: :mod:`visla_edu.smoother._window`).
     window_mode : {"fix", "marginalize"}
-        What happens to a pose leaving the window, see :func:`smooth_window`.
+        What happens to a pose leaving the window, see :mod:`visla_edu.smoother._window`.
     start : {"slam", "best"}
         Where the batch smoother starts (:func:`visla_edu.run.run_smoother`): the joint EKF's
-        estimate, or the lowest objective of dead reckoning, VIO and the joint EKF
-        (:func:`start_cost`). Either way the costs of all three are reported.
+        estimate, or the lowest objective (:func:`start_cost`) of dead reckoning, VIO and the
+        joint EKF. Either way the costs of all three are reported.
     """
 
     sigma_pixel: float = setting(1.5, float, 0.0, low_open=True, unit="px",
@@ -154,18 +133,13 @@ class SmootherConfig:
         Parameters
         ----------
         filter_config : visla_edu.filters.FilterConfig
-            Resolved (no ``"auto"`` noise or lag: :func:`visla_edu.run.resolve_config`).
+            Resolved (:func:`visla_edu.run.resolve_config`); ``"auto"`` settings are a ValueError.
         **overrides
-            Further :class:`SmootherConfig` fields.
+            :class:`SmootherConfig` fields.
 
         Returns
         -------
         SmootherConfig
-
-        Raises
-        ------
-        ValueError
-            ``filter_config`` still has ``"auto"`` settings.
         """
         if not filter_config.resolved:
             raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
@@ -180,24 +154,7 @@ class SmootherConfig:
 
 
 def as_smoother_config(config, caller):
-    """``config`` itself, :class:`SmootherConfig` defaults for None, or a TypeError.
-
-    Parameters
-    ----------
-    config : SmootherConfig or None
-    caller : str
-        Starts the error message (the public function's name).
-
-    Returns
-    -------
-    SmootherConfig
-
-    Raises
-    ------
-    TypeError
-        Anything else, e.g. the filters' ``FilterConfig`` (the message says how to convert it)
-        or a dict of settings.
-    """
+    """``config``; defaults for None; else a TypeError naming ``caller`` (how to convert a ``FilterConfig``)."""
     if config is None:
         return SmootherConfig()
     if isinstance(config, SmootherConfig):
@@ -213,20 +170,14 @@ OWN_SETTINGS = tuple(f.name for f in fields(SmootherConfig) if f.name not in FRO
 
 
 def check_own_settings(mode, names):
-    """Refuse names that are not the smoother's own settings, or that ``mode`` would ignore.
+    """Refuse (ValueError) names that are not the smoother's :data:`OWN_SETTINGS`, or that ``mode`` ignores.
 
     Parameters
     ----------
     mode : {"smooth", "window"}
-        The batch smoother or the sliding window (:data:`visla_edu.codes.SMOOTHER_MODES`).
+        :data:`visla_edu.codes.SMOOTHER_MODES`; ``"smooth"`` ignores :data:`WINDOW_ONLY`,
+        ``"window"`` :data:`BATCH_ONLY`.
     names : iterable of str
-        Settings given for it over the filter's model.
-
-    Raises
-    ------
-    ValueError
-        A name not in :data:`OWN_SETTINGS`, a name in :data:`WINDOW_ONLY` for ``"smooth"`` or in
-        :data:`BATCH_ONLY` for ``"window"``.
     """
     names = list(names)
     unknown = sorted(set(names) - set(OWN_SETTINGS))

@@ -1,25 +1,25 @@
 """Symmetric positive-definite block systems with an envelope (variable band) structure.
 
-The smoother's reduced pose system is block tridiagonal (pose information of the
-observations, motion factors between consecutive frames) minus one dense rank-3 term per
-landmark over the consecutive frames that see it (its Schur complement term). Frame ``l``
-is thus coupled only with frames back to the first frame of the oldest track seen at ``l``:
-an *envelope* (variable band). A Cholesky factor has no fill outside the envelope, so the
-factorisation is a loop over block columns on a dense *front* (the frames
+The smoother's reduced pose system is block tridiagonal (observations' pose information,
+motion factors) minus one dense rank-3 term per landmark over the consecutive frames that
+see it (its Schur complement term). Frame ``l`` is thus coupled only with frames back to the
+first frame of the oldest track seen at ``l``: an *envelope*. A Cholesky factor has no fill
+outside it, so the factorisation is a loop over block columns on a dense *front* (the frames
 ``i .. reach[i]`` still coupled to column ``i``)::
 
     L_ii = chol(A_ii),   L_Ji = A_Ji L_ii^{-T},   A_JJ <- A_JJ - L_Ji L_Ji^T
 
-with ``J = i+1 .. reach[i]``. The cost is about ``sum_i 6^3 (reach[i] - i)^2`` flops instead
-of the dense ``(6T)^3 / 3``, and the Schur complement is never stored as a sparse matrix:
-each landmark's term enters the front when its last frame does.
+with ``J = i+1 .. reach[i]``: about ``sum_i 6^3 (reach[i] - i)^2`` flops instead of
+``(6T)^3 / 3``. The Schur complement is never stored: each landmark's term enters the front
+with its last frame, before any of its block columns is eliminated.
 
-The diagonal blocks of the inverse ``Sigma = A^{-1}`` (the marginal covariances) come from
-the same factor by the backward recursion of Takahashi et al.: from ``Sigma L = L^{-T}``::
+The diagonal blocks of ``Sigma = A^{-1}`` (the marginal covariances) come from the same
+factor by the backward recursion of Takahashi et al. (from ``Sigma L = L^{-T}``)::
 
     Sigma_Ji = -Sigma_JJ L_Ji L_ii^{-1},   Sigma_ii = L_ii^{-T} L_ii^{-1} - Sigma_Ji^T L_Ji L_ii^{-1}
 
 for ``i = n-1 .. 0``, which only needs ``Sigma`` inside the envelope (a front again).
+Block rows are processed in groups of :data:`GROUP` (supernodes).
 """
 
 from dataclasses import dataclass
@@ -32,13 +32,10 @@ __all__ = ["EnvelopeSystem", "EnvelopeFactor", "envelope_reach", "cholesky", "so
 
 @dataclass
 class EnvelopeSystem:
-    """A symmetric block matrix: block tridiagonal minus dense low-rank corrections.
+    """``A = tridiag(sub, diag, sub^T) - sum_k P_k V_k V_k^T P_k^T``, a symmetric block matrix.
 
-    ``A = tridiag(sub, diag, sub^T) - sum_k P_k V_k V_k^T P_k^T``, where correction ``k``
-    covers the consecutive block rows ``lo[k] .. lo[k] + n_k - 1`` (``P_k`` places it there).
-    In the smoother, the tridiagonal part is the pose information (observations and motion)
-    and correction ``k`` is landmark ``k``'s Schur complement term
-    ``H_pm H_mm^{-1} H_mp = V V^T`` with ``V = H_pm L^{-T}``, ``H_mm = L L^T``.
+    Correction ``k`` covers the block rows ``lo[k] .. hi[k]`` (``P_k`` places it there); in the
+    smoother it is landmark ``k``'s Schur complement term (:mod:`~visla_edu.smoother._normal`).
 
     Attributes
     ----------
@@ -47,7 +44,6 @@ class EnvelopeSystem:
     sub : ndarray, shape (n - 1, b, b)
         ``A[l + 1, l]`` (before corrections).
     lo, hi : ndarray of int, shape (K,)
-        First and last block row of each correction (``lo <= hi``).
     start : ndarray of int, shape (K,)
         Correction ``k`` is ``rows[start[k] : start[k] + hi[k] - lo[k] + 1]``.
     rows : ndarray, shape (S, b, r)
@@ -74,10 +70,7 @@ class EnvelopeSystem:
 
 @dataclass
 class EnvelopeFactor:
-    """Block Cholesky factor ``A = L L^T`` of an :class:`EnvelopeSystem`, by groups of rows.
-
-    Consecutive block rows are factorised together (a *supernode* of ``GROUP`` rows): one
-    dense Cholesky of the group's diagonal block and one rank-``b GROUP`` update of the front.
+    """Block Cholesky factor ``A = L L^T`` of an :class:`EnvelopeSystem`, by groups of block rows.
 
     Attributes
     ----------
@@ -105,20 +98,7 @@ GROUP = 8
 
 
 def envelope_reach(system):
-    """Last block row coupled to each block column after elimination, shape (n,).
-
-    ``reach[i] = max(i + 1, hi[k] for corrections with lo[k] <= i)`` (clipped to ``n - 1``), a
-    nondecreasing sequence: a Cholesky factor has no fill below it.
-
-    Parameters
-    ----------
-    system : EnvelopeSystem
-
-    Returns
-    -------
-    ndarray of int, shape (n,)
-        ``n`` the system's number of block rows.
-    """
+    """Last block row coupled to each column, (n,): ``max(i + 1, hi[k] for lo[k] <= i)``, clipped, nondecreasing."""
     n = system.num_blocks
     last = np.minimum(np.arange(n) + 1, n - 1)
     if len(system.lo):
@@ -180,12 +160,8 @@ BUCKET = 16
 
 
 def _add_corrections(front, system, plan, first_row, last_row):
-    """Subtract ``V_k V_k^T`` of every correction ending in rows ``first_row .. last_row``.
-
-    The corrections are packed side by side (sorted by first row, zero where a correction
-    has no row) and applied in a few rank-``3K`` updates, one per bucket of similar first
-    rows, instead of one small update each: this touches each front entry a few times, not
-    once per landmark.
+    """Subtract ``V_k V_k^T`` of the corrections ending in ``first_row .. last_row``, in one rank-``3K``
+    update per :data:`BUCKET` of similar first rows (each front entry touched a few times, not per landmark).
     """
     a, b = plan.by_row[first_row], plan.by_row[last_row + 1]
     if a == b:
@@ -211,11 +187,7 @@ def _add_corrections(front, system, plan, first_row, last_row):
 
 
 def _load_rows(front, system, top, first_row, last_row):
-    """Bring block rows ``first_row .. last_row`` (diagonal and motion blocks) into the front.
-
-    ``top`` is the first block row still in use; entries between it and the new rows may be
-    stale (an earlier use of the buffer positions) and are cleared.
-    """
+    """Bring block rows ``first_row .. last_row`` into the front, clearing stale entries from ``top`` on."""
     b, k = front.b, last_row - first_row + 1
     new, used = front.span(first_row, last_row), front.span(top, last_row)
     front.M[new, used] = 0.0
@@ -232,26 +204,8 @@ def _load_rows(front, system, top, first_row, last_row):
 
 
 def cholesky(system, group=GROUP):
-    """Block Cholesky factor of an :class:`EnvelopeSystem` (see the module docstring).
-
-    Each correction is added to the dense front when its last block row enters it; by then
-    none of its block columns has been eliminated (``lo[k] >= `` the group being factorised).
-
-    Parameters
-    ----------
-    system : EnvelopeSystem
-        Symmetric positive definite.
-    group : int
-        Block rows per supernode.
-
-    Returns
-    -------
-    EnvelopeFactor
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        The matrix is not positive definite (a pivot block has no Cholesky factor).
+    """:class:`EnvelopeFactor` of a positive-definite :class:`EnvelopeSystem`, ``group`` block rows at a
+    time (the module's loop); raises ``numpy.linalg.LinAlgError`` when it is not positive definite.
     """
     n, b = system.num_blocks, system.diag.shape[1]
     lo = np.arange(0, n, group)
@@ -278,17 +232,7 @@ def cholesky(system, group=GROUP):
 
 
 def solve(factor, rhs):
-    """Solve ``A x = rhs`` with the factor of :func:`cholesky`.
-
-    Parameters
-    ----------
-    factor : EnvelopeFactor
-    rhs : ndarray, shape (n, b)
-
-    Returns
-    -------
-    ndarray, shape (n, b)
-    """
+    """Solve ``A x = rhs`` with the factor of :func:`cholesky`; ``rhs`` and ``x`` have shape (n, b)."""
     y = np.array(rhs, dtype=float)
     groups = list(zip(factor.lo, factor.hi, factor.reach, factor.diag_inv, factor.below))
     for s, e, c, L_inv, L_J in groups:  # forward: L y = rhs
@@ -304,19 +248,10 @@ def solve(factor, rhs):
 
 
 def inverse_diagonal(factor, visit=None):
-    """Diagonal blocks of ``A^{-1}`` by the backward (Takahashi) recursion, group by group.
+    """Diagonal blocks of ``A^{-1}``, (n, b, b), by the Takahashi recursion, group by group.
 
-    Parameters
-    ----------
-    factor : EnvelopeFactor
-    visit : callable, optional
-        ``visit(lo, hi, Sigma_front)`` is called after the group of block rows ``lo .. hi``
-        is done, with the dense ``A^{-1}`` restricted to block rows and columns
-        ``lo .. reach`` (a view: copy what you keep). The landmark covariances use it.
-
-    Returns
-    -------
-    ndarray, shape (n, b, b)
+    ``visit(lo, hi, Sigma_front)``, if given, gets ``A^{-1}`` on the block rows and columns
+    ``lo .. reach`` of each group (a view: copy what you keep); the landmark covariances use it.
     """
     b = factor.block_size
     n = int(factor.hi[-1]) + 1 if len(factor.hi) else 0
@@ -342,19 +277,7 @@ def inverse_diagonal(factor, visit=None):
 
 
 def to_dense(system):
-    """The full matrix of an :class:`EnvelopeSystem`, shape (n b, n b) (tests, small systems).
-
-    ``tridiag(sub, diag, sub^T) - sum_k P_k V_k V_k^T P_k^T``.
-
-    Parameters
-    ----------
-    system : EnvelopeSystem
-
-    Returns
-    -------
-    ndarray, shape (n b, n b)
-        A new dense array (``n`` block rows of size ``b``).
-    """
+    """The full matrix of an :class:`EnvelopeSystem`, shape (n b, n b) (tests, small systems)."""
     n, b = system.num_blocks, system.diag.shape[1]
     A = np.zeros((n * b, n * b))
     for row in range(n):

@@ -1,20 +1,14 @@
 """The smoother's motion residual and its analytic Jacobians, vectorised over factors; robust losses.
 
-The other residual, the reprojection ``r = h(T, m) - z`` with ``h(T, m) = Ks pi(cam_T_imu T^{-1} m)``
-(one per stereo observation, a different pose per observation), and its Jacobians are the
-camera's: :func:`visla_edu.camera.stereo_projection`.
-
-Motion (one per step ``t -> t+1`` with twist ``u_t`` over ``tau_t``)::
+The reprojection residual ``r = h(T, m) - z`` and its Jacobians are the camera's
+(:func:`visla_edu.camera.stereo_projection`). Motion, one per step ``t -> t+1``::
 
     E_t = exp(-tau_t u_t^) T_t^{-1} T_{t+1},      e_t = log(E_t)
 
-Perturbing ``T_t <- T_t exp(a^)`` and ``T_{t+1} <- T_{t+1} exp(b^)`` gives
-``E_t <- E_t exp((b - Ad(T_{t+1}^{-1} T_t) a)^)`` to first order, hence::
+Perturbing ``T_t`` by ``a`` and ``T_{t+1}`` by ``b`` (right perturbation, see
+:mod:`visla_edu.lie`) gives ``E_t <- E_t exp((b - Ad(T_{t+1}^{-1} T_t) a)^)`` to first order::
 
     J_e_next = J_r(e_t)^{-1},      J_e_prev = -J_r(e_t)^{-1} Ad(T_{t+1}^{-1} T_t)
-
-with the SE(3) right Jacobian of :mod:`visla_edu.lie` (its perturbation convention and
-``J_out_in`` names).
 """
 
 import numpy as np
@@ -25,21 +19,7 @@ __all__ = ["motion_steps", "motion_residuals", "robust_loss"]
 
 
 def motion_steps(time_stamps, twists, lag):
-    """The inverse IMU increments ``exp(-tau_t u_t^)`` and the steps ``tau_t``.
-
-    Parameters
-    ----------
-    time_stamps : ndarray, shape (T,)
-    twists : ndarray, shape (T, 6)
-        ``[v; w]`` samples.
-    lag : int
-        See :func:`visla_edu.motion.select_twists`.
-
-    Returns
-    -------
-    step_inv : ndarray, shape (T - 1, 4, 4)
-    tau : ndarray, shape (T - 1,)
-    """
+    """``exp(-tau_t u_t^)`` (T-1, 4, 4) and ``tau_t`` (T-1,) of twists (T, 6); ``lag``: ``select_twists``."""
     from visla_edu.motion import select_twists
 
     tau = np.diff(np.asarray(time_stamps, dtype=float))
@@ -54,15 +34,14 @@ def motion_residuals(world_T_imu, step_inv, jacobians=True):
     world_T_imu : ndarray, shape (K + 1, 4, 4)
         Consecutive poses ``T_0 .. T_K``.
     step_inv : ndarray, shape (K, 4, 4)
-        ``exp(-tau_t u_t^)`` for each step.
+        ``exp(-tau_t u_t^)`` of each step (:func:`motion_steps`).
     jacobians : bool
-        Also return the Jacobians.
 
     Returns
     -------
     e : ndarray, shape (K, 6)
     J_e_prev, J_e_next : ndarray, shape (K, 6, 6)
-        With respect to the right perturbations of ``T_t`` and ``T_{t+1}`` (only if asked).
+        Only if ``jacobians``.
     """
     next_T_prev = lie.se3_inv(world_T_imu[1:]) @ world_T_imu[:-1]
     E = step_inv @ lie.se3_inv(next_T_prev)
@@ -87,7 +66,7 @@ def robust_loss(s, loss, scale):
         ``|r|^2 / sigma^2``.
     loss : {"cauchy", "huber", "none"}
     scale : float
-        ``k`` (units of ``sqrt(s)``).
+        ``k``, in units of ``sqrt(s)``.
 
     Returns
     -------

@@ -2,7 +2,7 @@
 
 With the whitened residuals stacked in ``r`` and the Jacobian ``J`` (right perturbations of
 the pose variables, then the landmark positions), the robust cost is
-``C = sum_obs rho(s_i) + sum_t |W_t^{-1/2} e_t|^2 (+ prior)`` and Gauss-Newton with IRLS
+``C = sum_obs rho(s_i) + sum_t |W_t^{-1/2} e_t|^2 (+ priors)`` and Gauss-Newton with IRLS
 weights ``w_i = rho'(s_i) / sigma^2`` solves::
 
     [[H_pp, H_pm], [H_mp, H_mm]] [dp; dm] = -[g_p; g_m],     H = J^T W J,  g = J^T W r
@@ -17,6 +17,10 @@ first (Schur complement)::
 landmark (``V_j = H_pj L_j^{-T}``, ``H_mm,j = L_j L_j^T``) over the frames that see it: an
 :class:`~._envelope.EnvelopeSystem`, factorised without ever forming a ``(6T + 3M)^2``
 (or even a ``(6T)^2``) matrix. Levenberg-Marquardt damping adds ``lambda diag(H)``.
+
+The functions take the ``problem``, ``world_T_imu`` (T, 4, 4) by dataset frame and
+``landmarks`` (L, 3), the problem's (world frame, local order); ``n`` is the number of pose
+variables and ``N`` of observations (landmark-major, active or not).
 """
 
 from dataclasses import dataclass
@@ -50,8 +54,7 @@ class Linearization:
         ``H[l + 1, l]`` from the motion factors.
     g_p : ndarray, shape (n, 6)
     Hpm : ndarray, shape (6, 3, N)
-        Pose-landmark block of each observation, observation index last (zero at held frames
-        and for inactive observations).
+        Per observation, observation index last (zero at held frames and when inactive).
     Hmm : ndarray, shape (L, 3, 3)
     g_m : ndarray, shape (L, 3)
     """
@@ -67,25 +70,20 @@ class Linearization:
 
 @dataclass
 class Step:
-    """A damped Gauss-Newton step: pose and landmark increments, predicted cost decrease, and
-    the Cholesky factor of the damped reduced system it solved (its inverse approximates the
-    pose covariance at the state the step started from).
-
-    Made by :func:`solve_step`, applied by :func:`apply_step`.
+    """A damped Gauss-Newton step (:func:`solve_step`, applied by :func:`apply_step`).
 
     Attributes
     ----------
     d_pose : ndarray, shape (n, 6)
-        Right perturbations ``[v; w]`` of the pose variables (frames ``first_var ..
-        last_frame``): ``T <- T exp(d_pose^)``.
+        Right perturbations ``[v; w]`` of the pose variables: ``T <- T exp(d_pose^)``.
     d_landmark : ndarray, shape (L, 3)
-        Landmark increments in the world frame (m), ``m <- m + d_landmark``; zero for inactive
-        landmarks.
+        World-frame increments (m), ``m <- m + d_landmark``; zero for inactive landmarks.
     predicted : float
-        The cost decrease the damped linear model predicts, ``-g^T d + lambda d^T diag(H) d``
-        (the denominator of Levenberg-Marquardt's gain ratio).
+        The decrease the damped linear model predicts, ``-g^T d + lambda d^T diag(H) d`` (the
+        denominator of the gain ratio).
     factor : EnvelopeFactor or None
-        Cholesky factor of the reduced pose system ``S`` of the damped ``H + lambda diag(H)``.
+        Of the damped reduced system ``S`` it solved (its inverse approximates the pose
+        covariance at the state the step started from).
     """
 
     d_pose: np.ndarray
@@ -95,17 +93,8 @@ class Step:
 
 
 def _camera_points(problem, world_T_imu, landmarks):
-    """Each observation's pose rotation and its landmark in the IMU and left-camera frames.
-
-    Component-first layout (the observation index last), which makes numpy's small
-    per-observation products several times faster.
-
-    Returns
-    -------
-    R : ndarray, shape (3, 3, N)
-        ``world_R_imu`` of each observation's frame.
-    p_imu, q : ndarray, shape (3, N)
-        ``R^T (m - t)`` and ``R_c p_imu + t_c``.
+    """``R = world_R_imu`` (3, 3, N) of each observation's frame, ``p_imu = R^T (m - t)`` (3, N) and
+    ``q = R_c p_imu + t_c`` (3, N): component-first, which makes numpy's small products faster.
     """
     poses = world_T_imu[problem.obs_frame]
     d = landmarks[problem.obs_landmark] - poses[:, :3, 3]
@@ -115,11 +104,7 @@ def _camera_points(problem, world_T_imu, landmarks):
 
 
 def _pixels(problem, q):
-    """Stereo pixels ``Ks pi(q)`` of camera points ``q`` (3, N) as ``[uL, vL, uR, vR]``, shape (N, 4).
-
-    Written out per row of ``Ks`` (:func:`visla_edu.camera.stereo_matrix`); a rig with one
-    intrinsics reuses the left camera's ``u`` and ``v`` for the right image (the same numbers).
-    """
+    """Stereo pixels ``Ks pi(q)`` (:func:`visla_edu.camera.stereo_matrix` row by row) of ``q`` (3, N), (N, 4)."""
     Ks = problem.Ks
     inv_z = 1.0 / q[2]
     u = Ks[0, 0] * q[0] * inv_z + Ks[0, 2]
@@ -131,26 +116,9 @@ def _pixels(problem, q):
 
 
 def observation_errors(problem, world_T_imu, landmarks):
-    """Squared whitened reprojection errors ``s = |h - z|^2 / sigma^2`` and depths, shape (N,) each.
+    """``s = |h - z|^2 / sigma_pixel^2`` (chi-square, 4 dof, for an inlier) and the depths ``q_z`` (m), (N,) each.
 
-    ``h = Ks pi(q)`` with ``q = cam_T_imu inv(T_t) m_j``, for every observation of the
-    problem, active or not, and ``sigma`` = ``problem.sigma_pixel``.
-
-    Parameters
-    ----------
-    problem : Problem
-    world_T_imu : ndarray, shape (T, 4, 4)
-        IMU poses in the world frame, indexed by dataset frame.
-    landmarks : ndarray, shape (L, 3)
-        The problem's landmarks (local order), world frame.
-
-    Returns
-    -------
-    s : ndarray, shape (N,)
-        Squared whitened errors (chi-square with 4 dof for an inlier); observation order of
-        the problem (landmark-major).
-    depth : ndarray, shape (N,)
-        ``q_z``, the landmark's depth in the left camera (m); not positive behind it.
+    ``h = Ks pi(cam_T_imu inv(T_t) m_j)``; the depth is not positive behind the camera.
     """
     _, _, q = _camera_points(problem, world_T_imu, landmarks)
     r = _pixels(problem, q) - problem.obs_z
@@ -171,20 +139,7 @@ def _prior_residual(problem, world_T_imu):
 
 
 def evaluate(problem, world_T_imu, landmarks, errors=None):
-    """The robust cost ``C``; ``inf`` if an active observation is closer than ``min_depth``.
-
-    Parameters
-    ----------
-    problem : Problem
-    world_T_imu : ndarray, shape (T, 4, 4)
-    landmarks : ndarray, shape (L, 3)
-    errors : (ndarray, ndarray), optional
-        :func:`observation_errors` at this state, if already computed.
-
-    Returns
-    -------
-    float
-    """
+    """Robust cost ``C``; ``inf`` if an active observation is nearer than ``min_depth``; ``errors`` if known."""
     s, depth = observation_errors(problem, world_T_imu, landmarks) if errors is None else errors
     act = problem.active
     if np.any(depth[act] < problem.min_depth):
@@ -209,11 +164,10 @@ def _landmark_prior_cost(problem, landmarks):
 
 
 def _projection_information(problem, q, wr, w):
-    """``A^T w A`` (3, 3, N) and ``A^T w r`` (3, N) with ``A = d(Ks pi(q)) / d q_xyz``.
+    """``A^T w A`` (3, 3, N) and ``A^T w r`` (3, N), ``A = d(Ks pi(q)) / d q``, in closed form.
 
     ``A`` has rows ``fu/z [1, 0, -x/z]`` (uL), ``fv/z [0, 1, -y/z]`` (vL and vR) and
-    ``fu/z [1, 0, -(x - b)/z]`` (uR), so both products have closed forms (a rig with two
-    intrinsics: :func:`_projection_information_two`).
+    ``fu/z [1, 0, -(x - b)/z]`` (uR); two intrinsics: :func:`_projection_information_two`.
     """
     if not single_intrinsics(problem.Ks):
         return _projection_information_two(problem, q, wr, w)
@@ -234,11 +188,7 @@ def _projection_information(problem, q, wr, w):
 
 
 def _projection_information_two(problem, q, wr, w):
-    """:func:`_projection_information` for a rig with two intrinsics (rows 3 and 4 of ``Ks`` the right camera's).
-
-    ``A`` has rows ``a_k [1, 0, -x/z]`` for ``uL`` (``a_1 = fu/z``) and ``[0, c_k, e_k]`` for the
-    ``v`` rows, and ``uR`` the row ``fu'/z [1, 0, -(x - b)/z]``: each product is a sum over rows.
-    """
+    """:func:`_projection_information` for a rig with two intrinsics: each product a sum over ``Ks``'s rows."""
     Ks = problem.Ks
     inv_z = 1.0 / q[2]
     a, a_r = Ks[0, 0] * inv_z, Ks[2, 0] * inv_z
@@ -278,20 +228,17 @@ def _hat_times(p, X):
 
 
 def _observation_blocks(problem, world_T_imu, landmarks):
-    """Per-observation weighted blocks (component-first layout) and the robust cost.
+    """Per-observation weighted blocks (component-first) and the robust cost.
 
-    With ``J_q = A R_c`` (``R_c`` the camera's rotation from the IMU), the Jacobians of
-    :func:`visla_edu.camera.stereo_projection` are ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``,
-    ``P = hat(p_imu)``; so with ``K = J_q^T w J_q`` and ``h = J_q^T w r``::
+    With ``J_q = A R_c``, the Jacobians of :func:`visla_edu.camera.stereo_projection` are
+    ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``, ``P = hat(p_imu)``; so with
+    ``K = J_q^T w J_q`` and ``h = J_q^T w r``::
 
         J_p^T w J_p = [[K, -K P], [P K, -P K P]]     J_p^T w r = [-h; -P h]
         J_p^T w J_m = -[K R^T; P K R^T]              J_m^T w J_m = R K R^T,   J_m^T w r = R h
 
-    Returns
-    -------
-    blocks : dict
-        ``Hpp`` (21, N) (its upper triangle, :data:`_UPPER`), ``g_p`` (6, N), ``Hpm`` (6, 3, N), ``Hmm`` (3, 3, N), ``g_m`` (3, N).
-    cost : float
+    Blocks: ``Hpp`` (21, N) (upper triangle, :data:`_UPPER`), ``g_p`` (6, N), ``Hpm`` (6, 3, N),
+    ``Hmm`` (3, 3, N), ``g_m`` (3, N).
     """
     R, p_imu, q = _camera_points(problem, world_T_imu, landmarks)
     r = _pixels(problem, q) - problem.obs_z
@@ -342,18 +289,7 @@ def _add_motion(problem, world_T_imu, Hpp, sub, g_p):
 
 
 def linearize(problem, world_T_imu, landmarks):
-    """Gauss-Newton blocks and the cost at a state.
-
-    Parameters
-    ----------
-    problem : Problem
-    world_T_imu : ndarray, shape (T, 4, 4)
-    landmarks : ndarray, shape (L, 3)
-
-    Returns
-    -------
-    Linearization
-    """
+    """The :class:`Linearization` (Gauss-Newton blocks and cost) at a state."""
     obs, cost = _observation_blocks(problem, world_T_imu, landmarks)
     n, N = problem.num_vars, len(problem.obs_frame)
     upper = np.asarray(problem.frame_sum @ np.ascontiguousarray(obs["Hpp"].T))
@@ -416,24 +352,7 @@ def _reduced_system(problem, lin, damping, L_inv):
 
 
 def solve_step(problem, lin, damping):
-    """The damped Gauss-Newton step by the Schur complement.
-
-    Parameters
-    ----------
-    problem : Problem
-    lin : Linearization
-    damping : float
-        ``lambda`` >= 0.
-
-    Returns
-    -------
-    Step
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        The damped system is not positive definite.
-    """
+    """Damped Gauss-Newton :class:`Step` (``damping`` = ``lambda`` >= 0); LinAlgError if not positive definite."""
     L_inv = _landmark_factors(problem, lin, damping)
     system, rhs, _ = _reduced_system(problem, lin, damping, L_inv)
     factor = _envelope.cholesky(system)
@@ -450,32 +369,12 @@ def solve_step(problem, lin, damping):
 
 
 def apply_step(problem, world_T_imu, landmarks, step):
-    """``T <- T exp(dp^)`` on the pose variables, ``m <- m + dm``.
+    """``T <- T exp(dp^)`` on the pose variables, ``m <- m + dm``, in new arrays.
 
-    Held poses (before ``problem.first_var``) and poses after ``problem.last_frame`` are copied
-    unchanged. The inputs are not modified.
-
-    Parameters
-    ----------
-    problem : Problem
-    world_T_imu : ndarray, shape (T, 4, 4)
-        IMU poses in the world frame, indexed by dataset frame.
-    landmarks : ndarray, shape (L, 3)
-        The problem's landmarks (local order).
-    step : Step
-        From :func:`solve_step`: ``d_pose`` (n, 6) and ``d_landmark`` (L, 3).
-
-    Returns
-    -------
-    world_T_imu : ndarray, shape (T, 4, 4)
-    landmarks : ndarray, shape (L, 3)
-        New arrays.
-    too_close : ndarray of bool, shape (L,)
-        Active landmarks the step would bring closer than ``min_depth`` to (or behind) a
-        camera observing them. Such a step has no finite cost; the smoothers drop these
-        landmarks as inconsistent rather than let one of them shrink every step.
-    errors : (ndarray, ndarray)
-        :func:`observation_errors` at the new state (for :func:`evaluate`).
+    Returns ``(world_T_imu, landmarks, too_close, errors)``: ``too_close`` (L,) marks the active
+    landmarks the step brings closer than ``min_depth`` to (or behind) a camera observing them
+    (no finite cost: the smoothers drop them rather than let one shrink every step); ``errors``
+    is :func:`observation_errors` at the new state.
     """
     out = world_T_imu.copy()
     frames = slice(problem.first_var, problem.last_frame + 1)
@@ -488,31 +387,13 @@ def apply_step(problem, world_T_imu, landmarks, step):
 
 
 def marginals(problem, lin, landmark_covariance=True):
-    """Marginal covariances at the solution: the inverse of the (undamped) Gauss-Newton Hessian.
+    """Marginal covariances at the solution: the inverse of the undamped Gauss-Newton Hessian.
 
-    Pose blocks are the diagonal blocks of ``S^{-1}`` (Takahashi recursion on the envelope
-    factor); a landmark's is ``H_mm^{-1} + Y^T S^{-1}[span, span] Y`` with
-    ``Y = H_pm H_mm^{-1}`` over the frames that see it.
-
-    Parameters
-    ----------
-    problem : Problem
-    lin : Linearization
-        At the solution (:func:`linearize`); no damping is applied.
-    landmark_covariance : bool
-        Also compute the landmark blocks; if False only the pose blocks (faster).
-
-    Returns
-    -------
-    pose_cov : ndarray, shape (n, 6, 6)
-        Right-perturbation covariances of the pose variables.
-    landmark_cov : ndarray, shape (L, 3, 3) or None
-        NaN for inactive landmarks; None when ``landmark_covariance`` is False.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        The reduced system is not positive definite.
+    Pose blocks are the diagonal blocks of ``S^{-1}`` (Takahashi recursion); a landmark's is
+    ``H_mm^{-1} + Y^T S^{-1}[span, span] Y``, ``Y = H_pm H_mm^{-1}`` over the frames that see
+    it. Returns the pose variables' right-perturbation covariances (n, 6, 6) and the landmarks'
+    (L, 3, 3), NaN when inactive (None without ``landmark_covariance``). Raises
+    ``numpy.linalg.LinAlgError`` when the reduced system is not positive definite.
     """
     L_inv = _landmark_factors(problem, lin, 0.0)
     system, _, _ = _reduced_system(problem, lin, 0.0, L_inv)
@@ -536,26 +417,7 @@ def marginals(problem, lin, landmark_covariance=True):
 
 
 def normal_equations(problem, lin):
-    """The full sparse Gauss-Newton system ``H [dp; dm] = -g`` (poses first, then landmarks).
-
-    For teaching (its sparsity pattern) and for checking the Schur solve; the smoother itself
-    never builds it.
-
-    Parameters
-    ----------
-    problem : Problem
-        ``n`` pose variables and ``L`` landmarks; inactive observations carry zero weight and
-        an inactive landmark gets an identity block.
-    lin : Linearization
-        The blocks at the state (:func:`linearize`), undamped.
-
-    Returns
-    -------
-    H : scipy.sparse.csr_matrix, shape (6 n + 3 L, 6 n + 3 L)
-        ``J^T W J``: pose variables first (6 columns each), then landmarks (3 each, local order).
-    g : ndarray, shape (6 n + 3 L,)
-        ``J^T W r``.
-    """
+    """``H``, ``g`` of :class:`~._batch.NormalEquations` at ``lin``, sparse (the solver never builds it)."""
     n, L = problem.num_vars, problem.num_landmarks
     var = problem.obs_var()
     on = var >= 0

@@ -2,15 +2,14 @@
 
 A :class:`Problem` covers the frames ``first_frame .. last_frame``; the poses of
 ``first_var .. last_frame`` are variables (block rows ``0 .. n - 1`` of the reduced system),
-the earlier ones are held at their current values. The batch smoother has
-``first_frame = 0, first_var = 1`` (the first pose defines the world frame); the sliding
-window has its window as variables and, in ``"fix"`` mode, older frames held.
+the earlier ones are held. The batch smoother has ``first_frame = 0, first_var = 1`` (the
+first pose defines the world frame); the sliding window has its window as variables and, in
+``"fix"`` mode, older frames held.
 
-Observations are stored landmark-major (sorted by landmark, then frame), so the
-observations of one landmark are consecutive, and each landmark's variable frames form one
-run of block rows ``span_lo .. span_hi``; ``slot`` places each observation in that run
-(frames inside the run without an observation get zero slots). Observations and landmarks
-leave the problem by clearing ``active`` / ``landmark_active``; the structure is kept.
+Observations are stored landmark-major (by landmark, then frame), so each landmark's variable
+frames form one run of block rows ``span_lo .. span_hi``; ``slot`` places each observation in
+that run (frames of the run without an observation get zero slots). Observations and
+landmarks leave the problem by clearing ``active`` / ``landmark_active``; the structure stays.
 """
 
 from dataclasses import dataclass
@@ -27,15 +26,7 @@ __all__ = ["PosePrior", "Problem", "build_problem", "observation_status", "far_l
 
 @dataclass
 class PosePrior:
-    """A Gaussian prior on one pose: ``log(mean^{-1} T) ~ N(0, (U^T U)^{-1})``.
-
-    Attributes
-    ----------
-    frame : int
-    mean : ndarray, shape (4, 4)
-    sqrt_information : ndarray, shape (6, 6)
-        ``U``; the whitened residual is ``U log(mean^{-1} T)``.
-    """
+    """Prior on pose ``frame``, whitened residual ``U log(mean^{-1} T)``, ``U = sqrt_information`` (6, 6)."""
 
     frame: int
     mean: np.ndarray
@@ -53,18 +44,12 @@ class Problem:
     sigma_pixel, loss, loss_scale, min_depth, min_disparity
         From :class:`~visla_edu.smoother.SmootherConfig`.
     first_frame, first_var, last_frame : int
-        Frames in the problem; variables from ``first_var`` on.
-    motion_from : int
-        Motion factors are the steps ``motion_from .. last_frame - 1``.
-    step_inv : ndarray, shape (K, 4, 4)
-        ``exp(-tau_t u_t^)`` of those steps.
-    motion_sqrt_information : ndarray, shape (K, 6)
-        ``1 / (tau_t sigma)``: the diagonal of ``W_t^{-1/2}``.
-    obs_frame, obs_landmark : ndarray of int, shape (N,)
-        Frame and local landmark index (``0 .. L-1``) of each observation (landmark-major).
+    motion_from, step_inv, motion_sqrt_information : int, ndarray (K, 4, 4), ndarray (K, 6)
+        The motion factors: the steps ``motion_from .. last_frame - 1``, their
+        ``exp(-tau_t u_t^)`` and the diagonals of ``W_t^{-1/2}``.
+    obs_frame, obs_landmark, obs_source : ndarray of int, shape (N,)
+        Each observation's frame, local landmark (``0 .. L-1``) and index in the dataset's arrays.
     obs_z : ndarray, shape (N, 4)
-    obs_source : ndarray of int, shape (N,)
-        Index of each observation in the dataset's sparse arrays.
     landmark_ids : ndarray of int, shape (L,)
         Dataset id of each local landmark.
     landmark_start : ndarray of int, shape (L + 1,)
@@ -73,9 +58,9 @@ class Problem:
     landmark_active : ndarray of bool, shape (L,)
     prior : PosePrior or None
     landmark_prior : (ndarray, ndarray, ndarray) or None
-        Quadratic landmark priors ``m^T Lambda m - 2 m^T eta + c`` per landmark: ``Lambda``
-        (L, 3, 3), ``eta`` (L, 3) and ``c`` (L,) (observations from held poses, folded in: the
-        weighted squared errors they had, linearised, so the prior's cost is never negative).
+        Per landmark ``m^T Lambda m - 2 m^T eta + c``: ``Lambda`` (L, 3, 3), ``eta`` (L, 3), ``c``
+        (L,); observations from held poses folded in (their weighted squared errors, linearised,
+        so the prior's cost is never negative).
     slot : ndarray of int, shape (N,)
         Row of each observation in the Schur correction rows (-1 at held frames).
     span_lo, span_hi, span_start : ndarray of int, shape (L,)
@@ -86,7 +71,7 @@ class Problem:
     dropped_in_steps : int
         Landmarks the solver dropped because a step would bring them behind a camera.
     fsu_b : float
-        ``fsu b`` of the rig: a landmark at depth ``d`` has disparity ``fsu b / d`` (left pixels).
+        A landmark at depth ``d`` has disparity ``fsu b / d`` (left pixels).
     """
 
     Ks: np.ndarray
@@ -141,26 +126,10 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
                   prior=None, landmark_prior=None):
     """Assemble a :class:`Problem` and its structure from observations in any order.
 
-    Parameters
-    ----------
-    obs_frame, obs_landmark_ids : array_like of int, shape (N,)
-        Frame and dataset landmark id of each observation (each pair once).
-    obs_z : array_like, shape (N, 4)
-    obs_source : array_like of int, shape (N,)
-    camera : StereoCamera
-    config : SmootherConfig
-    frames : (int, int, int)
-        ``(first_frame, first_var, last_frame)``.
-    motion : (int, ndarray, ndarray)
-        ``(motion_from, step_inv, motion_sqrt_information)`` for the steps
-        ``motion_from .. last_frame - 1``.
-    prior : PosePrior, optional
-    landmark_prior : (ndarray, ndarray, ndarray), optional
-        ``Lambda`` (M, 3, 3), ``eta`` (M, 3) and ``c`` (M,) indexed by dataset landmark id.
-
-    Returns
-    -------
-    Problem
+    ``obs_frame``, ``obs_landmark_ids`` (dataset ids, each pair once), ``obs_z`` (N, 4) and
+    ``obs_source`` per observation; ``frames = (first_frame, first_var, last_frame)``, ``motion =
+    (motion_from, step_inv, motion_sqrt_information)``; ``landmark_prior`` indexed by dataset id
+    (``Lambda`` (M, 3, 3), ``eta`` (M, 3), ``c`` (M,)).
     """
     obs_frame, obs_landmark_ids = np.asarray(obs_frame, np.int64), np.asarray(obs_landmark_ids, np.int64)
     order = np.lexsort((obs_frame, obs_landmark_ids))
@@ -204,21 +173,10 @@ def _build_structure(problem):
 
 
 def observation_status(dataset, config, frames=None):
-    """Which dataset observations a smoother may use, and why the others are left out.
+    """Which dataset observations a smoother may use: an ``OBS_*`` code each (:mod:`visla_edu.codes`), (N,) int8.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    config : SmootherConfig
-    frames : ndarray of int, optional
-        Frame of each observation (``dataset.observation_frames()``).
-
-    Returns
-    -------
-    ndarray of int8, shape (N,)
-        Observation codes (:mod:`visla_edu.codes`): ``OBS_NO_DEPTH`` for a non-positive
-        disparity, ``OBS_IGNORED`` for the observations of a repeated frame
-        (``config.skip_repeated_frames``), else ``OBS_USED``.
+    ``OBS_NO_DEPTH`` for a non-positive disparity, ``OBS_IGNORED`` in a repeated frame
+    (``config.skip_repeated_frames``), else ``OBS_USED``. ``frames``: ``dataset.observation_frames()``.
     """
     frames = dataset.observation_frames() if frames is None else frames
     status = np.full(dataset.num_observations, OBS_USED, dtype=np.int8)
@@ -229,25 +187,7 @@ def observation_status(dataset, config, frames=None):
 
 
 def far_landmarks(dataset, usable, min_disparity):
-    """Landmarks whose usable observations all have a disparity below ``min_disparity`` px, (M,) bool.
-
-    The disparity is ``uL - uR`` of the observed pixels (in the left camera's pixels,
-    :meth:`~visla_edu.dataset.Dataset.disparity`).
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    usable : ndarray of bool, shape (N,)
-        Observations that may be used (e.g. ``status == OBS_USED``), in the dataset's order.
-    min_disparity : float
-        Pixels.
-
-    Returns
-    -------
-    ndarray of bool, shape (M,)
-        True for a landmark with at least one usable observation, all of them below
-        ``min_disparity``; False for landmarks without any.
-    """
+    """Landmarks with ``usable`` (N,) observations, all with ``uL - uR < min_disparity`` px: (M,) bool."""
     disparity = np.where(usable, dataset.disparity(), -np.inf)
     best = np.full(dataset.num_landmarks, -np.inf)
     np.maximum.at(best, dataset.obs_ids, disparity)
@@ -257,8 +197,8 @@ def far_landmarks(dataset, usable, min_disparity):
 def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):
     """Initial landmark positions: the given ones where finite, else from the best observation.
 
-    The best observation of a landmark is its usable one with the largest disparity
-    (the best-conditioned depth), triangulated at that frame's pose.
+    The best observation of a landmark is its usable one with the largest disparity (the
+    best-conditioned depth), triangulated at that frame's pose.
 
     Parameters
     ----------
@@ -292,23 +232,5 @@ def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):
 
 
 def rig_camera(dataset, imu_T_cam=None):
-    """The dataset's stereo rig, with ``imu_T_cam`` replaced if given (e.g. a corrected one).
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-        Gives ``K``, ``K_right``, ``b`` and the default ``imu_T_cam``.
-    imu_T_cam : array_like, shape (4, 4), optional
-        Pose of the left camera (optical frame) in the IMU frame.
-
-    Returns
-    -------
-    StereoCamera
-        :meth:`visla_edu.dataset.Dataset.stereo_camera`.
-
-    Raises
-    ------
-    ValueError
-        ``imu_T_cam`` is not (4, 4), or ``K`` or ``b`` is not a valid calibration.
-    """
+    """:meth:`~visla_edu.dataset.Dataset.stereo_camera`: the rig, ``imu_T_cam`` (4, 4) replaced if given."""
     return dataset.stereo_camera(imu_T_cam)

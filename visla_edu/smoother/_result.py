@@ -22,7 +22,6 @@ class SmootherResult:
     Attributes
     ----------
     name : str
-        Dataset name.
     mode : {"smooth", "window"}
     time_stamps : ndarray, shape (T,)
     world_T_imu : ndarray, shape (T, 4, 4)
@@ -30,39 +29,36 @@ class SmootherResult:
     landmarks : ndarray, shape (M, 3)
         NaN where a landmark was not estimated (dropped, or never usable).
     pose_cov : ndarray, shape (T, 6, 6)
-        Marginal covariance of each pose's right perturbation (zeros for a held pose, NaN
-        when not computed).
+        Marginal covariance of each pose's right perturbation (zeros for a held pose, NaN when
+        not computed).
     landmark_cov : ndarray, shape (M, 3, 3)
-        Marginal covariances of the landmarks (NaN where not estimated or not computed).
+        NaN where not estimated or not computed.
     history : dict of ndarray
-        One entry per iteration for each of :data:`HISTORY_FIELDS`: the rejection round (batch)
-        or the new frame ``k`` (sliding window: the cost is that frame's window problem's), the
-        cost after the iteration (a step not accepted leaves it, unless it dropped landmarks it
-        sent behind a camera: then the cost without them), the step norm, whether the step was
-        accepted, the damping.
+        Per iteration, each of :data:`HISTORY_FIELDS`: the rejection round (batch) or the new
+        frame ``k`` (window: the cost is that frame's window problem's), the cost after the
+        iteration (a rejected step leaves it, unless it dropped landmarks it sent behind a
+        camera: then the cost without them), the step norm, whether accepted, the damping.
     rejected : dict of int
-        ``outliers`` (observations rejected by the chi-square test), ``nonpositive_disparity``
-        and ``repeated_frame`` (observations never used), ``landmarks_no_position``,
+        ``outliers`` (rejected by the chi-square test), ``nonpositive_disparity`` and
+        ``repeated_frame`` (observations never used), ``landmarks_no_position``,
         ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far`` (landmarks
         dropped, see :class:`~visla_edu.smoother.SmootherConfig`).
     obs_status : ndarray of int8, shape (N,)
-        Status of each dataset observation, an ``OBS_*`` code of :mod:`visla_edu.codes`:
-        ``OBS_USED``, ``OBS_GATED`` (rejected as an outlier), ``OBS_NO_DEPTH``, ``OBS_IGNORED``
-        (a repeated frame) or ``OBS_DROPPED`` (its landmark was left out).
+        Each dataset observation's ``OBS_*`` code (:mod:`visla_edu.codes`): ``OBS_USED``,
+        ``OBS_GATED`` (an outlier), ``OBS_NO_DEPTH``, ``OBS_IGNORED`` (a repeated frame) or
+        ``OBS_DROPPED`` (its landmark was left out).
     timing : dict of float
-        Seconds spent: ``setup``, ``solve``, ``covariance``, ``total``.
+        Seconds: ``setup``, ``solve``, ``covariance``, ``total``.
     config : dict
     imu_T_cam : ndarray, shape (4, 4)
         The calibration used.
     frame_seconds : ndarray, shape (T,)
-        Sliding window only: the time spent on each new frame, 0 for frame 0 (the held first
-        pose; :meth:`summary` leaves it out); empty for the batch.
+        Window only (the batch's is empty): time per new frame, 0 for the held frame 0.
     online_world_T_imu : ndarray, shape (T, 4, 4)
-        Sliding window only: each pose as estimated when its frame was the newest (the
-        real-time estimate; ``world_T_imu`` is the estimate when it left the window).
+        Window only: each pose when its frame was the newest (the real-time estimate).
     stop_reasons : list of str
-        Batch only: why each round's Levenberg-Marquardt stopped (``"converged"``,
-        ``"iteration cap"`` or ``"no descent"``), the final round last.
+        Batch only: why each round's Levenberg-Marquardt stopped (:data:`STOP_REASONS`), the
+        final round last.
     """
 
     name: str
@@ -83,7 +79,7 @@ class SmootherResult:
     stop_reasons: list = field(default_factory=list)
 
     def status_totals(self):
-        """Observations by status name (:data:`visla_edu.codes.STATUS_NAMES`), e.g. ``{"used": ..., "gated": ...}``."""
+        """Observations by status name (:data:`visla_edu.codes.STATUS_NAMES`), e.g. ``{"used": ...}``."""
         counts = np.bincount(self.obs_status, minlength=len(STATUS_NAMES))
         return dict(zip(STATUS_NAMES, counts.tolist()))
 
@@ -120,26 +116,7 @@ class SmootherResult:
 
 
 def check_trajectory(world_T_imu, num_frames, name):
-    """``world_T_imu`` as a finite float array of shape (T, 4, 4), or a ValueError naming the problem.
-
-    Parameters
-    ----------
-    world_T_imu : array_like, shape (T, 4, 4)
-        The initial trajectory of a smoother.
-    num_frames : int
-        T, the dataset's frames.
-    name : str
-        Starts the error message (the dataset's name).
-
-    Returns
-    -------
-    ndarray, shape (T, 4, 4)
-
-    Raises
-    ------
-    ValueError
-        Another shape, or a pose with a non-finite entry (the message names the first frame).
-    """
+    """``world_T_imu`` as finite floats (``num_frames``, 4, 4), else ValueError naming ``name`` and a bad frame."""
     world_T_imu = np.asarray(world_T_imu, dtype=float)
     if world_T_imu.shape != (num_frames, 4, 4):
         raise ValueError(f"{name}: initial world_T_imu must have shape ({num_frames}, 4, 4) "
@@ -152,29 +129,9 @@ def check_trajectory(world_T_imu, num_frames, name):
 
 
 def check_landmarks(landmarks, num_landmarks, name):
-    """``landmarks`` as a float array of shape (M, 3) without inf (NaN rows allowed), or None.
+    """``landmarks`` as floats (``num_landmarks``, 3), NaN rows (unknown) allowed, None kept.
 
-    NaN rows mark unknown landmarks (the smoother triangulates them); infinite entries are refused.
-
-    Parameters
-    ----------
-    landmarks : array_like, shape (M, 3), or None
-        Initial landmark positions of a smoother.
-    num_landmarks : int
-        M, the dataset's landmarks.
-    name : str
-        Starts the error message (the dataset's name).
-
-    Returns
-    -------
-    ndarray, shape (M, 3), or None
-        None when ``landmarks`` is None.
-
-    Raises
-    ------
-    ValueError
-        ``landmarks`` does not have shape (M, 3), or has an infinite entry (the message names
-        the first such landmark).
+    An infinite entry or another shape is a ValueError naming ``name`` (and the first infinite landmark).
     """
     if landmarks is None:
         return None

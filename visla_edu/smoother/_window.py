@@ -1,39 +1,30 @@
 """The fixed-lag sliding-window smoother: the batch objective over the last N frames, online.
 
 At each new frame ``k`` the pose is predicted from the previous estimate and the IMU step,
-landmarks seen for the first time are triangulated there, and a few Gauss-Newton /
-Levenberg-Marquardt iterations (:func:`~._batch.levenberg_marquardt`) optimise the poses of
-the window ``max(1, k - N + 1) .. k`` and the landmarks they observe. Observations whose
-squared whitened error then exceeds the chi-square threshold are rejected for good.
+landmarks seen for the first time are triangulated there, and a few Levenberg-Marquardt
+iterations (:func:`~._batch.levenberg_marquardt`) optimise the poses of the window
+``max(1, k - N + 1) .. k`` and the landmarks they observe. Observations whose squared
+whitened error then exceeds the chi-square threshold are rejected for good.
 
 What happens to the states that leave the window (``SmootherConfig.window_mode``):
 
 ``"fix"`` (default)
-    Older poses are held at their last estimates. With its pose held, an observation is a
-    factor on its landmark alone: when a frame leaves the window its observations are folded
-    into a Gaussian prior on each landmark (information ``Lambda``, vector ``eta``, linearised
-    at the current estimate), so landmarks keep what the old frames saw while the window
-    problem stays small. The motion factor from the last held pose to the window's oldest
-    pose anchors the window.
+    Older poses are held, so their observations are factors on the landmarks alone: those of
+    a leaving frame are folded into Gaussian landmark priors (:meth:`_WindowState.hold`), so
+    landmarks keep what old frames saw while the problem stays small. The motion factor from
+    the last held pose anchors the window.
 ``"marginalize"``
-    Only observations inside the window are used. When pose ``v`` leaves, its marginal
-    covariance in the window (Schur complement of everything else) is propagated through the
-    motion step into a Gaussian prior on the new oldest pose, the information form
-    ``(F Sigma_v F^T + W)^{-1}`` with mean ``T_v exp(tau u^)``. The prior keeps only the pose
-    block, so observations that stay in the window are counted twice (the usual
-    approximation of a pose-only prior), and the old observations of the landmarks that stay
-    are lost.
+    Only observations inside the window are used. A leaving pose ``v``'s window marginal is
+    propagated through the motion step into a prior on the new oldest pose, information
+    ``(F Sigma_v F^T + W)^{-1}``, mean ``T_v exp(tau u^)``: a pose-only prior, which counts
+    the observations still in the window twice and loses the old ones of remaining landmarks.
 
-Measured (``benchmarks/bench_smoother.py``, simulated drives "small" with 5% outlier tracks,
-seeds 0-4, ATE in m): ``"fix"`` 0.11, 0.13, 0.14, 0.55, 0.14; ``"marginalize"`` 0.34, 0.45,
-0.48, 2.56, 2.78, at the same time per frame (the EKF: 2.4, 1.3, 1.4, 1.8, 4.4). The pose-only
-prior forgets what the old frames said about the landmarks still in view; holding the old
-poses keeps it. Hence ``"fix"`` is the default.
-
-Window length and iterations (same drives, seeds 0-2, CPU per frame): 10 frames with two
-iterations 0.32/0.23/0.18 m at 19 ms, one iteration 0.31/0.23/0.23 m at 11 ms; 20 frames with
-one iteration 0.11/0.13/0.14 m at 14 ms; 30 frames 0.10/0.11/0.10 m at 19 ms. The default is
-20 frames, one iteration: dataset 03 then takes 15 ms per frame (median).
+``python benchmarks/bench_smoother.py --cases sim`` (preset "small", 5% outlier tracks, seeds
+0-4, ATE in m): ``"fix"`` 0.11, 0.13, 0.14, 0.55, 0.14; ``"marginalize"`` 0.34, 0.45, 0.48,
+2.56, 2.78 at the same time per frame, hence the default. Window length on the same drives
+(seeds 0-2): 10 frames 0.31/0.23/0.23 m at 11 ms per frame (two iterations 0.32/0.23/0.18 m
+at 19 ms), 20 frames 0.11/0.13/0.14 m at 14 ms, 30 frames 0.10/0.11/0.10 m at 19 ms: the
+default is 20 frames, one iteration (dataset 03: 15 ms per frame, median).
 """
 
 import time
@@ -87,9 +78,9 @@ class _WindowState:
         self.dropped = {"landmarks_behind_camera": 0}
 
     def predict(self, k):
-        """Predict pose ``k`` from pose ``k - 1``; triangulate the landmarks seen at ``k`` for the
-        first time with a disparity of at least ``min_disparity`` (as the EKF does; earlier
-        observations still in the problem are used from then on)."""
+        """Predict pose ``k`` from pose ``k - 1``; triangulate there, as the EKF does, the landmarks first
+        seen at ``k`` with a disparity of at least ``min_disparity`` (their earlier observations count too).
+        """
         self.world_T_imu[k] = self.world_T_imu[k - 1] @ lie.se3_inv(self.step_inv[k - 1])
         lo, hi = self.dataset.frame_ptr[k], self.dataset.frame_ptr[k + 1]
         idx = np.arange(lo, hi)
@@ -102,11 +93,9 @@ class _WindowState:
                 self.dataset.obs_z[new], self.world_T_imu[k])
 
     def window_observations(self, k, v0):
-        """Dataset indices of the observations the window problem at frame ``k`` uses.
-
-        The usable observations of frames ``v0 .. k`` and, in ``"fix"`` mode, those of the
-        held frames ``v0 - held .. v0 - 1`` of the same landmarks; landmarks need at least
-        ``min_observations`` (counting those folded into a landmark prior).
+        """Dataset indices of the observations of the window problem at frame ``k``: the usable ones of
+        frames ``v0 .. k`` and, in ``"fix"`` mode, the held frames' (:meth:`held_from`) of the same
+        landmarks, for landmarks with ``min_observations`` (counting those folded into priors).
         """
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v0], ds.frame_ptr[k + 1])
@@ -121,10 +110,8 @@ class _WindowState:
         return idx[count[ds.obs_ids[idx]] >= self.config.min_observations]
 
     def held_from(self, v0):
-        """First held frame whose observations stay in the problem.
-
-        ``"fix"``: ``HELD_FRAMES`` before the window. ``"marginalize"``: none once the first pose
-        has been marginalised (its information is in the pose prior); until then frame 0.
+        """First held frame whose observations stay: ``"fix"``, :data:`HELD_FRAMES` before ``v0``;
+        ``"marginalize"``, frame 0 until the first pose is marginalised, then none.
         """
         if self.config.window_mode == "marginalize":
             return 0 if v0 == 1 else v0
@@ -143,11 +130,8 @@ class _WindowState:
                              landmark_prior=(self.prior_info, self.prior_eta, self.prior_const) if fix else None)
 
     def hold(self, v):
-        """Pose ``v`` leaves the window in ``"fix"`` mode: fold its observations into landmark priors.
-
-        With the pose held, an observation is a Gaussian factor on its landmark alone;
-        linearised at the current estimate ``m0`` with residual ``r`` and Jacobian ``J`` it
-        adds ``Lambda += J^T w J`` and ``eta += J^T w (J m0 - r)`` (robust weight ``w``).
+        """Pose ``v`` leaves the ``"fix"`` window: each observation, linearised at ``m0`` (residual ``r``,
+        Jacobian ``J``, robust weight ``w``), adds ``J^T w J`` to ``Lambda``, ``J^T w (J m0 - r)`` to ``eta``.
         """
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v], ds.frame_ptr[v + 1])
@@ -170,10 +154,8 @@ class _WindowState:
 
 
 def _drop_close(state, problem, m):
-    """Drop landmarks predicted closer than ``min_depth`` in the window (for good).
-
-    Their usable observations become ``OBS_DROPPED``; the others keep their status (no depth,
-    ignored: a repeated frame, gated: rejected), so the counts stay those of the batch.
+    """Drop, for good, landmarks predicted closer than ``min_depth``: their usable observations
+    become ``OBS_DROPPED``, the others keep their codes (the counts stay the batch's).
     """
     _, depth = _normal.observation_errors(problem, state.world_T_imu, m)
     close = np.zeros(problem.num_landmarks, dtype=bool)
@@ -235,39 +217,24 @@ def _process_frame(state, k, history):
 
 
 def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_threads=1):
-    """Fixed-lag sliding-window smoother over the whole drive, frame by frame.
+    """Fixed-lag sliding-window smoother over the whole drive, frame by frame (module docstring).
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     world_T_imu0 : array_like, shape (4, 4), optional
         The first pose (held); identity by default.
-    imu_T_cam : array_like, shape (4, 4), optional
-        Calibration to use (e.g. after the extrinsic correction); default the dataset's.
-    config : SmootherConfig, optional
-        ``window_size``, ``window_iterations``, ``window_mode`` and the noise model (a window
-        longer than the drive optimises every frame so far at each new frame).
-    blas_threads : int or None
-        BLAS threads while it runs, as for :func:`~._batch.smooth` (None leaves numpy's setting
-        alone).
+    imu_T_cam, config, blas_threads
+        As in :func:`~._batch.smooth` (and refused as there). A window longer than the drive
+        optimises every frame so far at each new frame.
 
     Returns
     -------
     SmootherResult
-        ``mode="window"``; ``world_T_imu`` holds each pose as estimated when it left the
-        window (the last window's estimates for its frames), ``online_world_T_imu`` each pose
-        when its frame was the newest, ``frame_seconds`` the time per frame, ``pose_cov`` the
-        window marginal at exit (conditioned on the held poses in ``"fix"`` mode, hence
-        optimistic), from the factor of the frame's last Gauss-Newton step (the Hessian one
-        step before the final estimate, with the Levenberg-Marquardt damping: a cheap
-        approximation). Landmark covariances are not computed.
-
-    Raises
-    ------
-    ValueError
-        A bad first pose or calibration.
-    TypeError
-        ``config`` is not a :class:`SmootherConfig` (e.g. a ``FilterConfig``).
+        ``mode="window"``; ``world_T_imu`` holds each pose as estimated when it left the window
+        (the last window's for its frames), ``pose_cov`` the window marginal at exit
+        (conditioned on the held poses in ``"fix"`` mode, hence optimistic) from the factor of
+        the frame's last, damped step (a cheap approximation). No landmark covariances.
     """
     config = as_smoother_config(config, "smooth_window")
     first = np.eye(4) if world_T_imu0 is None else check_trajectory(np.asarray(world_T_imu0)[None], 1,
@@ -289,12 +256,9 @@ def _run_window(dataset, world_T_imu0, camera, config):
 
 
 def _final_landmarks(dataset, state, config):
-    """The map, with what the window never estimated left out; the landmark drop counts.
-
-    A landmark whose usable observations all lie below ``min_disparity`` was never
-    triangulated (too far); one left with fewer than ``min_observations`` usable observations
-    (e.g. all rejected as outliers) is dropped (too few). The usable observations of both become ``OBS_DROPPED``
-    in ``state.status``, as in the batch.
+    """The map without what the window never estimated, and the counts ``landmarks_too_far`` (never
+    triangulated: all below ``min_disparity``) and ``landmarks_too_few`` (below
+    ``min_observations``); their usable observations become ``OBS_DROPPED``, as in the batch.
     """
     status, M = state.status, dataset.num_landmarks
     used = np.bincount(dataset.obs_ids, status == OBS_USED, M)

@@ -1,16 +1,10 @@
 """The filter stepper: step a filter forwards and backwards in time and watch it work.
 
-Four modules, from the model up:
-
-* :mod:`~visla_edu.stepper.model` - :class:`Stepper`, the filter with its history (no GUI
-  import; re-exported here with the names the views read);
-* :mod:`~visla_edu.stepper.figure` - ``StepperFigure``, the matplotlib figure (PNG);
-* :mod:`~visla_edu.stepper.widget` - ``StepperWidget``, the ipywidgets controls around it;
-* :mod:`~visla_edu.stepper.app` - ``serve``, the widget as a Voila page
-  (``visla-edu stepper``).
-
-Importing this package loads neither matplotlib nor ipywidgets; import the view modules by
-name::
+Modules, from the model up: :mod:`~visla_edu.stepper.model` (:class:`Stepper`, the filter
+with its history, re-exported here), :mod:`~visla_edu.stepper.figure` (``StepperFigure``, the
+matplotlib figure), :mod:`~visla_edu.stepper.widget` (``StepperWidget``, the ipywidgets
+controls), :mod:`~visla_edu.stepper.app` (``serve``: the widget as a Voila page,
+``visla-edu stepper``). Importing this package loads neither matplotlib nor ipywidgets::
 
     from visla_edu.stepper.widget import StepperWidget
     StepperWidget("sim")

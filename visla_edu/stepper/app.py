@@ -2,7 +2,7 @@
 
     visla-edu stepper --port 8866          # or: python -c "from visla_edu.stepper.app import serve; serve(wait=True)"
 
-The page is ``visla_edu/stepper_app.ipynb`` (package data), one cell that shows a
+The page is ``visla_edu/stepper_app.ipynb`` (package data): one cell showing a
 :class:`~visla_edu.stepper.widget.StepperWidget`.
 """
 
@@ -17,13 +17,12 @@ __all__ = ["serve", "app_notebook_path"]
 
 
 def app_notebook_path():
-    """Path of the standalone stepper page (``stepper_app.ipynb``, shipped in the package).
+    """Path of the standalone stepper page, ``stepper_app.ipynb`` in the installed package.
 
     Returns
     -------
     pathlib.Path
-        ``visla_edu/stepper_app.ipynb`` in the installed package (absolute, symbolic links
-        resolved); its existence is not checked.
+        Absolute, symbolic links resolved; its existence is not checked.
     """
     return Path(__file__).resolve().parent.parent / "stepper_app.ipynb"
 
@@ -35,24 +34,21 @@ def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None,
     ----------
     port : int
     open_browser : bool
-        Let Voila open the page in a browser.
     data_dir : str or os.PathLike, optional
         Folder of the course files, passed to the page as ``VISLA_EDU_DATA``.
-    dataset : str, optional
-        Dataset the page opens with (default ``"sim"``), via ``VISLA_EDU_STEPPER_DATASET``.
-    mode : str, optional
-        Filter mode the page opens with (default ``"slam"``), via ``VISLA_EDU_STEPPER_MODE``.
+    dataset, mode : str, optional
+        What the page opens with (default ``"sim"``, ``"slam"``), via
+        ``VISLA_EDU_STEPPER_DATASET`` and ``VISLA_EDU_STEPPER_MODE``.
     wait : bool
-        Block until the server exits (Ctrl-C or a SIGTERM, e.g. ``kill``, stops it, never
-        leaving Voila running behind); otherwise return at once.
+        Block until the server exits (Ctrl-C or a SIGTERM stops it, never leaving Voila
+        running behind); otherwise return at once.
     **popen_options
-        Passed to :class:`subprocess.Popen` (e.g. ``stdout=``, ``stderr=`` to capture the log).
+        Passed to :class:`subprocess.Popen` (e.g. ``stdout=``, ``stderr=``).
 
     Returns
     -------
     subprocess.Popen
-        The Voila process (the page is at ``http://localhost:<port>/``); stop it with
-        ``terminate()``.
+        The Voila process (the page is at ``http://localhost:<port>/``; ``terminate()`` stops it).
     """
     notebook = app_notebook_path()
     if not notebook.is_file():

@@ -1,7 +1,5 @@
-"""The stepper's figure: one persistent matplotlib figure, redrawn by moving its artists.
-
-:class:`StepperFigure` reads a :class:`~visla_edu.stepper.Stepper` (the model) and renders
-PNG bytes; it has no ipywidgets dependency, so it can be used (and tested) on its own.
+"""The stepper's figure: one persistent matplotlib figure that renders a
+:class:`~visla_edu.stepper.Stepper` to PNG bytes (no ipywidgets: usable and testable alone).
 """
 
 import contextlib
@@ -38,32 +36,27 @@ _STATUS_STYLE = {  # status -> (marker, colour, label)
 class StepperFigure:
     """One persistent matplotlib figure of a :class:`Stepper`, redrawn by updating its artists.
 
-    Panels: the top-down map (estimated trajectory, dead reckoning and ground truth, the
-    pose covariance ellipse, the map built so far, the active landmarks with their ellipses),
-    the current stereo frame (left and right image: observed and predicted pixels, the
-    innovations, gated outliers) and NIS/dof over time with the 95% band of ``chi2(dof)/dof``.
+    Panels: the top-down map (estimate, dead reckoning, ground truth, the pose covariance
+    ellipse, the map so far, the active landmarks with their ellipses), the stereo frame (left
+    and right: observed and predicted pixels, innovations, gated outliers) and NIS/dof over
+    time with the 95% band of ``chi2(dof)/dof``.
 
-    Speed: the right-hand panels' axes, ticks and legends are drawn once into a background,
-    the map's axes, ticks and ground truth into a second one (redrawn only when the map view
-    moves, its legend pasted from cached pixels); each frame restores that background and
-    draws only the time-dependent artists on top (blitting on the Agg canvas), then encodes
-    the PNG. Text is slow to render, so besides the title the per-frame numbers are only in
-    :attr:`captions` unless ``annotate=True`` (the widget shows them as HTML).
+    What does not change is drawn once into cached backgrounds (the map's redrawn only when its
+    view moves, :meth:`draw`); each frame blits the time-dependent artists on top. Text is slow,
+    so besides the title the per-frame numbers are only in :attr:`captions` unless ``annotate``.
 
     Parameters
     ----------
-    figsize : (float, float)
-        Inches.
-    dpi : float
-        Resolution of the rendered PNG.
+    figsize, dpi : (float, float), float
+        Inches; the PNG's resolution.
     n_sigma : float
         Size of the covariance ellipses.
     follow : bool
-        Map view around the current pose (at least ``follow_radius`` metres each way) instead
-        of the whole drive. The view moves in jumps when the pose nears its edge.
+        Map view around the current pose (at least ``follow_radius`` metres each way, moving
+        in jumps when the pose nears its edge) instead of the whole drive.
     follow_radius : float
     annotate : bool
-        Also draw the per-frame captions (observation counts, NIS, ellipse size) in the figure.
+        Also draw the captions in the figure.
 
     Attributes
     ----------
@@ -370,11 +363,7 @@ class StepperFigure:
                 a.set_visible(True)
 
     def draw(self):
-        """Render onto the Agg canvas: restore the cached background, draw the time-dependent artists.
-
-        The backgrounds are rebuilt only when stale: the base (everything but the map and the
-        dynamic artists) after :meth:`setup`, the map's when its view limits change.
-        """
+        """Render onto the Agg canvas: cached background (rebuilt when stale), then the time-dependent artists."""
         canvas = self.fig.canvas
         if self._base is None or self._base_state != self._setup_serial:
             with self._hidden(self._dynamic + [self.ax_map]):

@@ -1,18 +1,14 @@
 """The filter stepper's model: a filter you can move through in time, forwards and backwards.
 
-A :class:`Stepper` owns one filter object (see :func:`visla_edu.run.make_filter`) and the
-history of what it produced: the :class:`~visla_edu.filters.StepRecord` of every frame
-processed so far (each record is a small snapshot: pose, pose covariance, the frame's
-observations and the active landmarks). The *frontier* is the last frame processed.
+A :class:`Stepper` owns one filter (:func:`visla_edu.run.make_filter`) and the
+:class:`~visla_edu.filters.StepRecord` of every frame processed so far (a small snapshot: pose,
+pose covariance, the frame's observations, the active landmarks). The *frontier* is the last
+frame processed: ``goto(t)`` reads the history up to it, and beyond it steps the filter to
+``t`` and no further (a step forward costs one filter step, never a re-run). Changing the
+dataset, the mode or the noise settings resets the filter to frame 0.
 
-* ``goto(t)`` with ``t <= frontier`` only reads the history (no filter work);
-* ``goto(t)`` with ``t > frontier`` steps the filter from the frontier to ``t`` and no
-  further, so a step forward costs one filter step, never a re-run;
-* changing the dataset, the mode or the noise settings resets the filter to frame 0.
-
-This module is the model behind the view (:mod:`visla_edu.stepper.figure`,
-:mod:`visla_edu.stepper.widget`); it has no ipywidgets or matplotlib dependency, so it can
-be scripted and tested on its own::
+It imports neither ipywidgets nor matplotlib (the views: :mod:`visla_edu.stepper.figure`,
+:mod:`visla_edu.stepper.widget`), so it can be scripted and tested on its own::
 
     >>> from visla_edu.stepper import Stepper
     >>> s = Stepper("sim-tiny", mode="slam")
@@ -24,10 +20,8 @@ be scripted and tested on its own::
     >>> s.goto(3) is s.records[3]  # stepping back reads the history
     True
 
-The filter need not be the library's: ``Stepper(dataset, mode, config, filter_factory=f)``
-steps ``f(dataset, config)`` instead (``config`` with its ``"auto"`` settings measured), any
-object with the small interface :class:`SteppableFilter` describes -- a student's own filter,
-for instance (notebook 12).
+``Stepper(dataset, mode, config, filter_factory=f)`` steps ``f(dataset, config)`` instead: any
+:class:`SteppableFilter`, e.g. a student's own filter (notebook 12).
 """
 
 import time
@@ -70,20 +64,16 @@ _EXTRA_SIMULATED = ("sim-small", "sim-tiny")
 
 
 def dataset_choices(data_dir=None):
-    """Dataset names to offer in a menu, each with a label: ``[(label, name), ...]``.
-
-    Everything :func:`visla_edu.data.available` lists (course files found in the data
-    directory, ``"10"`` also as its labelled stand-in, ``"sim"``), then the smaller
-    simulated drives ``"sim-small"`` and ``"sim-tiny"``.
+    """Dataset names and labels for a menu: :func:`visla_edu.data.available`'s, then ``"sim-small"``, ``"sim-tiny"``.
 
     Parameters
     ----------
     data_dir : str or os.PathLike, optional
-        Folder of the course files (default: ``VISLA_EDU_DATA``, see :func:`visla_edu.data.data_dir`).
+        Default: :func:`visla_edu.data.data_dir`.
 
     Returns
     -------
-    list of (str, str)
+    list of (label, name)
     """
     from visla_edu import data
 
@@ -105,10 +95,9 @@ def dataset_choices(data_dir=None):
 
 
 def world_position_covariance(world_T_imu, pose_cov):
-    """Covariance of the IMU position in the world frame, shape (3, 3).
+    """World-frame covariance of the IMU position, ``R Sigma_vv R^T``, shape (3, 3).
 
-    With the right perturbation ``delta = [v; w]`` (:mod:`visla_edu.lie`), the position is
-    ``p = p_mu + R_mu v`` to first order, so its covariance is ``R Sigma_vv R^T``.
+    To first order ``p = p_mu + R_mu v`` (right perturbation ``[v; w]``, see :mod:`visla_edu.lie`).
 
     Parameters
     ----------
@@ -121,27 +110,22 @@ def world_position_covariance(world_T_imu, pose_cov):
 
 @runtime_checkable
 class SteppableFilter(Protocol):
-    """The minimal interface of a filter the :class:`Stepper` can step (a filter factory's product).
-
-    The library's filters (:func:`visla_edu.run.make_filter`) have it; so can a student's own.
+    """The interface of a filter the :class:`Stepper` can step (the library's filters have it).
 
     Attributes
     ----------
     config : visla_edu.filters.FilterConfig
-        The settings in use, resolved (no ``"auto"`` left): the stepper's noise sliders show
-        them and the dead-reckoning reference uses its ``imu_lag``. The factory receives this
-        config; keeping it as the attribute is enough.
+        The resolved settings the factory received (keeping them is enough): the noise sliders
+        show them, the dead-reckoning reference uses their ``imu_lag``.
 
     Methods
     -------
     step() -> visla_edu.filters.StepRecord
-        Process the next frame and return its record: frames ``0, 1, 2, ...`` in order, one
-        per call (``record.t`` is the frame), the pose in ``record.world_T_imu`` (4, 4) with
-        its covariance ``record.pose_cov`` (6, 6, right perturbation ``[v; w]``), the frame's
-        observations with their status codes, and the active landmarks the map view draws
-        (empty arrays are fine). The stepper calls it only while frames remain.
-
-    Raises from ``step()`` propagate: the stepper stays at the last good frame.
+        The next frame's record (frames ``0, 1, 2, ...``, one per call, only while frames
+        remain): ``t``, ``world_T_imu`` (4, 4) and ``pose_cov`` (6, 6, right perturbation
+        ``[v; w]``), the frame's observations with their status codes, the active landmarks the
+        map draws (empty arrays are fine). What it raises propagates; the stepper stays at the
+        last good frame.
     """
 
     config: FilterConfig
@@ -156,36 +140,30 @@ class Stepper:
     Parameters
     ----------
     dataset : str or visla_edu.dataset.Dataset
-        A name :func:`visla_edu.data.load` understands (``"sim-tiny"``, ``"03"``, ``"10"``...)
-        or a loaded dataset.
+        A name :func:`visla_edu.data.load` understands (``"sim-tiny"``, ``"03"``...) or a dataset.
     mode : {"deadreckon", "mapping", "vio", "slam"}
-        One of :data:`visla_edu.codes.MODES`.
     config : visla_edu.filters.FilterConfig, optional
     data_dir : str or os.PathLike, optional
         Folder of the course files when ``dataset`` is a name.
     blas_threads : int or None
-        BLAS threads while the filter steps (see :func:`visla_edu.run.limit_blas_threads`).
+        BLAS thread limit while the filter steps (:func:`visla_edu.run.limit_blas_threads`).
     filter_factory : callable, optional
-        ``filter_factory(dataset, config) -> filter`` builds the filter to step instead of
-        :func:`visla_edu.run.make_filter` (``config`` is resolved: no ``"auto"`` left); the
-        filter needs only the :class:`SteppableFilter` interface. It is called again at every
-        reset (a new dataset or new noise settings). ``mode`` then only labels the views.
+        ``filter_factory(dataset, config) -> filter``, a :class:`SteppableFilter` (``config``
+        resolved), instead of :func:`visla_edu.run.make_filter`; called again at every reset.
+        ``mode`` then only labels the views.
 
     Attributes
     ----------
     records : list of StepRecord
         ``records[k]`` is frame ``k``'s snapshot, for ``k = 0 .. frontier``.
     filter : SteppableFilter
-        The filter object (a library mode, or the factory's product); its state is at the frontier.
-    filter_factory : callable or None
+        Its state is at the frontier.
     steps_computed : int
         Filter steps run since the last reset (each frame is computed once).
     last_update_seconds : float
         Wall time of the last :meth:`goto`.
     generation : int
         Counts the resets (0 after construction); views redraw their static parts when it changes.
-    blas_threads : int or None
-        The BLAS thread limit :meth:`goto` applies while it steps the filter.
     """
 
     def __init__(self, dataset="sim-tiny", mode=SLAM, config=None, data_dir=None, blas_threads=1,
@@ -225,7 +203,7 @@ class Stepper:
         return self.filter.config
 
     def configure(self, dataset=None, mode=None, config=None, **settings):
-        """Change the dataset, mode or noise settings; the filter restarts at frame 0.
+        """Change the dataset, mode or noise settings; if anything changed, the filter restarts at frame 0.
 
         Parameters
         ----------
@@ -234,12 +212,12 @@ class Stepper:
         config : FilterConfig, optional
             Replaces the whole configuration.
         **settings
-            Single :class:`FilterConfig` fields, e.g. ``sigma_pixel=4.0`` (applied after ``config``).
+            :class:`FilterConfig` fields, e.g. ``sigma_pixel=4.0`` (applied after ``config``).
 
         Returns
         -------
         bool
-            True if anything changed (and the filter was reset).
+            True if anything changed.
         """
         new_dataset = self._dataset if dataset is None else self._load(dataset)
         new_mode = self._mode if mode is None else self._check_mode(mode)
@@ -297,26 +275,19 @@ class Stepper:
         self.goto(value)
 
     def goto(self, t):
-        """Move to frame ``t`` and return its record.
+        """Move to frame ``t`` and return its record (history up to the frontier, then filter steps).
 
-        Frames up to the frontier are read from the history; beyond it the filter is stepped
-        from the frontier to ``t`` (only the missing frames are computed).
+        What the filter raises on the way (e.g. ``FilterDivergedError``) propagates; the stepper
+        stays at the last good frame.
 
         Parameters
         ----------
         t : int
-            ``0 <= t < num_frames``.
+            ``0 <= t < num_frames``, else IndexError.
 
         Returns
         -------
         StepRecord
-
-        Raises
-        ------
-        IndexError
-            ``t`` out of range.
-        visla_edu.filters.FilterDivergedError
-            The filter diverged on the way; the stepper stays at the last good frame.
         """
         if isinstance(t, (bool, np.bool_)) or int(t) != t:
             raise TypeError(f"Stepper.goto: t must be an integer frame index, got {t!r}")
@@ -390,10 +361,8 @@ class Stepper:
         return self._readonly(self._arrays.nis_dof[: self._t + 1])
 
     def nis_band_series(self, probability=0.95):
-        """The ``probability`` band of ``chi2(dof)/dof`` for frames ``0..t``: lower, upper (t + 1,).
-
-        NaN where there was no update (:func:`visla_edu.metrics.nis_band`). NIS/dof of a
-        consistent filter stays inside it about ``probability`` of the time.
+        """The ``probability`` band of ``chi2(dof)/dof`` (:func:`visla_edu.metrics.nis_band`) for frames
+        ``0..t``: lower, upper (t + 1,), NaN where there was no update.
         """
         if probability not in self._bands:
             self._bands[probability] = [0, np.full(self.num_frames, np.nan), np.full(self.num_frames, np.nan)]
@@ -434,10 +403,8 @@ class Stepper:
         return world_position_covariance(rec.world_T_imu, rec.pose_cov)
 
     def retired_landmarks(self):
-        """Landmarks that left the active set by the current frame: ids (k,) and means (k, 3).
-
-        Each keeps the estimate it had in its last active frame; together with the current
-        record's active landmarks this is the map built so far.
+        """Landmarks that left the active set by the current frame, with their last active estimates:
+        ids (k,), means (k, 3). With the record's active landmarks, the map built so far.
         """
         ids = np.asarray(self._retired_order[: self._retired_count[self._t]], dtype=np.int64)
         return ids, self._retired_means[ids]

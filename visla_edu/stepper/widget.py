@@ -1,17 +1,12 @@
-"""The filter stepper as an interactive view (ipywidgets + matplotlib).
-
-In a notebook, one line shows it::
+"""The filter stepper as an interactive view (ipywidgets + matplotlib)::
 
     from visla_edu.stepper.widget import StepperWidget; StepperWidget("sim")
 
 As a page of its own (Voila): ``visla-edu stepper --port 8866`` (:mod:`visla_edu.stepper.app`).
 
-The view is thin: every control either re-configures the :class:`~visla_edu.stepper.Stepper`
-(dataset, mode, noise settings: the filter restarts from frame 0) or sets its time (slider,
-play, step buttons), and then the figure is redrawn. The figure is one persistent matplotlib
-figure (:class:`~visla_edu.stepper.figure.StepperFigure`) whose artists are updated in place and rendered to a PNG that
-replaces the content of an ``ipywidgets.Output``; no ipympl is needed and the same image shows
-in JupyterLab, classic notebooks and Voila.
+Every control re-configures the :class:`~visla_edu.stepper.Stepper` (dataset, mode, noise:
+the filter restarts from frame 0) or sets its time; the figure is then rendered to a PNG in
+an ``ipywidgets.Output``: no ipympl, the same image in JupyterLab, classic notebooks and Voila.
 """
 
 import base64
@@ -71,20 +66,12 @@ class StepperWidget(w.VBox):
     Parameters
     ----------
     dataset : str or Dataset
-        Initial dataset (a name from :func:`visla_edu.stepper.dataset_choices`, e.g. ``"sim"``,
-        ``"sim-tiny"``, ``"03"``, ``"10"``, or a loaded dataset).
-    mode : {"deadreckon", "mapping", "vio", "slam"}
-    config : FilterConfig, optional
-    data_dir : str or os.PathLike, optional
-        Folder of the course files (default: ``VISLA_EDU_DATA``).
-    filter_factory : callable, optional
-        ``filter_factory(dataset, config) -> filter``: step your own filter instead of the
-        library's (see :class:`visla_edu.stepper.Stepper` and
-        :class:`visla_edu.stepper.SteppableFilter`). ``mode`` then labels it and the mode menu
-        is disabled; the dataset menu and the noise sliders rebuild it through the factory,
-        and any error its ``step()`` raises is shown under the figure.
+        Initial dataset, a name of :func:`visla_edu.stepper.dataset_choices` or a loaded one.
+    mode, config, data_dir, filter_factory
+        As :class:`visla_edu.stepper.Stepper`. With a ``filter_factory`` the mode menu is
+        disabled, and any error its ``step()`` raises is shown under the figure.
     **figure_options
-        Passed to :class:`~visla_edu.stepper.figure.StepperFigure` (``figsize``, ``dpi``, ``n_sigma``, ``follow``...).
+        Passed to :class:`~visla_edu.stepper.figure.StepperFigure` (``figsize``, ``dpi``, ``follow``...).
 
     Attributes
     ----------
@@ -92,21 +79,18 @@ class StepperWidget(w.VBox):
         The model; the view only calls ``goto``/``configure`` on it.
     figure : visla_edu.stepper.figure.StepperFigure
     dataset_dropdown, mode_dropdown, view_toggle : ipywidgets selection widgets
-    play : ipywidgets.Play
-        Linked to ``time_slider``.
-    time_slider : ipywidgets.IntSlider
+    play, time_slider : ipywidgets.Play, ipywidgets.IntSlider
+        Linked.
     first_button, back_button, step_button, jump_button, end_button : ipywidgets.Button
         Frame 0, one back, one forward, ten forward, the last frame.
     noise_sliders : dict of str -> slider
         One per :data:`visla_edu.stepper.NOISE_FIELDS`; a change re-runs the filter.
     defaults_button : ipywidgets.Button
-        Restore the default noise settings.
     status : ipywidgets.HTML
         ``t = ...`` and what the current frame did; errors show here.
     output : ipywidgets.Output
         Holds the rendered figure.
     render_count : int
-        Figures rendered so far.
     last_redraw_seconds, last_update_seconds : float
     """
 
@@ -313,9 +297,8 @@ def _slider_value(value):
 
 
 def _noise_slider(name, value, default):
-    """Slider of one noise setting: linear for the gate probability, log scale for the sigmas.
-
-    The range is :data:`NOISE_RANGES`, widened to hold the current value and the default.
+    """Slider of one noise setting (linear for the gate probability, log scale for the sigmas) over
+    :data:`NOISE_RANGES`, widened to hold the current value and the default.
     """
     lo, hi = NOISE_RANGES[name]
     label, tip = _NOISE_DESCRIPTIONS[name]
