@@ -42,7 +42,7 @@ OBS_NEW = 2
 OBS_NO_DEPTH = 3
 #: Disparity too small to initialise the landmark (not yet in the state; filters).
 OBS_FAR = 4
-#: Not used by this mode (dead reckoning, landmark stride, repeated frame).
+#: Not used by this mode (dead reckoning, landmark stride, repeated frame, stale copy).
 OBS_IGNORED = 5
 #: Held for its track's multi-frame update (joint SLAM with clones: a landmark outside the state);
 #: the track's outcome, used or gated, is counted when the track is used

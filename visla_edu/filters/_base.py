@@ -14,7 +14,7 @@ import numpy as np
 
 from visla_edu import ekf, motion
 from visla_edu.codes import OBS_FAR, OBS_GATED, OBS_IGNORED, OBS_NEW, OBS_NO_DEPTH, OBS_USED
-from visla_edu.dataset import repeated_frames
+from visla_edu.dataset import repeated_frames, stale_copies
 
 __all__ = ["FilterDivergedError", "StepRecord", "MAX_DISTANCE", "MIN_DEPTH"]
 
@@ -133,6 +133,8 @@ class FilterBase(abc.ABC):
         self.landmark_cov = np.full((M, 3, 3), np.nan)
         self.last_frame = dataset.track_spans()[:, 1]
         self.skip_frames = set(repeated_frames(dataset)) if config.skip_repeated_frames else set()
+        self.stale = stale_copies(dataset) if config.skip_stale_copies else np.zeros(dataset.num_observations, bool)
+        self._frame_stale = np.zeros(0, dtype=bool)
         self.record_landmarks = True
 
     # -- the hooks step() calls ---------------------------------------------------------
@@ -179,6 +181,7 @@ class FilterBase(abc.ABC):
         if self.t > 0:
             self._predict(self.step_twists[self.t - 1], self.taus[self.t - 1])
         ids, z = self.dataset.observations(self.t)
+        self._frame_stale = self.stale[self.dataset.frame_ptr[self.t]:self.dataset.frame_ptr[self.t + 1]]
         status = np.full(len(ids), OBS_IGNORED)
         z_pred = np.full((len(ids), 4), np.nan)
         nis, dof = (np.nan, 0) if self.t in self.skip_frames else self._update(ids, z, status, z_pred)
@@ -193,11 +196,11 @@ class FilterBase(abc.ABC):
         self._predict_covariance(F, W)
 
     def _usable(self, ids, z, status):
-        """Mark no-depth observations; return the mask of usable ones (in the stride, positive disparity)."""
-        in_stride = ids % self.config.landmark_stride == 0
+        """Mark no-depth observations; return the usable ones (in the stride, no stale copy, positive disparity)."""
+        wanted = (ids % self.config.landmark_stride == 0) & ~self._frame_stale
         disparity = self.camera.disparity(z)
-        status[in_stride & (disparity <= 0)] = OBS_NO_DEPTH
-        return in_stride & (disparity > 0)
+        status[wanted & (disparity <= 0)] = OBS_NO_DEPTH
+        return wanted & (disparity > 0)
 
     def _known(self, ids, usable):
         """Mask of usable observations whose landmark has a mean already."""

@@ -44,7 +44,7 @@ class CloneWindow:
         pending = usable & ~known
         self.buffer.add(ids[pending], z[pending], self.t)
         status[pending] = OBS_DELAYED
-        nis, dof = self._use_tracks(ids[usable])
+        nis, dof = self._use_tracks(ids[usable | self._frame_stale])  # a stale copy does not end its track
         prediction = self._gate_known(ids, z, status, z_pred, known)
         use = status == OBS_USED
         if np.any(use):

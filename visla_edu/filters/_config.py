@@ -139,6 +139,10 @@ class FilterConfig:
     skip_repeated_frames : bool
         Modes: mapping, vio, slam. No update at frames repeating the previous one's observations
         exactly (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
+    skip_stale_copies : bool
+        Modes: mapping, vio, slam. Leave out the observations that repeat their landmark's pixels of
+        the frame before bit for bit (:func:`visla_edu.dataset.stale_copies`: they claim the scene did
+        not move); in the clone window such a gap does not end the track.
     landmark_stride : int
         Modes: mapping, vio, slam. Use only the landmarks whose index is a multiple of this (the
         textbook workaround for the dense filter's memory).
@@ -193,6 +197,7 @@ class FilterConfig:
     mapping_motion_noise: bool = setting(True, bool)
     vio_refine_landmarks: bool = setting(False, bool)
     skip_repeated_frames: bool = setting(True, bool)
+    skip_stale_copies: bool = setting(True, bool)
     landmark_stride: int = setting(1, int, 1, 1_000_000, why="1 uses every landmark")
     # "invariant": consistent where the right perturbation becomes overconfident (notebook 10).
     slam_error: str = setting("invariant", str, words=("invariant", "right"),

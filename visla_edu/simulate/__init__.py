@@ -35,13 +35,15 @@ The track model (vectorised: the one loop runs over track *age*, not frames):
 
 Modules: ``_config`` (:class:`SimulationConfig`, with the quirks of real files it can mimic,
 presets, :func:`default_rig`), ``_motion`` (the car's motion, IMU noise), ``_landmarks``,
-``_tracks`` (the track model), ``_drive`` (whole drives). Everything public is re-exported here.
+``_tracks`` (the track model), ``_drive`` (whole drives), ``_stale`` (stale copies of a frame's tracks,
+:func:`with_stale_copies`). Everything public is re-exported here.
 """
 
 from visla_edu.simulate._config import PRESETS, SimulationConfig, default_rig, make_config
 from visla_edu.simulate._drive import simulate_along_drive, simulate_drive
 from visla_edu.simulate._landmarks import place_landmarks
 from visla_edu.simulate._motion import add_imu_noise, lag_samples, simulate_motion
+from visla_edu.simulate._stale import with_stale_copies
 from visla_edu.simulate._tracks import SimulatedTracks, simulate_tracks
 
 __all__ = [
@@ -57,4 +59,5 @@ __all__ = [
     "simulate_tracks",
     "simulate_drive",
     "simulate_along_drive",
+    "with_stale_copies",
 ]

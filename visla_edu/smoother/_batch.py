@@ -159,7 +159,7 @@ def _setup(dataset, world_T_imu, landmarks, camera, config):
     known = np.all(np.isfinite(initial), axis=1)
     use = (status == OBS_USED) & (known & ~far)[dataset.obs_ids]
     rejected = {"nonpositive_disparity": int(np.sum(status == OBS_NO_DEPTH)),
-                "repeated_frame": int(np.sum(status == OBS_IGNORED)),
+                "ignored": int(np.sum(status == OBS_IGNORED)),
                 "landmarks_no_position": int(np.sum(~known & (np.bincount(dataset.obs_ids, status == OBS_USED,
                                                                           dataset.num_landmarks) > 0))),
                 "landmarks_too_far": int(far.sum())}

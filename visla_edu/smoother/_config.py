@@ -21,7 +21,8 @@ WINDOW_MODES = ("fix", "marginalize")
 #: is multiplied by the filter's ``pixel_noise_inflation``.
 FROM_FILTER = {"sigma_pixel": "sigma_pixel", "sigma_linear_velocity": "sigma_linear_velocity",
                "sigma_angular_velocity": "sigma_angular_velocity", "imu_lag": "imu_lag",
-               "min_disparity": "min_init_disparity", "skip_repeated_frames": "skip_repeated_frames"}
+               "min_disparity": "min_init_disparity", "skip_repeated_frames": "skip_repeated_frames",
+               "skip_stale_copies": "skip_stale_copies"}
 #: The filter settings the smoothers read; the sliding window uses no other filter setting but
 #: ``extrinsic_correction``.
 FILTER_SETTINGS = tuple(FROM_FILTER.values()) + ("pixel_noise_inflation",)
@@ -44,7 +45,7 @@ class SmootherConfig:
 
     Attributes
     ----------
-    sigma_pixel, sigma_linear_velocity, sigma_angular_velocity, imu_lag, skip_repeated_frames
+    sigma_pixel, sigma_linear_velocity, sigma_angular_velocity, imu_lag, skip_repeated_frames, skip_stale_copies
         As the filters': ``V = sigma_pixel^2 I4``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)``
         (a velocity sigma may be per axis), the step ``t -> t+1`` uses ``u[t + imu_lag]``.
     loss : {"cauchy", "huber", "none"}
@@ -110,6 +111,7 @@ class SmootherConfig:
     min_depth: float = setting(0.5, float, 0.0, unit="m")
     min_disparity: float = setting(3.0, float, 0.0, unit="px")
     skip_repeated_frames: bool = setting(True, bool)
+    skip_stale_copies: bool = setting(True, bool)
     pose_covariance: bool = setting(True, bool)
     landmark_covariance: bool = setting(True, bool)
     window_size: int = setting(20, int, 2, why="two frames hold one motion step")

@@ -18,7 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from visla_edu.codes import OBS_IGNORED, OBS_NO_DEPTH, OBS_USED
-from visla_edu.dataset import repeated_frames
+from visla_edu.dataset import repeated_frames, stale_copies
 
 __all__ = ["PosePrior", "Problem", "build_problem", "observation_status", "far_landmarks", "triangulate_landmarks",
            "rig_camera"]
@@ -176,13 +176,16 @@ def observation_status(dataset, config, frames=None):
     """Which dataset observations a smoother may use: an ``OBS_*`` code each (:mod:`visla_edu.codes`), (N,) int8.
 
     ``OBS_NO_DEPTH`` for a non-positive disparity, ``OBS_IGNORED`` in a repeated frame
-    (``config.skip_repeated_frames``), else ``OBS_USED``. ``frames``: ``dataset.observation_frames()``.
+    (``config.skip_repeated_frames``) and for a stale copy (``config.skip_stale_copies``,
+    :func:`visla_edu.dataset.stale_copies`), else ``OBS_USED``. ``frames``: ``dataset.observation_frames()``.
     """
     frames = dataset.observation_frames() if frames is None else frames
     status = np.full(dataset.num_observations, OBS_USED, dtype=np.int8)
     status[dataset.disparity() <= 0] = OBS_NO_DEPTH
     if config.skip_repeated_frames:
         status[np.isin(frames, repeated_frames(dataset))] = OBS_IGNORED
+    if config.skip_stale_copies:
+        status[stale_copies(dataset)] = OBS_IGNORED
     return status
 
 

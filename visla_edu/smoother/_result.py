@@ -40,7 +40,7 @@ class SmootherResult:
         camera: then the cost without them), the step norm, whether accepted, the damping.
     rejected : dict of int
         ``outliers`` (rejected by the chi-square test), ``nonpositive_disparity`` and
-        ``repeated_frame`` (observations never used), ``landmarks_no_position``,
+        ``ignored`` (observations never used: repeated frames, stale copies), ``landmarks_no_position``,
         ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far`` (landmarks
         dropped, see :class:`~visla_edu.smoother.SmootherConfig`).
     obs_status : ndarray of int8, shape (N,)

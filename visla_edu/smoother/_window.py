@@ -275,7 +275,7 @@ def _window_result(dataset, state, history, frame_seconds, config, total):
     landmarks, dropped = _final_landmarks(dataset, state, config)
     status = state.status
     rejected = {"nonpositive_disparity": int(np.sum(status == OBS_NO_DEPTH)),
-                "repeated_frame": int(np.sum(status == OBS_IGNORED)), "landmarks_no_position": 0, **dropped,
+                "ignored": int(np.sum(status == OBS_IGNORED)), "landmarks_no_position": 0, **dropped,
                 **state.dropped, "outliers": int(np.sum(status == OBS_GATED))}
     return SmootherResult(
         name=dataset.name, mode="window", time_stamps=dataset.time_stamps.copy(),
