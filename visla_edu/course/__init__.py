@@ -1,27 +1,14 @@
 """Course scaffolding: what the course ships to students and how it gets to them.
 
-* What the notebooks teach with: :mod:`visla_edu.course.checks` (the exercise checks),
-  :mod:`visla_edu.course.capstone` (notebook 12's filter loop over the student's functions),
-  :mod:`visla_edu.course.kalman` (the primer's linear Kalman filter) and
-  :mod:`visla_edu.course.numdiff` (the central differences a gradient check compares with).
-* ``notebooks/`` (:data:`STUDENT_NOTEBOOKS`), package data: the student edition of the course,
-  generated from the repository's ``solutions/`` by ``visla-edu release``
-  (:mod:`visla_edu.course.release`) and checked in. It is the only copy: the wheel carries it (and
-  nothing of the solutions), so a student who ``pip install``-ed the package has it.
-* :mod:`visla_edu.course.manifest`: what ``release`` last wrote into a folder, so that a
-  release never overwrites a notebook edited by hand.
-* :mod:`visla_edu.course.student`: ``visla-edu student DIR``, the student's own working folder:
-  copies of the student edition that are never overwritten, and a short README.
-* :mod:`visla_edu.course.project`: the summative project: the written assignment (``PROJECT.md``,
-  package data: :func:`~visla_edu.course.project.assignment_text`), the drive a submission is
-  graded on (:func:`~visla_edu.course.project.prepare_drive`), the measured rubric and
-  :func:`~visla_edu.course.project.grade`, what ``visla-edu project grade`` runs; ``_sandbox``
-  what a graded submission may use of visla_edu and how the rest is hidden, ``_grader_child``
-  the process that runs one submission, ``_runner`` starts it with its limits and reads what it
-  left, ``_report`` the figures, the reports and the summary table, ``commands`` the
-  ``visla-edu project`` command line.
-* :mod:`visla_edu.course.book`: ``visla-edu book DIR``, the course site (the student edition of
-  every notebook, executed, as static HTML that works offline).
+The notebooks teach with :mod:`~visla_edu.course.checks`, :mod:`~visla_edu.course.capstone`,
+:mod:`~visla_edu.course.kalman` and :mod:`~visla_edu.course.numdiff`. ``notebooks/``
+(:data:`STUDENT_NOTEBOOKS`, package data) is the student edition, generated from the repository's
+``solutions/`` by ``visla-edu release`` (:mod:`~visla_edu.course.release`,
+:mod:`~visla_edu.course.manifest`) and checked in: the only copy, which the wheel carries (and
+nothing of the solutions), so a student who ``pip install``-ed the package has it. ``visla-edu
+student`` (:mod:`~visla_edu.course.student`) copies it into a student's folder, ``visla-edu book``
+(:mod:`~visla_edu.course.book`) makes the course site, and :mod:`~visla_edu.course.project` is
+the summative project and its grader.
 
 Nothing is imported or read at import time (``visla-edu`` builds its parser without loading
 the grader).

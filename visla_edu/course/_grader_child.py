@@ -1,25 +1,18 @@
 """The process that runs one submission: ``python -m visla_edu.course._grader_child REQUEST.json``.
 
-:mod:`visla_edu.course._runner` starts one per submission, in a folder of its own, and
-:mod:`visla_edu.course.project` reads what it leaves there. In order, it
+Started by :mod:`visla_edu.course._runner` in a folder of its own, it reads the request
+(:func:`visla_edu.course._runner.write_request`), loads the drive and the config, lowers its
+limits (:func:`limit_resources`), hides the library (:mod:`visla_edu.course._sandbox`), then
+imports the submission, calls ``make_filter(dataset, config)`` and steps the filter once per
+frame, checking each record (:func:`check_record`) and writing where it is to ``progress``
+(``import``, ``make_filter``, ``frame N``). It leaves, for :mod:`visla_edu.course.project`:
 
-1. reads the request (JSON, :func:`visla_edu.course._runner.write_request`): the submission's
-   path, the drive file the grader prepared (no ground truth,
-   :func:`visla_edu.course.project.prepare_drive`), the settings, the limits;
-2. loads the drive and builds the :class:`~visla_edu.filters.FilterConfig`;
-3. lowers its resource limits for good (:func:`limit_resources`; the limits:
-   :mod:`visla_edu.course._runner`);
-4. hides the library (:func:`visla_edu.course._sandbox.hide_library`, ``block_imports``);
-5. imports the submission (writing ``progress``: ``import``), calls ``make_filter(dataset,
-   config)`` (``make_filter``) and steps the filter once per frame (``frame N``), checking
-   each :class:`~visla_edu.filters.StepRecord` (:func:`check_record`);
-6. writes ``estimate.npz`` (the frames done: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6),
-   ``nis`` (k,), ``nis_dof`` (k,), ``step_seconds`` (k,)) and ``outcome.json``.
-
-``outcome.json`` holds ``status`` (a key of :data:`STATUSES`), ``message`` (one line, without the
-submission's name: the parent adds it), ``frames`` done, ``seconds`` of the submission's own time,
-``hidden_calls`` (:data:`visla_edu.course._sandbox.HIDDEN_CALLS`), ``traceback`` (the text of
-the submission's error, for its report; ``""`` when there is none) and ``notes``.
+* ``estimate.npz``, the frames done: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6), ``nis``
+  (k,), ``nis_dof`` (k,), ``step_seconds`` (k,);
+* ``outcome.json``: ``status`` (a key of :data:`STATUSES`), ``message`` (one line, without the
+  submission's name: the parent adds it), ``frames`` done, ``seconds`` of the submission's own
+  time, ``hidden_calls`` (:data:`visla_edu.course._sandbox.HIDDEN_CALLS`), ``traceback`` (of the
+  submission's error, for its report; ``""`` if none) and ``notes``.
 """
 
 import json
@@ -60,17 +53,9 @@ class _Failure(Exception):
 
 
 def limit_resources(request):
-    """Lower this process's limits for good (Linux and macOS; nothing elsewhere).
+    """Lower this process's limits for good (Linux and macOS); return notes on those that could not be set.
 
-    Parameters
-    ----------
-    request : dict
-        ``memory_limit`` (bytes, or None), ``cpu_limit`` (s), ``file_limit`` (bytes).
-
-    Returns
-    -------
-    list of str
-        Notes on the limits that could not be set.
+    ``request``: ``memory_limit`` (bytes, or None), ``cpu_limit`` (s), ``file_limit`` (bytes).
     """
     try:
         import resource
@@ -93,7 +78,7 @@ def limit_resources(request):
 
 
 def _progress(out, text):
-    """Overwrite ``out/progress`` with ``text`` (where the submission is, for a time limit's message)."""
+    """Overwrite ``out/progress`` with ``text`` (for a time limit's message)."""
     (out / "progress").write_text(text)
 
 
@@ -121,7 +106,7 @@ def _import_submission(path):
 
 
 def _describe(err, path):
-    """``Type: message (line N of file.py)``, one line; the line is the submission's last in the traceback."""
+    """``Type: message (line N of file.py)``, one line, N the submission's last line in the traceback."""
     try:
         text = " ".join(str(err).split())
     except Exception:  # noqa: BLE001 - a submission's exception whose str() fails
@@ -133,7 +118,7 @@ def _describe(err, path):
 
 
 def _traceback_text(err, path):
-    """The traceback of the submission's error from its first frame in the submission's file (the grader's cut)."""
+    """The traceback of the submission's error from its first frame in the submission's file."""
     tb = err.__traceback__
     while tb is not None and tb.tb_frame.f_code.co_filename != str(path):
         tb = tb.tb_next
@@ -141,7 +126,7 @@ def _traceback_text(err, path):
 
 
 def check_filter(flt):
-    """Raise :class:`_Failure` ``wrong-type`` unless ``flt`` has the stepper's interface (``config``, ``step()``)."""
+    """Raise :class:`_Failure` ``wrong-type`` unless ``flt`` has the stepper's ``config`` and ``step()``."""
     kind = type(flt).__name__
     if not callable(getattr(flt, "step", None)):
         raise _Failure("wrong-type", f"make_filter returned a {kind} without a step() method (the interface: "
@@ -154,12 +139,8 @@ def check_filter(flt):
 def check_record(rec, t):
     """The pose (4, 4), covariance (6, 6), NIS and its dof of frame ``t``'s record, checked.
 
-    Raises
-    ------
-    _Failure
-        ``wrong-type`` (not a StepRecord, another frame, wrong shapes, not numbers),
-        ``non-finite`` (NaN or inf in the pose or its covariance) or ``not-se3`` (the pose is
-        not rigid to :data:`visla_edu.validation.POSE_RIGID_TOL`).
+    :class:`_Failure` ``wrong-type`` (not a StepRecord, another frame, wrong shapes, not numbers),
+    ``non-finite`` or ``not-se3`` (not rigid to :data:`visla_edu.validation.POSE_RIGID_TOL`).
     """
     if not isinstance(rec, StepRecord):
         raise _Failure("wrong-type", f"step() returned a {type(rec).__name__} at frame {t}, not a "
@@ -242,7 +223,7 @@ def _run_submission(path, dataset, config, trace, out):
 
 
 def _refused_first(status, message):
-    """A hidden call decides the outcome, whatever came after it (the submission may have caught its error)."""
+    """A hidden call decides the outcome, whatever came after it (the submission may have caught it)."""
     if not _sandbox.HIDDEN_CALLS or status == "refused":
         return status, message
     first = _sandbox.HIDDEN_CALLS[0]
@@ -263,13 +244,7 @@ def _load(request):
 
 
 def main(argv=None):
-    """Run the submission of the request file ``argv[0]``; write ``estimate.npz`` and ``outcome.json``.
-
-    Returns
-    -------
-    int
-        0 when the outcome was written (whatever the submission did).
-    """
+    """Run the submission of the request file ``argv[0]``; write the outcome; return 0 (whatever the submission did)."""
     argv = sys.argv[1:] if argv is None else argv
     request = json.loads(Path(argv[0]).read_text(encoding="utf-8"))
     out = Path(request["out"])

@@ -1,12 +1,11 @@
 """What the project grader writes: a report per submission with its figures, the summary, the table.
 
-``DIR/<name>/`` holds ``report.md``, ``trajectory.png`` (top-down, against the ground truth,
-dead reckoning and the library's filters), ``errors.png`` (position error over time),
-``consistency.png`` (pose NEES and NIS per degree of freedom with their chi-square bands),
-``estimate.npz`` (as the grading process wrote it, :mod:`visla_edu.course._grader_child`),
-``output.txt`` (what it printed) and, when it raised, ``traceback.txt``. ``DIR/summary.md`` and ``DIR/grades.csv`` list every submission.
-Figures are drawn on :class:`matplotlib.figure.Figure` objects (no pyplot state) and every
-file is written atomically.
+``DIR/<name>/``: ``report.md``, ``trajectory.png`` (top-down, with the ground truth, dead
+reckoning and the library's filters), ``errors.png`` (position error over time),
+``consistency.png`` (pose NEES and NIS per dof with their chi-square bands), ``estimate.npz``,
+``output.txt`` and, when it raised, ``traceback.txt``; ``DIR/summary.md`` and ``DIR/grades.csv``
+list every submission. Figures are :class:`matplotlib.figure.Figure` objects (no pyplot state);
+every file is written atomically.
 """
 
 import csv

@@ -46,9 +46,8 @@ def rubric_table():
 def accuracy_unscored(references):
     """Why accuracy is not scored on a drive (``""`` when it is), from the library's runs on it.
 
-    Not scored without ground truth, nor where dead reckoning alone earns the top band (the
-    KITTI drives of the 2019 release, whose velocities are nearly noise-free): such a drive
-    cannot show what the camera adds.
+    Not without ground truth, nor where dead reckoning alone earns the top band (the 2019 KITTI
+    drives, nearly noise-free): such a drive cannot show what the camera adds.
 
     Parameters
     ----------
@@ -72,11 +71,11 @@ def measured_points(measures, references, completed, simulated):
     ----------
     measures : visla_edu.course.project.Measures or None
     references : dict of str to visla_edu.course.project.Measures
-        The library's, by mode (``slam``, ``vio``, ``deadreckon``).
+        As :func:`accuracy_unscored`.
     completed : bool
         The submission ran every frame (status ``ok``).
     simulated : bool
-        The ground truth is a simulation's (see :data:`CONSISTENCY_BANDS`).
+        The ground truth is a simulation's (:data:`CONSISTENCY_BANDS`).
 
     Returns
     -------

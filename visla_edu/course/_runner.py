@@ -1,19 +1,16 @@
 """Start the grading process of one submission with its limits, and read what it left.
 
-:func:`run_submission` writes the request (:func:`write_request`), starts
-``python -m visla_edu.course._grader_child REQUEST`` in a folder and a process group of its
-own (its output, the submission's prints included, goes to ``output.txt`` there), waits for it
-with the time limit (:func:`wait_with_time_limit`: it starts counting when the child begins
-importing the submission, so the grader's own start-up is not the submission's time; then the
-whole group is killed), and reads the outcome (:func:`read_outcome`). A child that left no
-outcome is described by how it ended: killed at the time limit (``timeout``), by a signal or
-an early exit (``crashed``).
+:func:`run_submission` starts ``python -m visla_edu.course._grader_child REQUEST`` in a folder
+and a process group of its own (its output, the submission's prints included, to ``output.txt``
+there), waits with the time limit and reads the outcome; a child without one is reported by how
+it ended: at the time limit (``timeout``), by a signal or an early exit (``crashed``).
 
-**The limits** of a submission: the time limit, wall clock, for its import, ``make_filter``
-and every step together; CPU seconds of that plus :data:`CPU_MARGIN`; address space (None: no
-limit); :data:`FILE_LIMIT` bytes a file; no new processes or threads. The child sets all but
-the first on itself for good (:func:`visla_edu.course._grader_child.limit_resources`; Linux
-and macOS).
+**The limits** of a submission: the time limit, wall clock, for its import, ``make_filter`` and
+every step together (counted from the child's first ``progress``, so the grader's own start-up
+is not the submission's time; then the whole group is killed); CPU seconds of that plus
+:data:`CPU_MARGIN`; address space (None: no limit); :data:`FILE_LIMIT` bytes a file; no new
+processes or threads. The child sets all but the first on itself for good
+(:func:`visla_edu.course._grader_child.limit_resources`; Linux and macOS).
 """
 
 import json
@@ -60,16 +57,11 @@ _SIGNALS = {
 class ChildOutcome:
     """What one submission's grading process reported, or how it ended.
 
-    Attributes
-    ----------
-    status, message, frames, seconds, hidden_calls, traceback, notes
-        As in ``outcome.json`` (:mod:`visla_edu.course._grader_child`). Without it: ``status``
-        a key of :data:`EXIT_STATUSES`, ``seconds`` NaN.
-    arrays : dict of str to ndarray
-        ``estimate.npz`` (:mod:`visla_edu.course._grader_child`), ``k = frames`` rows each;
-        empty without it.
-    output : str
-        The end of what the process printed (the submission's prints), at most 4000 characters.
+    ``status, message, frames, seconds, hidden_calls, traceback, notes`` as in ``outcome.json``
+    (:mod:`visla_edu.course._grader_child`); without it ``status`` is a key of :data:`EXIT_STATUSES`
+    and ``seconds`` NaN. ``arrays``: ``estimate.npz``, ``k = frames`` rows each (empty without it).
+    ``output``: the end of what the process printed (the submission's prints), at most 4000
+    characters.
     """
 
     status: str
@@ -84,16 +76,7 @@ class ChildOutcome:
 
 
 def write_request(folder, submission, drive_file, config, time_limit, memory_limit):
-    """Write ``folder/request.json`` for the grading process; return its path.
-
-    Parameters
-    ----------
-    folder : pathlib.Path
-        The submission's working folder (the child's current folder and where it writes).
-    submission, drive_file, config, time_limit, memory_limit
-        As :func:`run_submission`; ``config`` is sent as its
-        :meth:`~visla_edu.filters.FilterConfig.to_dict`.
-    """
+    """Write ``folder/request.json`` (``config`` as its ``to_dict()``) for the grading process; return its path."""
     request = {"submission": str(Path(submission).resolve()), "drive": str(drive_file), "config": config.to_dict(),
                "out": str(folder), "memory_limit": memory_limit, "cpu_limit": int(time_limit + CPU_MARGIN),
                "file_limit": FILE_LIMIT}
@@ -114,14 +97,9 @@ def _kill_group(proc):
 
 
 def wait_with_time_limit(proc, progress_file, time_limit):
-    """Wait for ``proc``; kill its group ``time_limit`` s after ``progress_file`` appeared.
+    """Wait for ``proc``; kill its group ``time_limit`` s after ``progress_file`` appeared; ``(returncode, timed_out)``.
 
     Before the file appears (the grader's start-up) :data:`STARTUP_SECONDS` apply.
-
-    Returns
-    -------
-    returncode : int
-    timed_out : bool
     """
     deadline = time.monotonic() + STARTUP_SECONDS
     counting = False
@@ -146,7 +124,7 @@ _KEPT_VARIABLES = ("PATH", "HOME", "LANG", "LC_ALL", "LC_CTYPE", "TMPDIR", "TEMP
 
 
 def _child_environment():
-    """The child's environment: a few system variables, this visla_edu first on the path, one BLAS thread."""
+    """A few system variables, this visla_edu first on the path, one BLAS thread."""
     env = {name: os.environ[name] for name in _KEPT_VARIABLES if name in os.environ}
     given = os.environ.get("PYTHONPATH", "")
     env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT)] + ([given] if given else []))
@@ -193,11 +171,8 @@ def _read_text(path, limit=None):
 def read_outcome(folder, returncode, timed_out, time_limit, num_frames):
     """The :class:`ChildOutcome` of the grading process that ran in ``folder``.
 
-    Raises
-    ------
-    RuntimeError
-        The process failed before the submission ran (loading the drive, its imports): a
-        problem of the grader, not of the submission (the command line reports it as a bug).
+    RuntimeError when the process failed before the submission ran (loading the drive, its
+    imports): the grader's problem, not the submission's (the command line reports it as a bug).
     """
     import numpy as np  # here: the command line imports this module to build its parser
 
@@ -225,23 +200,11 @@ def read_outcome(folder, returncode, timed_out, time_limit, num_frames):
 
 
 def run_submission(submission, drive_file, config, folder, time_limit, memory_limit, num_frames):
-    """Grade one submission in its own process; return its :class:`ChildOutcome`.
+    """Grade one submission in its own process, in the empty ``folder``; return its :class:`ChildOutcome`.
 
-    Parameters
-    ----------
-    submission : pathlib.Path
-    drive_file : pathlib.Path
-        The prepared drive (no ground truth, :func:`visla_edu.data.save`).
-    config : visla_edu.filters.FilterConfig
-        Resolved.
-    folder : pathlib.Path
-        An empty working folder for this submission.
-    time_limit : float
-        Seconds (the module docstring's limits).
-    memory_limit : int or None
-        Bytes of address space, or None for no limit.
-    num_frames : int
-        Frames of the drive (for the messages).
+    ``drive_file``: the prepared drive (no ground truth, :func:`visla_edu.data.save`); ``config``:
+    the resolved FilterConfig; ``time_limit`` (s) and ``memory_limit`` (bytes of address space,
+    None: no limit) as in the module docstring; ``num_frames`` of the drive, for the messages.
     """
     request = write_request(folder, submission, drive_file, config, time_limit, memory_limit)
     command = [sys.executable, "-m", "visla_edu.course._grader_child", str(request)]

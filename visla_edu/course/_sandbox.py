@@ -1,31 +1,21 @@
 """What a graded submission may use of visla_edu, and how the rest is hidden from it.
 
-The project (``PROJECT.md``) asks for a whole filter, so while the grader runs a submission
-only the geometry and the interface stay usable (:data:`ALLOWED_MODULES`, :data:`ALLOWED_NAMES`):
-``lie``, ``camera``, ``dataset``, ``codes``, ``metrics``, ``numdiff``, ``kalman``, ``validation`` (the
-checks the camera and the metrics make of their inputs), and from
-``filters`` the types of the interface (``FilterConfig``, ``StepRecord``,
-``FilterDivergedError``). Everything else of visla_edu is **hidden**: the filters and their
-steps (``filters``, ``motion``, ``ekf``, ``capstone``, ``run``, ``smoother``, ``stepper``...),
-and what would hand over the truth (``data``, ``simulate``, ``diagnostics``, ``odometry``).
+The project asks for a whole filter, so while the grader runs a submission only the geometry and
+the interface stay usable (:data:`ALLOWED_MODULES`, :data:`ALLOWED_PACKAGES`,
+:data:`ALLOWED_NAMES`, :data:`FILTERS_INTERFACE`; PROJECT.md, "What you may use"); the rest is
+**hidden**, in three layers, the first two in the grading process only
+(:mod:`visla_edu.course._grader_child`, which exits afterwards, so nothing is put back):
 
-Three layers, the first two in the grading process only (:mod:`visla_edu.course._grader_child`,
-which exits afterwards, so nothing is put back):
-
-1. :func:`hide_library` swaps the code of every function and method defined in a loaded
-   hidden module for a stub that records the call (:data:`HIDDEN_CALLS`) and raises
+1. :func:`hide_library` swaps the code of every function and method of a loaded hidden module
+   for a stub that records the call in :data:`HIDDEN_CALLS` (caught or not) and raises
    :class:`SubmissionUsedLibrary`, so every alias fails alike (as
-   :func:`visla_edu.course.checks._hiding.hide` does for the exercise checks); a call the submission
-   catches is still recorded;
-2. :func:`block_imports` refuses to load a hidden module that is not loaded yet, and to
-   reload one that is (``importlib.reload`` would rebuild it with its real code);
-3. :func:`scan_source` reads the submission's text for a human: imports of hidden modules
-   and the constructs that could go around layers 1 and 2 (``sys.modules``, ``__code__``,
-   ``exec``, ``subprocess``, ``ctypes``, reading files...). Those are marked, not refused.
+   :func:`visla_edu.course.checks._hiding.hide` does for the exercise checks);
+2. :func:`block_imports` refuses to load a hidden module, or to reload one (``importlib.reload``
+   would rebuild it with its real code);
+3. :func:`scan_source` marks for a human the imports of hidden modules and the constructs that
+   could go around layers 1 and 2; it refuses nothing.
 
-Code in the same process can still defeat all of this (the checks' guide says the same of
-the checks): the grader's answer to that is a process per submission in a sandbox (TEACHING.md),
-a drive whose truth the submission never gets, and a human look at marked submissions.
+Code in the same process can still defeat this (TEACHING.md, "Running students' code safely").
 """
 
 import ast
@@ -59,13 +49,7 @@ HIDDEN_CALLS = []
 
 
 class SubmissionUsedLibrary(LibraryFunctionHidden):
-    """Raised by a visla_edu function that is hidden while a submission is graded.
-
-    Attributes
-    ----------
-    hidden : str
-        The function's label (:func:`visla_edu.course.checks.function_label`), e.g. ``"run.make_filter"``.
-    """
+    """Raised by a hidden function; ``hidden`` is its label (:func:`visla_edu.course.checks.function_label`)."""
 
     def __init__(self, hidden):
         super().__init__(f"{hidden} is hidden while a submission is graded: the project asks for your own filter "
@@ -80,20 +64,14 @@ def refuse(name):
 
 
 def is_hidden(module_name):
-    """True for a visla_edu module a submission may not use (see the module docstring).
-
-    Parameters
-    ----------
-    module_name : str
-        A dotted module name, e.g. ``"visla_edu.filters._slam"``.
-    """
+    """True for a visla_edu module (dotted name) a submission may not use (the module docstring)."""
     inside = module_name == "visla_edu" or module_name.startswith("visla_edu.")
     in_package = any(module_name.startswith(package + ".") for package in ALLOWED_PACKAGES)
     return inside and not in_package and module_name not in ALLOWED_MODULES + GRADER_MODULES
 
 
 def _stub_code(fn, name):
-    """A code object for ``fn`` (same name, same number of free variables) that raises :func:`refuse`'s error."""
+    """A code object for ``fn`` (same name, same free variables) that raises :func:`refuse`'s error."""
     free = fn.__code__.co_freevars
     lines = ["def _outer():", *(f"    {var} = None" for var in free), "    def _hidden(*args, **kwargs):"]
     if free:
@@ -105,7 +83,7 @@ def _stub_code(fn, name):
 
 
 def _functions_of(module):
-    """``(label, function)`` of the functions and methods defined in ``module`` that are not allowed."""
+    """``(label, function)`` of the functions and methods defined in ``module``, except the allowed names."""
     allowed = ALLOWED_NAMES.get(module.__name__, ())
     for attr, value in list(vars(module).items()):
         if attr in allowed or getattr(value, "__module__", None) != module.__name__:
@@ -132,12 +110,9 @@ def _methods_of(cls):
 
 
 def hide_library():
-    """Make every function and method of the loaded hidden visla_edu modules raise :class:`SubmissionUsedLibrary`.
+    """Make every function and method of the loaded hidden modules raise :class:`SubmissionUsedLibrary`.
 
-    Returns
-    -------
-    int
-        How many functions were hidden.
+    Returns how many functions were hidden (int).
     """
     found = {}  # all of them first: the labels and stubs are made with functions that get hidden too
     for name, module in sorted(sys.modules.items()):
@@ -217,21 +192,12 @@ def _marks_of(node):
 
 
 def scan_source(source):
-    """What a human should look at in a submission's text (marks, not refusals).
+    """What a human should look at in a submission's Python text: ``"line N: ..."`` marks, in line order.
 
-    Parameters
-    ----------
-    source : str
-        The submission's Python text.
-
-    Returns
-    -------
-    list of str
-        ``"line N: ..."``, in line order: each import of a hidden visla_edu module or name (the
-        ``visla_edu.filters`` names of :data:`FILTERS_INTERFACE` are allowed), each import of
-        :data:`MARKED_MODULES`, each call of :data:`MARKED_CALLS` and each use of
-        :data:`MARKED_ATTRIBUTES`; ``[]`` for a text that does not parse (the grader reports the
-        syntax error itself).
+    Each import of a hidden visla_edu module or name (but the names of :data:`FILTERS_INTERFACE`) or
+    of :data:`MARKED_MODULES`, each call of :data:`MARKED_CALLS` and each use of
+    :data:`MARKED_ATTRIBUTES`; ``[]`` for a text that does not parse (the grader reports the syntax
+    error itself).
     """
     try:
         tree = ast.parse(source)

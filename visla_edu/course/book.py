@@ -1,36 +1,15 @@
-"""The course site: ``visla-edu book DIR`` builds the lessons as static HTML pages.
+"""The course site: ``visla-edu book DIR`` builds the lessons as static HTML pages (TEACHING.md, 8).
 
-**Pages.** One per notebook of ``solutions/`` (every ``*.ipynb`` there, in file-name order, found
-when the book is built), each the **student edition** of the notebook
-(:func:`visla_edu.course.release.student_notebook`) with its outputs and figures, and an
-index page: the table of contents and how to run the notebooks (a clone, Binder, Colab). A
-notebook without code (a page of notation, say) is a page like the others, without execution.
-
-**Where the outputs come from.** The student edition itself is executed (nbclient, errors
-allowed), never the solutions. So no output can carry a model answer (a value, a figure or a
-message made by solution code), and each page shows what a student sees who runs the notebook
-as handed out: where a later cell falls back on the library because the exercise is a stub, the
-page says ``using the library's ...``, which is true for its reader. Then the exercise cells
-(nbgrader ``solution`` cells) and their graded checks are shown without outputs (unfinished, they
-only raise ``NotImplementedError``), and an error in any other cell stops the build
-(:class:`BookError`): the student edition must run there. Widgets (the filter stepper) need a
-kernel: each is replaced by the figures its ``Output`` widgets held and a line saying so.
-
-**Offline.** Nothing is downloaded when the site is built or read. Sphinx with myst-nb renders the
-executed notebooks (it executes nothing itself), sphinx-book-theme ships its fonts and scripts,
-the math is typeset in the browser by the copy of MathJax 2 that the ``jupyter-server-mathjax``
-package carries (copied to ``_static/mathjax``), and neither intersphinx nor the ipywidgets
-embedding scripts (from a CDN) are used. The Binder and Colab buttons (``repository``) are links.
-
-**Course data.** The kernels inherit ``VISLA_EDU_DATA``, so real-data cells run when the course
-files are there; ``course_data=False`` (``--no-course-data``) hides them, as on Binder or Colab,
-for a site that shows nothing derived from files the course may not redistribute.
-
-**The folder.** The site is built beside ``DIR`` and then moved into place, so an interrupted build
-leaves the previous site whole; ``DIR`` must be new, empty or a site built before (it has Sphinx's
-``.buildinfo``): nothing else is ever overwritten.
-
-Needs the ``book`` extra (``pip install -e ".[book]"``); :func:`require_book_tools` says so.
+One page per notebook of ``solutions/`` (file-name order) and an index. Each page is the
+**student edition** (:func:`visla_edu.course.release.student_notebook`), executed by nbclient
+(if it has code) with errors allowed, never the solutions: no output can carry a model answer,
+and where a later cell falls back on the library because the exercise is a stub, the page says
+``using the library's ...``, true for its reader. Exercise and graded cells are shown without
+outputs; an error in any other cell stops the build (:class:`BookError`); each widget becomes
+the figures its ``Output`` widgets held. Sphinx with myst-nb renders the executed pages (it
+executes nothing); nothing is downloaded when the site is built or read (the theme's files and
+the ``jupyter-server-mathjax`` package's MathJax 2 are copied in). The site is built beside
+``DIR`` and moved into place, so an interrupted build leaves the previous site whole.
 """
 
 import contextlib
@@ -78,22 +57,13 @@ _REPOSITORY = re.compile(r"https://(github|gitlab)\.com/[\w.-]+/[\w.-]+")
 
 
 class BookError(RuntimeError):
-    """The build stopped on valid input: a notebook failed outside its exercises, or Sphinx failed.
-
-    ``failed``: exit status 1, not 2 (:mod:`visla_edu.cli`).
-    """
+    """The build stopped on valid input: a notebook failed outside its exercises, or Sphinx failed (exit 1, not 2)."""
 
     failed = True
 
 
 def require_book_tools():
-    """Check that the packages of the ``book`` extra are installed.
-
-    Raises
-    ------
-    ValueError
-        Naming the missing distributions and the extra to install.
-    """
+    """Check that the packages of the ``book`` extra are installed; a ValueError names those missing and the extra."""
     missing = [dist for module, dist in BOOK_PACKAGES.items() if importlib.util.find_spec(module) is None]
     if missing:
         raise ValueError(f"the course site needs {', '.join(missing)}: install visla-edu[book] "
@@ -106,13 +76,7 @@ def default_solutions():
 
 
 def notebook_paths(src_dir):
-    """The notebooks of ``src_dir`` in file-name order (``*.ipynb``, hidden files left out).
-
-    Raises
-    ------
-    FileNotFoundError
-        ``src_dir`` is not a folder, or holds no notebook.
-    """
+    """The notebooks of ``src_dir`` in file-name order (``*.ipynb``, not hidden); FileNotFoundError if none."""
     src_dir = Path(src_dir)
     if not src_dir.is_dir():
         raise FileNotFoundError(f"solutions folder {src_dir} not found: build the book in a clone of the repository, "
@@ -124,21 +88,13 @@ def notebook_paths(src_dir):
 
 
 def check_site_folder(out_dir):
-    """``out_dir`` as an absolute path, if the site may be written there.
+    """``out_dir`` as an absolute path, if the site may be written there (else a ValueError).
 
     Parameters
     ----------
     out_dir : str or os.PathLike
-        The site's folder (the module docstring's "The folder").
-
-    Returns
-    -------
-    pathlib.Path
-
-    Raises
-    ------
-    ValueError
-        ``out_dir`` is a file, or a folder holding anything but a site built before.
+        New, empty, or a site built before (it has Sphinx's ``.buildinfo``): nothing else is
+        ever overwritten.
     """
     out_dir = Path(out_dir).expanduser().absolute()
     if out_dir.exists() and not out_dir.is_dir():
@@ -166,7 +122,7 @@ def _staging(out_dir):
 
 
 def _move_into_place(site, out_dir, staging):
-    """Replace ``out_dir`` (absent, empty, or an old site) by the folder ``site``; the old one goes into ``staging``."""
+    """Replace ``out_dir`` by the folder ``site``; an old one goes into ``staging``."""
     if out_dir.is_dir():
         out_dir.rename(staging / "previous-site")
     site.rename(out_dir)
@@ -183,7 +139,7 @@ def _kernel_env(course_data):
 
 
 def _execute(nb, work_dir, course_data):
-    """Run every cell of ``nb`` in place (errors recorded as outputs, widget state kept)."""
+    """Run every cell of ``nb`` in place (errors kept as outputs, widget state kept)."""
     from nbclient import NotebookClient
 
     client = NotebookClient(nb, timeout=CELL_TIMEOUT, kernel_name="python3", allow_errors=True,
@@ -212,7 +168,7 @@ def _blank_exercises(nb, name):
 
 
 def _widget_images(model_id, state):
-    """The PNG images (base64) of the ``Output`` widgets in widget ``model_id`` and its children, in order."""
+    """The base64 PNGs of the ``Output`` widgets in widget ``model_id`` and its children, in order."""
     model = state.get(model_id, {}).get("state", {})
     images = [out["data"]["image/png"] for out in model.get("outputs", []) if "image/png" in out.get("data", {})]
     for child in model.get("children", []):
@@ -221,7 +177,7 @@ def _widget_images(model_id, state):
 
 
 def _freeze_widgets(nb):
-    """Replace each widget output by its figures and a note (none if it holds no figure: a progress bar)."""
+    """Replace each widget output by its figures and a note (nothing if it holds no figure: a progress bar)."""
     import nbformat
 
     state = nb.metadata.pop("widgets", {}).get(_WIDGET_STATE, {}).get("state", {})
@@ -243,27 +199,19 @@ def _freeze_widgets(nb):
 
 
 def student_page(path, work_dir, course_data=True):
-    """The page of one notebook: its student edition, executed, exercises without outputs, widgets frozen.
+    """The page (a NotebookNode) of one notebook: its student edition, executed, exercises blank, widgets frozen.
+
+    Raises :class:`BookError` when a cell outside the exercises raised, ValueError for unbalanced
+    markers (:func:`visla_edu.course.release.student_notebook`).
 
     Parameters
     ----------
     path : pathlib.Path
         A solution notebook.
     work_dir : str or os.PathLike
-        The kernel's working folder (the notebook may write there).
+        The kernel's working folder.
     course_data : bool
         As :func:`build_book`.
-
-    Returns
-    -------
-    nbformat.NotebookNode
-
-    Raises
-    ------
-    BookError
-        A cell outside the exercises raised an error.
-    ValueError
-        Unbalanced solution, hidden-test or answer markers (:func:`visla_edu.course.release.student_notebook`).
     """
     import nbformat
 
@@ -336,10 +284,7 @@ def _theme_options(repository, branch):
 
 
 def _sphinx_settings(repository, branch):
-    """Sphinx's configuration (there is no conf.py): myst-nb without execution, the book theme, local MathJax.
-
-    ``sphinx.ext.githubpages`` only writes ``.nojekyll``, so that GitHub Pages serves the ``_static`` folder.
-    """
+    """Sphinx's configuration (no conf.py); ``githubpages`` only writes ``.nojekyll``, so Pages serves ``_static``."""
     return {
         "project": TITLE, "html_title": TITLE, "author": "visla-edu",
         "extensions": ["myst_nb", "sphinx.ext.mathjax", "sphinx.ext.githubpages"],
@@ -366,11 +311,7 @@ def _write_sources(src, pages, index_text):
 
 
 def _run_sphinx(src, out, doctrees, settings):
-    """Build the HTML; returns Sphinx's warnings (lines). :class:`BookError` if Sphinx fails.
-
-    Python's deprecation warnings raised inside the build (the theme's use of Sphinx's API) are not
-    shown: they are for the theme's authors, and nothing the user can change.
-    """
+    """Build the HTML; return Sphinx's warnings (lines; Python's deprecation warnings are the theme's, not shown)."""
     import io
     import warnings
 
@@ -391,11 +332,7 @@ def _run_sphinx(src, out, doctrees, settings):
 
 
 def _pages(paths, course_data, log):
-    """``{page name: executed student edition}`` of ``paths``, the kernels working in a temporary folder.
-
-    The folder is the system's (``/tmp/visla-edu-book-...``), not the site's: a notebook that prints its
-    data folder without the course data (``.../data``) names that short path.
-    """
+    """``{page name: executed student edition}``, the kernels working in a short system temporary folder."""
     pages = {}
     with tempfile.TemporaryDirectory(prefix="visla-edu-book-") as work:
         for path in paths:
@@ -407,28 +344,25 @@ def _pages(paths, course_data, log):
 
 
 def build_book(out_dir, src_dir=None, course_data=True, repository=None, branch="main", log=print):
-    """Build the course site into ``out_dir``.
+    """Build the course site into ``out_dir``; return ``out_dir / "index.html"``.
 
     Parameters
     ----------
     out_dir : str or os.PathLike
-        The site's folder: new, empty or a site built before (:func:`check_site_folder`).
+        New, empty or a site built before (:func:`check_site_folder`).
     src_dir : str or os.PathLike, optional
         The solution notebooks (default: the repository's ``solutions/``).
     course_data : bool
-        Let the notebooks see the course data (``VISLA_EDU_DATA``); False: none, as on Binder.
+        Let the kernels see ``VISLA_EDU_DATA``, so real-data cells run; False
+        (``--no-course-data``): hidden, as on Binder, for a site with nothing from files the
+        course may not redistribute.
     repository : str, optional
-        ``https://github.com/OWNER/NAME``: adds Binder and Colab buttons to each page and the
-        Colab recipe to the index.
+        ``https://github.com/OWNER/NAME`` (or gitlab.com): Binder and Colab buttons on each page and
+        the Colab recipe in the index.
     branch : str
-        The repository's branch those buttons open.
+        The branch those buttons open.
     log : callable
         Called with each progress line (one per notebook, then Sphinx's warnings).
-
-    Returns
-    -------
-    pathlib.Path
-        ``out_dir / "index.html"``.
 
     Raises
     ------

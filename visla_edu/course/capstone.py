@@ -1,20 +1,11 @@
 """Notebook 12's loop skeleton: VIO and joint SLAM assembled from functions passed in.
 
-The capstone notebook has students assemble the filter of notebooks 06-09 from their own
-functions. This module is the part they do not write: a filter with the library's step
-interface (``step()`` returns a :class:`~visla_edu.filters.StepRecord`, so
-:class:`visla_edu.stepper.Stepper` can step it) whose loop -- data, landmark bookkeeping,
-gating, retiring finished tracks, what is recorded -- calls two sets of functions:
-
-* :class:`Parts`, the exercises of notebooks 01-09 with the notebooks' signatures;
-  :func:`library_parts` gives the library's, and ``dataclasses.replace`` swaps in one's own;
-* :class:`Steps`, the three assembly functions notebook 12 asks for (``predict``,
-  ``add_landmarks``, ``slam_update``), each taking ``parts`` first.
-
-The error form is the right perturbation the notebooks derive (``T = mu exp(delta^)``,
-``m = mu_m + delta_m``), so a correct assembly reproduces the library's
-``FilterConfig(slam_error="right")`` joint filter. Conventions: twist ``u = [v; w]``, poses
-``world_T_imu``, state ``[pose (6); landmarks (3 each, in slot order)]``.
+The part students do not write: a filter with the library's step interface (so
+:class:`visla_edu.stepper.Stepper` can step it) whose loop (data, landmark bookkeeping, gating,
+retiring finished tracks, what is recorded) calls :class:`Parts`, the exercises of notebooks
+01-09, and :class:`Steps`, notebook 12's assembly. In the right perturbation (see
+:mod:`visla_edu.lie`) a correct assembly reproduces ``FilterConfig(slam_error="right")``'s joint
+filter. The state is ``[pose (6); landmarks (3 each, in slot order)]``.
 """
 
 from dataclasses import dataclass
@@ -35,31 +26,24 @@ POSE_DIM = 6
 
 @dataclass(frozen=True)
 class Parts:
-    """The exercise functions of notebooks 01-09, with the notebooks' signatures.
+    """The exercise functions of notebooks 01-09, with the notebooks' signatures (notebook in brackets).
 
     Attributes
     ----------
-    se3_exp : callable
-        ``se3_exp(u (6,)) -> (4, 4)`` (01).
-    pose_transition : callable
-        ``pose_transition(u (6,), tau) -> F (6, 6)`` (06).
-    project : callable
-        ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)`` (02).
-    pose_jacobian : callable
-        ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` (03).
+    se3_exp : callable, ``se3_exp(u (6,)) -> (4, 4)`` (01)
+    project : callable, ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)`` (02)
+    pose_jacobian : callable, ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` (03)
+    odot : callable, ``odot(s (4,)) -> (4, 6)`` (03)
     landmark_jacobian : callable
         ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)`` (05).
-    init_landmark : callable
-        ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> m (3,)`` (05).
-    odot : callable
-        ``odot(s (4,)) -> (4, 6)`` (03).
+    init_landmark : callable, ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> m (3,)`` (05)
+    pose_transition : callable, ``pose_transition(u (6,), tau) -> F (6, 6)`` (06)
     pose_update : callable
         ``pose_update(mu, Sigma (6, 6), z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var)
         -> (mu, Sigma)`` (07).
     slam_jacobian : callable
         ``slam_jacobian(J_pose (k, 4, 6), J_landmark (k, 4, 3), slots (k,), n) -> H (4k, 6 + 3n)`` (08).
-    marginalize : callable
-        ``marginalize(Sigma, keep) -> Sigma[keep][:, keep]`` (09).
+    marginalize : callable, ``marginalize(Sigma, keep) -> Sigma[keep][:, keep]`` (09)
     """
 
     se3_exp: Callable
@@ -76,21 +60,20 @@ class Parts:
 
 @dataclass(frozen=True)
 class Steps:
-    """The three assembly functions of notebook 12 (each takes :class:`Parts` first).
+    """The three assembly functions of notebook 12, each taking :class:`Parts` first.
 
     Attributes
     ----------
     predict : callable
         ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W (6, 6)) -> (world_T_imu,
-        Sigma)``: :class:`CapstoneFilter`'s prediction, in VIO and in SLAM.
+        Sigma)``, in VIO and in SLAM.
     add_landmarks : callable
         ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
-        -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``: places new landmarks in joint SLAM (VIO
-        uses ``parts.init_landmark``).
+        -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``: SLAM only (VIO uses ``parts.init_landmark``).
     slam_update : callable
         ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks,
-        cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``: the joint SLAM update (VIO
-        uses ``parts.pose_update``).
+        cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``: SLAM only (VIO uses
+        ``parts.pose_update``).
     """
 
     predict: Callable
@@ -144,14 +127,9 @@ def _marginalize(Sigma, keep):
 def library_parts():
     """The library's versions of the notebooks' exercises, as :class:`Parts`.
 
-    Swap in your own with ``dataclasses.replace(library_parts(), pose_update=my_pose_update)``.
-
-    Returns
-    -------
-    Parts
-        ``lie.se3_exp``, ``motion.pose_transition`` and ``lie.odot``, and this module's
-        implementations of the other exercises (``marginalize`` is
-        ``Sigma[np.ix_(keep, keep)]``).
+    Swap in your own with ``dataclasses.replace(library_parts(), pose_update=my_pose_update)``. Its
+    ``se3_exp``, ``odot`` and ``pose_transition`` are :mod:`visla_edu.lie`'s and
+    :mod:`visla_edu.motion`'s; the others are this module's, on the camera's projection.
     """
     return Parts(se3_exp=lie.se3_exp, pose_transition=motion.pose_transition, project=_project,
                  pose_jacobian=_pose_jacobian, landmark_jacobian=_landmark_jacobian,
@@ -163,26 +141,26 @@ def library_parts():
 class CapstoneFilter(FilterBase):
     """VIO or joint SLAM whose mathematics are the functions passed in; the loop is provided.
 
-    Each ``step()`` (inherited, the library's) predicts with ``steps.predict`` and then updates
-    with the frame's observations in this order:
+    Each ``step()`` (the library's) predicts with ``steps.predict``, then updates with the frame's
+    observations:
 
     1. (SLAM) retire the landmarks whose track has ended: ``parts.marginalize`` keeps the rest;
-    2. gate the observations of landmarks already placed (chi-square test of each innovation
-       with its covariance ``S_i``, computed here from the state);
-    3. update with the ones inside the gate: VIO ``parts.pose_update`` (landmarks fixed and
-       taken as exact), SLAM ``steps.slam_update`` (pose and every active landmark);
-    4. (SLAM) a landmark no update has used yet whose observation fell outside the gate is
-       placed again (``FilterConfig.reinit_gated_landmarks``);
+    2. gate the observations of placed landmarks (chi-square test of each innovation with its
+       covariance ``S_i``, computed here from the state);
+    3. update with those inside the gate: VIO ``parts.pose_update`` (landmarks fixed and taken as
+       exact), SLAM ``steps.slam_update`` (pose and every active landmark);
+    4. (SLAM) place again a landmark no update has used yet whose observation fell outside the gate
+       (``FilterConfig.reinit_gated_landmarks``);
     5. place the new landmarks (first observation, enough disparity): VIO ``parts.init_landmark``,
-       SLAM ``steps.add_landmarks``, which appends them to the state with their
-       cross-covariance; the pixel part of their covariance, ``C_pixels``, is computed here.
+       SLAM ``steps.add_landmarks``, which appends them to the state with their cross-covariance;
+       the pixel part of their covariance, ``C_pixels``, is computed here.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     config : visla_edu.filters.FilterConfig
-        Resolved (``visla_edu.run.resolve_config``); ``slam_error`` is ignored (this skeleton is
-        the right-perturbation form), the rest as in the library's filters.
+        Resolved (:func:`visla_edu.run.resolve_config`); ``slam_error`` is ignored (the skeleton is
+        the right-perturbation form).
     parts : Parts
     steps : Steps
     joint : bool
@@ -215,7 +193,7 @@ class CapstoneFilter(FilterBase):
 
     @property
     def pose_cov(self):
-        """Covariance of the right perturbation ``[v; w]`` of the pose, (6, 6)."""
+        """Covariance (6, 6) of the pose's right perturbation ``[v; w]``."""
         return self.Sigma[:POSE_DIM, :POSE_DIM]
 
     def _predict(self, u, tau):
@@ -355,15 +333,7 @@ class CapstoneFilter(FilterBase):
 def run_capstone(dataset, config, parts, steps, joint=True):
     """Run :class:`CapstoneFilter` over the whole drive (one BLAS thread, as the library's driver).
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    config : visla_edu.filters.FilterConfig
-        Resolved (:func:`visla_edu.run.resolve_config`).
-    parts : Parts
-    steps : Steps
-    joint : bool
-        True: joint SLAM; False: VIO.
+    Parameters as :class:`CapstoneFilter`.
 
     Returns
     -------

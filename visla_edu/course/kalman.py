@@ -1,21 +1,17 @@
 """The linear Kalman filter of the primer notebook (00b): one scalar update, predict, update.
 
-The course's filters (:mod:`visla_edu.filters`, :mod:`visla_edu.ekf`) are these equations on
-SE(3) and on a map of landmarks; this module is the textbook version on a plain vector, used by
-``solutions/00b_kalman_primer.ipynb`` after its exercises and by the checks of those exercises
-(as the reference; a check hides it while it runs the student's code).
-
-For a state ``x ~ N(mean, P)``:
+The textbook version, on a plain vector, of the course's filters (:mod:`visla_edu.filters`,
+:mod:`visla_edu.ekf`, on SE(3) and a map of landmarks); ``solutions/00b_kalman_primer.ipynb``
+uses it after its exercises, and their checks as the reference. For ``x ~ N(mean, P)``:
 
 * prediction through ``x' = F x + w``, ``w ~ N(0, Q)``:  ``mean' = F mean``, ``P' = F P F^T + Q``;
 * update with ``z = H x + v``, ``v ~ N(0, R)``: innovation ``r = z - H mean``,
   ``S = H P H^T + R``, gain ``K = P H^T S^-1``, ``mean += K r``, ``P = (I - K H) P``.
 
-The extended Kalman filter uses the same update with ``r = z - h(mean)`` and ``H`` the Jacobian
-of ``h`` at the mean (:func:`update` takes the innovation for that reason).
-
-It lives outside :mod:`visla_edu.course.checks` so that the function objects stay the same when a
-graded cell reloads the checks (see :mod:`visla_edu.course.numdiff`).
+The EKF uses the same update with ``r = z - h(mean)`` and ``H`` the Jacobian of ``h`` at the
+mean, hence :func:`update` takes the innovation. Outside :mod:`visla_edu.course.checks` so that
+the function objects stay the same when a graded cell reloads the checks (as
+:mod:`visla_edu.course.numdiff`).
 """
 
 import numpy as np
@@ -32,15 +28,13 @@ def update_1d(mean, variance, z, noise_variance):
     mean, variance : float
         Prior ``x ~ N(mean, variance)``.
     z : float
-        Measurement.
     noise_variance : float
-        Variance ``r`` of the measurement noise.
+        ``r``.
 
     Returns
     -------
     (float, float)
-        Posterior mean and variance: ``K = variance / (variance + r)``,
-        ``mean + K (z - mean)``, ``(1 - K) variance``.
+        ``mean + K (z - mean)`` and ``(1 - K) variance``, with ``K = variance / (variance + r)``.
     """
     variance, noise_variance = float(variance), float(noise_variance)
     if variance < 0 or noise_variance < 0 or variance + noise_variance <= 0:
@@ -58,21 +52,13 @@ def _square(M, n, what):
 
 
 def predict(mean, P, F, Q):
-    """Prediction of a linear Gaussian state: ``(F mean, F P F^T + Q)``.
+    """Prediction of a linear Gaussian state: ``(F mean, F P F^T + Q)``, shapes (n,) and (n, n).
 
     Parameters
     ----------
     mean : array_like, shape (n,)
-    P : array_like, shape (n, n)
-        Covariance of the state.
-    F : array_like, shape (n, n)
-        Transition matrix.
-    Q : array_like, shape (n, n)
-        Covariance of the process noise.
-
-    Returns
-    -------
-    (ndarray of shape (n,), ndarray of shape (n, n))
+    P, F, Q : array_like, shape (n, n)
+        Covariance of the state, transition matrix, covariance of the process noise.
     """
     mean = np.atleast_1d(np.asarray(mean, dtype=float))
     n = mean.shape[0]
@@ -83,6 +69,9 @@ def predict(mean, P, F, Q):
 def update(mean, P, innovation, H, R):
     """Kalman update given the innovation ``r = z - H mean`` (EKF: ``z - h(mean)``, ``H`` the Jacobian).
 
+    Returns the posterior mean (n,) and covariance (n, n) of the module docstring's update, ``K``
+    solved with a Cholesky factor of ``S`` (never inverted), the covariance symmetrised.
+
     Parameters
     ----------
     mean : array_like, shape (n,)
@@ -90,13 +79,6 @@ def update(mean, P, innovation, H, R):
     innovation : array_like, shape (m,)
     H : array_like, shape (m, n)
     R : array_like, shape (m, m)
-        Covariance of the measurement noise.
-
-    Returns
-    -------
-    (ndarray of shape (n,), ndarray of shape (n, n))
-        ``mean + K r`` and ``(I - K H) P`` with ``K = P H^T S^-1``, ``S = H P H^T + R``
-        (solved with a Cholesky factor of ``S``, never inverted; the result is symmetrised).
     """
     mean = np.atleast_1d(np.asarray(mean, dtype=float))
     innovation = np.atleast_1d(np.asarray(innovation, dtype=float))

@@ -1,27 +1,15 @@
 """What ``visla-edu release`` last wrote into a folder: ``.release.json``, one sha256 per file.
 
-``release`` (:func:`visla_edu.course.release.make_student_notebooks`) writes the student notebooks and
-then this manifest beside them, and the manifest is committed with them. Before it writes
-anything, release compares the digest of each notebook it would replace with the recorded one:
+Release (:func:`visla_edu.course.release.make_student_notebooks`) writes it beside the student
+notebooks, committed with them. Before replacing a notebook it compares the file's digest with
+the recorded one: the same, and the file is release's own output; another, or a file the
+manifest does not list, and someone made or edited it (a student answering in a clone, a teacher
+fixing a typo in the generated copy): release refuses, names it and writes nothing, unless forced.
 
-* the same digest: the file is release's own output, and a newer release may replace it;
-* another digest, or a file the manifest does not list: someone made or edited it (a student
-  answering in a clone, a teacher fixing a typo in the generated copy), so release refuses,
-  names it and writes nothing, unless forced.
-
-The file (sorted keys, two-space indentation, a final newline: the same bytes for the same
-notebooks, so the test that the folder is in sync checks it too)::
-
-    {
-      "about": "...",
-      "sha256": {
-        "01_se3_kinematics.ipynb": "<64 hexadecimal digits>",
-        ...
-      }
-    }
-
-A digest is that of the file's bytes, which are the notebook's text in UTF-8
-(:func:`visla_edu.course.release.notebook_text`).
+The file is the JSON object ``{"about": "...", "sha256": {file name: 64 hexadecimal digits}}``
+with sorted keys, two-space indentation and a final newline: the same bytes for the same
+notebooks, so the in-sync test checks it too. A digest is that of the file's bytes, the
+notebook's text in UTF-8 (:func:`visla_edu.course.release.notebook_text`).
 """
 
 import hashlib
@@ -40,54 +28,27 @@ _ABOUT = ("sha256 of each file `visla-edu release` wrote in this folder; release
 
 
 def digest(data):
-    """The sha256 of ``data`` as 64 hexadecimal digits.
-
-    Parameters
-    ----------
-    data : bytes or str
-        A ``str`` is encoded as UTF-8 (the bytes release writes).
-
-    Returns
-    -------
-    str
-    """
+    """The sha256 of ``data``, bytes or str (encoded as UTF-8: the bytes release writes), as 64 hexadecimal digits."""
     return hashlib.sha256(data.encode("utf-8") if isinstance(data, str) else data).hexdigest()
 
 
 def manifest_text(texts):
-    """The manifest of files with contents ``texts``, as it is stored.
-
-    Parameters
-    ----------
-    texts : dict of str to str
-        File name -> the text release writes there.
-
-    Returns
-    -------
-    str
-        JSON (format in the module docstring), with a final newline.
-    """
+    """The manifest (str, the module docstring's format) of files with contents ``texts``: file name -> text."""
     body = {"about": _ABOUT, "sha256": {name: digest(text) for name, text in sorted(texts.items())}}
     return json.dumps(body, indent=2, sort_keys=True) + "\n"
 
 
 def read_manifest(folder):
-    """The digests recorded in ``folder``'s manifest.
+    """The digests recorded in ``folder``'s manifest: file name -> sha256, ``{}`` without a manifest.
 
     Parameters
     ----------
     folder : str or os.PathLike
 
-    Returns
-    -------
-    dict of str to str
-        File name -> sha256; empty when there is no manifest (a folder release never wrote).
-
     Raises
     ------
     ValueError
-        The manifest is not valid JSON or lacks its ``sha256`` table of names and digests; the
-        message names the file and what to do.
+        The manifest is not valid JSON or lacks its ``sha256`` table (the message says what to do).
     """
     path = Path(folder) / MANIFEST_NAME
     if not path.is_file():
@@ -105,7 +66,7 @@ def read_manifest(folder):
 
 
 def write_manifest(folder, texts):
-    """Write ``folder``'s manifest for files with contents ``texts``, atomically, if it changes.
+    """Write ``folder``'s manifest for files with contents ``texts``, atomically, if it changes; True if it did.
 
     Parameters
     ----------
@@ -113,11 +74,6 @@ def write_manifest(folder, texts):
         Must exist.
     texts : dict of str to str
         File name -> the text release wrote there.
-
-    Returns
-    -------
-    bool
-        True if the manifest was written (new or different).
     """
     path = Path(folder) / MANIFEST_NAME
     text = manifest_text(texts)
@@ -129,25 +85,16 @@ def write_manifest(folder, texts):
 
 
 def edited_files(folder, names):
-    """The files among ``names`` in ``folder`` that release did not write as they are now.
+    """The files among ``names`` in ``folder`` that release did not write as they are now, in that order.
+
+    Those that exist but are not a regular file, or whose digest is not the manifest's (or that it
+    does not list); a missing file is never edited. ValueError for a damaged manifest.
 
     Parameters
     ----------
     folder : str or os.PathLike
     names : iterable of str
         File names release is about to replace.
-
-    Returns
-    -------
-    list of str
-        The names, in the order given, of the files that exist but are not a regular file, or
-        whose digest differs from the manifest's (or that it does not list). A missing file is
-        never edited.
-
-    Raises
-    ------
-    ValueError
-        A damaged manifest (:func:`read_manifest`).
     """
     folder = Path(folder)
     recorded = read_manifest(folder)

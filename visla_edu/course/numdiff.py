@@ -1,12 +1,9 @@
 """Central-difference Jacobians: the reference a gradient checker is compared with.
 
-``J[:, i] = (f(x + eps e_i) - f(x - eps e_i)) / (2 eps)``, error ``O(eps^2)`` (plus a rounding
-error of about ``1e-16 |f| / eps``). Notebook 03 builds its own and compares; the course's
-exercise checks use this one (as ``checks.reference_numerical_jacobian``).
-
-It lives outside :mod:`visla_edu.course.checks` so that the function object stays the same when a
-graded cell reloads the checks: a check can then hide it from the student's code, whatever
-name the student bound it to.
+Notebook 03 builds its own and compares; the exercise checks use this one (as
+``checks.reference_numerical_jacobian``). It lives outside :mod:`visla_edu.course.checks` so that
+the function object stays the same when a graded cell reloads the checks: a check can then hide
+it from the student's code, whatever name the student bound it to.
 """
 
 import numpy as np
@@ -15,7 +12,7 @@ __all__ = ["central_jacobian"]
 
 
 def central_jacobian(f, x, eps=1e-6):
-    """Central-difference Jacobian of ``f: R^n -> R^m`` at ``x``.
+    """Central-difference Jacobian of ``f: R^n -> R^m`` at ``x``, error ``O(eps^2)`` plus ``1e-16 |f| / eps``.
 
     Parameters
     ----------

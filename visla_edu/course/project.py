@@ -1,28 +1,12 @@
 """The course project (summative): the assignment, the drive it is graded on, the measured rubric, the grader.
 
-The assignment is ``PROJECT.md`` beside this module (:func:`assignment_text`; ``visla-edu
-project show`` prints it): build the whole visual-inertial filter, run it on simulated and
-course drives, write a report. A submission is one Python file whose
-``make_filter(dataset, config)`` returns an object with the stepper's interface
-(:class:`visla_edu.stepper.SteppableFilter`: a ``config`` attribute and ``step()`` returning
-a :class:`visla_edu.filters.StepRecord`, frame after frame).
-
-:func:`grade` (``visla-edu project grade``) grades submissions on one drive:
-
-1. :func:`prepare_drive` loads the drive, measures its calibration once
-   (:func:`visla_edu.run.resolve_config`, the extrinsic correction) and makes what a
-   submission gets: a copy of the drive **without** its ground truth, metadata or source (so
-   neither the truth nor a simulation's seed reaches it), its ``imu_T_cam`` already
-   corrected, and the resolved :class:`~visla_edu.filters.FilterConfig`
-   (``extrinsic_correction="none"``). The library's ``slam``, ``vio`` and ``deadreckon`` run
-   on exactly these inputs: the references;
-2. each submission runs in a process of its own with the library hidden
-   (:mod:`visla_edu.course._sandbox`) and its limits (:mod:`visla_edu.course._runner`);
-3. :func:`measure` computes ATE (raw and aligned), KITTI drift, pose NEES and NIS per degree
-   of freedom, and :func:`measured_points` the grader's part of the rubric
-   (:data:`MEASURED_TOTAL` points; :func:`rubric_table` is PROJECT.md's table of it);
-4. ``_report`` writes ``DIR/<name>/report.md`` with its figures, ``DIR/summary.md`` and
-   ``DIR/grades.csv``.
+The assignment is ``PROJECT.md`` beside this module (:func:`assignment_text`, ``visla-edu project
+show``); a submission is one Python file whose ``make_filter(dataset, config)`` returns a filter
+with the stepper's interface (:class:`visla_edu.stepper.SteppableFilter`; PROJECT.md, "The
+interface"). :func:`grade` (``visla-edu project grade``; TEACHING.md, section 7) runs each
+submission on what :func:`prepare_drive` makes, in a process of its own with the library hidden
+(:mod:`visla_edu.course._sandbox`) and its limits (:mod:`visla_edu.course._runner`), scores it
+(:func:`measure`, :func:`measured_points`) and writes the reports (``_report``).
 """
 
 import dataclasses
@@ -66,19 +50,16 @@ class Measures:
 
     Attributes
     ----------
-    frames : int
     seconds : float
         Time of the run (s).
     evaluation : visla_edu.metrics.TrajectoryEvaluation or None
         ATE and drift; None without ground truth or for an incomplete run.
-    nees_per_dof : float
-        Mean pose NEES / 6 over the frames with ground truth (NaN without it).
-    nis_per_dof : float
-        Total NIS / total dof over the updates (NaN without one).
-    position_error : ndarray, shape (n,)
-        ``|p_est - p_true|`` per frame (m), no alignment; empty without ground truth.
-    nees : ndarray, shape (n,)
-        Pose NEES per frame (NaN where the covariance is singular).
+    nees_per_dof, nis_per_dof : float
+        Mean pose NEES / 6 over the frames with ground truth; total NIS / total dof over the
+        updates. NaN without them.
+    position_error, nees : ndarray, shape (n,)
+        Per frame with ground truth (empty without): ``|p_est - p_true|`` (m, no alignment), and
+        the pose NEES (NaN where the covariance is singular).
     nis, nis_dof : ndarray, shape (frames,)
     """
 
@@ -94,15 +75,15 @@ class Measures:
 
 
 def measure(world_T_imu, pose_cov, nis, nis_dof, truth, seconds, complete=True):
-    """The :class:`Measures` of a run (``k`` frames) against ``truth``.
+    """The :class:`Measures` of a run of ``k`` frames against ``truth``.
 
     Parameters
     ----------
     world_T_imu : ndarray, shape (k, 4, 4)
     pose_cov : ndarray, shape (k, 6, 6)
-        Right perturbation ``[v; w]``.
-    nis : ndarray, shape (k,)
-    nis_dof : ndarray of int, shape (k,)
+        Of the right perturbation ``[v; w]`` (see :mod:`visla_edu.lie`).
+    nis, nis_dof : ndarray, shape (k,)
+        NIS and its dof (int) per frame.
     truth : visla_edu.dataset.GroundTruth or None
     seconds : float
     complete : bool
@@ -136,15 +117,11 @@ class GradingDrive:
         may be ``sim-small``).
     dataset : visla_edu.dataset.Dataset
         As loaded, with its ground truth.
-    view : visla_edu.dataset.Dataset
-        What a submission gets: no ground truth, ``extra``, ``source`` or ``label``;
-        ``imu_T_cam`` corrected.
-    config : visla_edu.filters.FilterConfig
-        What a submission gets: resolved, ``extrinsic_correction="none"``.
+    view, config : visla_edu.dataset.Dataset, visla_edu.filters.FilterConfig
+        What a submission gets (:func:`prepare_drive`).
     truth : visla_edu.dataset.GroundTruth or None
-    references : dict of str to visla_edu.run.RunResult
-        The library's runs on ``view`` with ``config``, by mode (:data:`REFERENCE_MODES`).
-    reference_measures : dict of str to Measures
+    references, reference_measures : dict of str to visla_edu.run.RunResult, Measures
+        The library's runs on ``view`` with ``config``, by mode (:data:`REFERENCE_MODES`), measured.
     notes : list of str
         The calibration's evidence (an extrinsic correction applied...).
     """
@@ -165,7 +142,13 @@ class GradingDrive:
 
 
 def prepare_drive(drive, data_dir=None, ground_truth=None, ground_truth_times=None):
-    """Load ``drive``, make a submission's view of it and run the library's references.
+    """Load ``drive``, make a submission's view of it and run the library's references: a :class:`GradingDrive`.
+
+    The view is a copy **without** ground truth, ``extra``, ``source`` or ``label`` (so neither the
+    truth nor a simulation's seed reaches a submission), its ``imu_T_cam`` corrected once by the
+    measured calibration (:func:`visla_edu.run.resolve_config`); the config is the resolved one with
+    ``extrinsic_correction="none"``. The library's ``slam``, ``vio`` and ``deadreckon`` run on
+    exactly these inputs.
 
     Parameters
     ----------
@@ -175,10 +158,6 @@ def prepare_drive(drive, data_dir=None, ground_truth=None, ground_truth_times=No
         Folder of the course files.
     ground_truth, ground_truth_times : str or os.PathLike, optional
         KITTI poses (and times) to attach (:func:`visla_edu.data.attach_ground_truth`).
-
-    Returns
-    -------
-    GradingDrive
     """
     dataset = data.load(drive, data_dir)
     if ground_truth:
@@ -207,15 +186,14 @@ class Grade:
     ----------
     name : str
         Its name in the reports (the file's stem, made unique).
-    path : pathlib.Path
     outcome : visla_edu.course._runner.ChildOutcome
     measures : Measures or None
         None when it ran no frame.
     points : dict of str to int or None
         :func:`measured_points`.
     marks : list of str
-        What a human should look at (:func:`visla_edu.course._sandbox.scan_source`, a
-        trajectory that matches the library's).
+        What a human should look at (:func:`visla_edu.course._sandbox.scan_source`, a trajectory
+        that matches the library's).
     """
 
     name: str
@@ -315,8 +293,8 @@ def grade(submissions, drive, out_dir, ground_truth=None, ground_truth_times=Non
           memory_limit=DEFAULT_MEMORY_LIMIT, data_dir=None):
     """Grade each submission on ``drive``; write the reports in ``out_dir``; return the :class:`Grade` list.
 
-    Prints a line per submission: on stdout when it completed, on stderr when it did not; the
-    next submission is graded either way.
+    Prints a line per submission, on stdout when it completed, on stderr when not; the next
+    submission is graded either way.
 
     Parameters
     ----------
@@ -332,8 +310,8 @@ def grade(submissions, drive, out_dir, ground_truth=None, ground_truth_times=Non
     Raises
     ------
     FileNotFoundError, ValueError
-        A missing or non-Python submission, a bad ``out_dir``, a drive or ground truth that does
-        not load; all checked before any submission runs.
+        A missing or non-Python submission, a bad ``out_dir``, a drive or ground truth that does not
+        load; all checked before any submission runs.
     """
     paths = _check_submissions(submissions)
     out = _check_out_dir(out_dir, paths)

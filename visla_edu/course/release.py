@@ -1,37 +1,26 @@
 """Generate the student notebooks from the solution notebooks (the single source).
 
-``solutions/*.ipynb`` hold the full course: derivations, exercises with their solutions
-between nbgrader's markers, and graded check cells. This module turns them into the student
-edition (:data:`visla_edu.course.STUDENT_NOTEBOOKS`), the files students open. A marker is a
-whole line, compared after stripping spaces:
+``solutions/*.ipynb`` hold the full course: derivations, exercises with their solutions between
+nbgrader's markers, and graded check cells. The student edition
+(:data:`visla_edu.course.STUDENT_NOTEBOOKS`) is made from them; a marker is a whole line,
+compared after stripping spaces:
 
-* in every cell, the lines between ``### BEGIN SOLUTION`` and ``### END SOLUTION`` are
-  replaced by a stub (``raise NotImplementedError(...)`` in code, ``YOUR ANSWER HERE`` in
-  markdown) at the indentation of the ``BEGIN`` marker, so the function signature and
-  docstring above the marker stay;
-* the lines between ``### BEGIN HIDDEN TESTS`` and ``### END HIDDEN TESTS`` (markers
-  included) are removed, so only the teacher's copy runs them;
-* in markdown cells, the lines between ``<!-- BEGIN ANSWERS -->`` and ``<!-- END ANSWERS -->``
-  (the answers to the check-your-understanding questions) are replaced by ``YOUR ANSWER HERE``.
-  These cells carry no nbgrader metadata: nbgrader accepts a markdown solution cell only as a
-  manually graded one, and the questions are ungraded. (nbgrader's own ``generate_assignment``
-  does not know this marker and keeps the answers: hand out the student edition);
-* outputs, execution counts and per-run metadata (``execution``, ``collapsed``...) are
-  removed; notebook and nbgrader cell metadata are kept, so nbgrader can grade the result.
+* ``### BEGIN SOLUTION`` .. ``### END SOLUTION`` (any cell): replaced by a stub
+  (``raise NotImplementedError(...)`` in code, ``YOUR ANSWER HERE`` in markdown) at the ``BEGIN``
+  marker's indentation, so the signature and docstring above it stay;
+* ``### BEGIN HIDDEN TESTS`` .. ``### END HIDDEN TESTS``: removed with the markers;
+* ``<!-- BEGIN ANSWERS -->`` .. ``<!-- END ANSWERS -->`` (markdown cells without nbgrader
+  metadata, which nbgrader does not know): the answers to the ungraded questions, replaced by
+  ``YOUR ANSWER HERE``;
+* outputs, execution counts and per-run cell metadata are removed; notebook and nbgrader
+  metadata are kept, so nbgrader can grade the result.
 
-It also writes the table of points per notebook (from the graded cells' nbgrader metadata)
-into the teacher's guide, ``TEACHING.md``, between :data:`POINTS_BEGIN` and :data:`POINTS_END`.
-
-The output depends only on the input (no time stamps, no random cell ids), so the student
-notebooks can be checked in and a test can prove they are in sync. Release never replaces a
-notebook edited by hand unless forced (:mod:`visla_edu.course.manifest`)::
-
-    python -m visla_edu.course.release                 # solutions/ -> visla_edu/course/notebooks/
-    python -m visla_edu.course.release --force         # also replace notebooks edited by hand
-    python -m visla_edu.course.release --check         # exit 1 and list the drifted files
-    python -m visla_edu.course.release --clean-sources # also strip outputs from solutions/
-
-Nothing here shells out to nbgrader; only :mod:`nbformat` is used.
+Release also writes the points per notebook (from the graded cells' nbgrader metadata) into
+``TEACHING.md`` between :data:`POINTS_BEGIN` and :data:`POINTS_END`. The output depends only on
+the input (no time stamps, no random cell ids), so the student notebooks are checked in and a
+test proves they are in sync; a notebook edited by hand is never replaced unless forced
+(:mod:`visla_edu.course.manifest`). Only :mod:`nbformat` is used, never nbgrader. Command line:
+:func:`main`.
 """
 
 import argparse
@@ -117,23 +106,18 @@ def _marker_regions(lines, begin, end, where):
 
 
 def stub_source(source, cell_type="code", what="exercise", where="cell", markers=(BEGIN_SOLUTION, END_SOLUTION)):
-    """Replace every solution region of ``source`` by a stub.
+    """A cell's ``source`` (str) with every solution region replaced by a stub (the module docstring).
 
     Parameters
     ----------
     source : str
-        Cell source.
     cell_type : {"code", "markdown"}
     what : str
-        Named in the stub's message (e.g. the exercise's grade id).
+        Named in the stub's message when no enclosing function is found (e.g. the grade id).
     where : str
-        Named in error messages about unbalanced markers.
+        Named in the ValueError for unbalanced markers.
     markers : (str, str)
         The region's first and last line (default: nbgrader's solution markers).
-
-    Returns
-    -------
-    str
     """
     lines = source.split("\n")
     regions = list(_marker_regions(lines, *markers, where))
@@ -153,11 +137,7 @@ def stub_source(source, cell_type="code", what="exercise", where="cell", markers
 
 
 def _enclosing_function(lines_before, indent):
-    """Name of the function whose body holds a solution region indented by ``indent``, or None.
-
-    The nearest ``def name(`` above the region with a shorter indentation: the student's
-    function, whatever the exercise's grade id (notebook 12's ``capstone_predict`` is ``predict``).
-    """
+    """The nearest ``def name(`` above the region, less indented: the student's function, or None."""
     for line in reversed(lines_before):
         match = re.match(r"(\s*)def (\w+)\(", line)
         if match and len(match.group(1)) < len(indent):
@@ -166,28 +146,17 @@ def _enclosing_function(lines_before, indent):
 
 
 def strip_hidden_tests(source, where="cell"):
-    """Remove every hidden-test region of ``source`` (markers included; the module docstring).
+    """A cell's ``source`` (str) without its hidden-test regions, markers included.
 
-    When the last region ends the cell (only blank lines after it), the blank lines before it
-    and after it are dropped too, so the result does not end where the tests were; otherwise
-    the cell's end is kept as it was. Without a region ``source`` is returned unchanged.
+    When the last region ends the cell (only blank lines after it), the blank lines around it go
+    too; otherwise the cell's end is kept. Without a region ``source`` is returned unchanged.
 
     Parameters
     ----------
     source : str
-        Cell source.
     where : str
-        Named in error messages about unbalanced markers.
-
-    Returns
-    -------
-    str
-
-    Raises
-    ------
-    ValueError
-        A ``BEGIN`` inside an open region, an ``END`` without a ``BEGIN``, or a region never
-        closed.
+        Named in the ValueError for a ``BEGIN`` inside an open region, an ``END`` without a
+        ``BEGIN``, or a region never closed.
     """
     lines = source.split("\n")
     regions = list(_marker_regions(lines, BEGIN_HIDDEN, END_HIDDEN, where))
@@ -206,20 +175,11 @@ def strip_hidden_tests(source, where="cell"):
 
 
 def clean_notebook(nb):
-    """A copy of ``nb`` without outputs, execution counts and per-run cell metadata.
+    """A deep copy of the NotebookNode ``nb`` without outputs, execution counts and per-run cell metadata.
 
-    Parameters
-    ----------
-    nb : nbformat.NotebookNode
-        Not modified.
-
-    Returns
-    -------
-    nbformat.NotebookNode
-        A deep copy whose code cells have no outputs and no execution count, and whose cells
-        have none of the metadata keys ``execution``, ``collapsed``, ``scrolled`` and
-        ``ExecuteTime``; the notebook's metadata, the other cell metadata (nbgrader's) and the
-        markdown cells' attachments are kept.
+    The cell metadata keys of ``_RUN_METADATA`` (``execution``, ``collapsed``, ``scrolled``,
+    ``ExecuteTime``) go; the other metadata (nbgrader's) and markdown attachments stay; ``nb`` is
+    not modified.
     """
     nb = copy.deepcopy(nb)
     for cell in nb.cells:
@@ -237,17 +197,13 @@ def _is_solution_cell(cell):
 
 
 def student_notebook(nb, name="notebook"):
-    """The student version of a solution notebook (a new object).
+    """The student version (a new NotebookNode) of a solution notebook (the module docstring).
 
     Parameters
     ----------
     nb : nbformat.NotebookNode
     name : str
-        Used in error messages (unbalanced markers) and nothing else.
-
-    Returns
-    -------
-    nbformat.NotebookNode
+        Used in the errors about unbalanced markers.
     """
     nb = clean_notebook(nb)
     for index, cell in enumerate(nb.cells):
@@ -267,17 +223,7 @@ def student_notebook(nb, name="notebook"):
 
 
 def notebook_text(nb):
-    """The exact text a notebook is stored as (nbformat's JSON, newline at the end).
-
-    Parameters
-    ----------
-    nb : nbformat.NotebookNode
-
-    Returns
-    -------
-    str
-        ``nbformat.writes(nb, version=4)``, with a final newline added if it has none.
-    """
+    """The exact text the NotebookNode ``nb`` is stored as: ``nbformat.writes(nb, version=4)`` ending with a newline."""
     nbformat = _nbformat()
     text = nbformat.writes(nb, version=4)
     return text if text.endswith("\n") else text + "\n"
@@ -305,28 +251,21 @@ def _expected(src_dir):
 def make_student_notebooks(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST, force=False):
     """Write the student version of every ``src_dir/*.ipynb`` to ``dst_dir``, never over someone's edits.
 
-    Files are rewritten only when their content changes, each atomically, and then the
-    manifest of what was written. A notebook to replace that release did not write as it is
-    (:mod:`visla_edu.course.manifest`) stops the release before anything is written, unless
-    ``force``. Student notebooks without a solution notebook are left alone
-    (:func:`check_in_sync` reports them).
+    Only changed files are rewritten, each atomically, then the manifest; returns the notebooks
+    written (:class:`pathlib.Path`). A notebook to replace that release did not write as it is stops
+    the release before anything is written, unless ``force``. Student notebooks without a solution
+    notebook are left alone (:func:`check_in_sync` lists them).
 
     Parameters
     ----------
     src_dir, dst_dir : str or os.PathLike
     force : bool
-        Replace edited notebooks too (and a damaged manifest).
-
-    Returns
-    -------
-    list of pathlib.Path
-        The notebooks written (changed or new); the manifest is not listed.
+        Replace edited notebooks (and a damaged manifest) too.
 
     Raises
     ------
     ValueError
-        Without ``force``: a notebook to replace was edited (the message names each one), or
-        the manifest is damaged. Nothing was written.
+        Without ``force``: an edited notebook (each named) or a damaged manifest; nothing written.
     """
     dst_dir = Path(dst_dir)
     expected = _expected(src_dir)
@@ -352,28 +291,21 @@ def _holds(path, text):
 
 
 def _write_text(path, text):
-    """Write ``text`` as UTF-8 bytes, atomically (:func:`visla_edu._files.atomic_write`): never half a file.
-
-    Bytes, not text mode: no newline translation, so the file's digest is the text's.
-    """
+    """Write ``text`` as UTF-8 bytes, atomically; bytes, so no newline translation: the digest is the text's."""
     with atomic_write(path, "wb") as f:
         f.write(text.encode("utf-8"))
 
 
 def check_in_sync(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST):
-    """Student notebooks that differ from what :func:`make_student_notebooks` would write.
+    """The file names in ``dst_dir`` that differ from what :func:`make_student_notebooks` would write.
+
+    Missing or different ones, those without a solution notebook, and the manifest
+    (:data:`~visla_edu.course.manifest.MANIFEST_NAME`) if it is not the expected one; ``[]``
+    when in sync.
 
     Parameters
     ----------
     src_dir, dst_dir : str or os.PathLike
-
-    Returns
-    -------
-    list of str
-        File names: missing or different in ``dst_dir``, present in ``dst_dir`` without a
-        solution notebook, and the manifest (:data:`visla_edu.course.manifest.MANIFEST_NAME`)
-        when it is missing or not that of the expected notebooks. Empty when everything is in
-        sync.
     """
     dst_dir = Path(dst_dir)
     expected = _expected(src_dir)
@@ -386,13 +318,7 @@ def check_in_sync(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST):
 
 
 def clean_sources(src_dir=SOLUTIONS):
-    """Strip outputs and execution counts from the solution notebooks themselves.
-
-    Returns
-    -------
-    list of pathlib.Path
-        The files rewritten.
-    """
+    """Strip outputs and execution counts from the solution notebooks themselves; return the files rewritten."""
     written = []
     for path in _sources(src_dir):
         text = notebook_text(clean_notebook(_read(path)))
@@ -403,19 +329,10 @@ def clean_sources(src_dir=SOLUTIONS):
 
 
 def is_reference_page(nb):
-    """True for a reference page (the notation page): a notebook without exercises or code.
+    """True for a NotebookNode marked ``{"visla_edu": {"reference_page": true}}`` (the notation page).
 
-    Marked by the notebook metadata ``{"visla_edu": {"reference_page": true}}``; the release
-    handles it like any notebook (it has nothing to strip), and the tests exempt it from the
-    per-lesson checks (exercises, graded cells, questions, the first code cell).
-
-    Parameters
-    ----------
-    nb : nbformat.NotebookNode
-
-    Returns
-    -------
-    bool
+    A reference page has no exercises or code: release handles it like any notebook, and the tests
+    exempt it from the per-lesson checks.
     """
     return bool(nb.metadata.get("visla_edu", {}).get("reference_page", False))
 
@@ -435,18 +352,7 @@ def _number(points):
 
 
 def points_table(src_dir=SOLUTIONS):
-    """The markdown table of the points per notebook, from the graded cells' metadata.
-
-    Parameters
-    ----------
-    src_dir : str or os.PathLike
-        The solution notebooks.
-
-    Returns
-    -------
-    str
-        A table (one row per notebook, then the total), without the markers.
-    """
+    """The markdown table (str) of the points per notebook of ``src_dir`` and the total, without the markers."""
     rows = ["| notebook | graded cells (points each) | points |", "|---|---|---|"]
     cells = total = 0
     for path in _sources(src_dir):
@@ -468,18 +374,13 @@ def _with_points(text, table, where):
 
 
 def update_points_table(src_dir=SOLUTIONS, teaching="TEACHING.md", check=False):
-    """Write the points table of ``src_dir`` into ``teaching`` (only if it changed).
+    """Write the points table of ``src_dir`` into ``teaching`` if it changed; True if it was (would be) rewritten.
 
     Parameters
     ----------
     src_dir, teaching : str or os.PathLike
     check : bool
-        Write nothing; only report whether the table is out of date.
-
-    Returns
-    -------
-    bool
-        True if the file was (``check``: would be) rewritten.
+        Write nothing; only say whether the table is out of date.
     """
     teaching = Path(teaching)
     text = teaching.read_text(encoding="utf-8")
@@ -500,32 +401,21 @@ def _teaching_next_to(src_dir):
 def main(argv=None):
     """Command line: ``python -m visla_edu.course.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
 
-    Without ``--check``: writes the student notebooks (:func:`make_student_notebooks`), then
-    with ``--clean-sources`` strips
-    the solution notebooks (:func:`clean_sources`) and, if ``TEACHING.md`` exists in the folder
-    above ``--src``, writes its points table (:func:`update_points_table`), printing each file
-    written. With ``--check``: writes nothing and lists what is out of date
-    (``--clean-sources`` with it is refused). ``--src`` and ``--dst`` default to the project's
-    ``solutions/`` and the student edition in the package (:data:`visla_edu.course.STUDENT_NOTEBOOKS`).
+    Writes the student notebooks, with ``--clean-sources`` strips the solutions, and updates the
+    points table of a ``TEACHING.md`` in the folder above ``--src``, printing each file written.
+    ``--check`` writes nothing and lists what is out of date (not with ``--clean-sources``).
 
     Parameters
     ----------
     argv : list of str, optional
-        The arguments; default ``sys.argv[1:]``.
+        Default ``sys.argv[1:]``.
 
     Returns
     -------
     int
-        Exit status: 0 done (or in sync), 1 out of date (``--check``), 2 on a
-        ``FileNotFoundError`` or ``ValueError`` (no solutions folder or notebooks, unbalanced
-        markers, a student notebook edited by hand, ``TEACHING.md`` without its points
-        markers...), whose message goes to stderr.
-
-    Raises
-    ------
-    SystemExit
-        From argparse, for bad arguments, ``--check`` with ``--clean-sources`` (status 2) or
-        ``--help``.
+        0 done (or in sync), 1 out of date (``--check``), 2 on a ``FileNotFoundError`` or
+        ``ValueError`` (message on stderr): no notebooks, unbalanced markers, an edited notebook,
+        ``TEACHING.md`` without its markers... Argparse exits with 2 on bad arguments.
     """
     parser = argparse.ArgumentParser(
         prog="python -m visla_edu.course.release",

@@ -1,15 +1,10 @@
 """A student's own working folder, ``visla-edu student DIR``: course files that are never overwritten.
 
-Students work in a folder of their own, not in a clone of the repository (where ``visla-edu
-release`` regenerates the notebooks, and where the solutions are). :func:`make_student_folder`
-copies into it every file of the student edition the installed package carries
-(:data:`visla_edu.course.STUDENT_NOTEBOOKS`: the notebooks, and any page beside them, whatever
-their names) and a short ``README.md`` (:data:`visla_edu.course.STUDENT_README`). A file that is
-already in the folder is kept as it is, whatever it holds: the student's answers, or an older
-edition. Run again after an upgrade, it therefore only adds what is new, and its report says
-which files it added and which it kept.
-
-Each file is written atomically and only under a name nothing has
+Students work in a folder of their own (TEACHING.md, section 1), not in a clone, where ``visla-edu
+release`` regenerates the notebooks beside the solutions. :func:`make_student_folder` copies into
+it the student edition the package carries and a short ``README.md``, keeping any file already
+there as it is (the student's answers, or an older edition): after an upgrade it only adds what
+is new. Each file is written atomically and only under a name nothing has
 (:func:`visla_edu._files.atomic_write` with ``replace=False``): an interruption leaves no half
 notebook, and a file that appears while copying is not replaced either.
 
@@ -36,19 +31,15 @@ _SKIPPED = {"__pycache__"}
 
 @dataclasses.dataclass(frozen=True)
 class FolderUpdate:
-    """What :func:`make_student_folder` did to a student's folder.
+    """What :func:`make_student_folder` did to a student's folder (``folder``, absolute).
 
     Attributes
     ----------
-    folder : pathlib.Path
-        The folder (absolute).
     added : tuple of str
-        Files copied now (paths relative to ``folder``, with ``/``).
-    kept : tuple of str
-        Files that were there already with the same content as this edition's.
-    kept_different : tuple of str
-        Files that were there already with other content (the student's work, or an older
-        edition of the course), left as they are.
+        Files copied now (paths relative to ``folder``, with ``/``), as the other two.
+    kept, kept_different : tuple of str
+        Files that were there already, with the same content as this edition's, or with another
+        (the student's work, or an older edition), left as they are.
     """
 
     folder: Path
@@ -57,12 +48,7 @@ class FolderUpdate:
     kept_different: tuple
 
     def report(self):
-        """The text ``visla-edu student`` prints: a summary line, then one line per file.
-
-        Returns
-        -------
-        str
-        """
+        """The text ``visla-edu student`` prints (str): a summary line, then one line per file."""
         kept = len(self.kept) + len(self.kept_different)
         lines = [f"student folder {self.folder}: {len(self.added)} added, {kept} kept (never overwritten)"]
         lines += [f"  added  {name}" for name in self.added]
@@ -74,25 +60,17 @@ class FolderUpdate:
 
 
 def course_files(source=None):
-    """The files a student's folder receives: relative name -> the package file to copy.
+    """The files a student's folder receives: relative name (with ``/``) -> the package file, sorted.
+
+    Every regular file of ``source`` and its subfolders, whatever its name, except hidden names
+    (``.release.json``, ``.ipynb_checkpoints/``...) and ``__pycache__``; ``README.md`` is
+    :data:`visla_edu.course.STUDENT_README` unless the edition has a file of that name.
 
     Parameters
     ----------
     source : str or os.PathLike, optional
-        The student edition (default :data:`visla_edu.course.STUDENT_NOTEBOOKS`). Every regular
-        file in it or its subfolders is listed, except hidden names (``.release.json``,
-        ``.ipynb_checkpoints/``...) and ``__pycache__``; ``README.md`` is
-        :data:`visla_edu.course.STUDENT_README` unless the edition has a file of that name.
-
-    Returns
-    -------
-    dict of str to pathlib.Path
-        Sorted by name; names relative to ``source``, with ``/``.
-
-    Raises
-    ------
-    FileNotFoundError
-        ``source`` holds no notebook (a broken installation).
+        The student edition (default :data:`visla_edu.course.STUDENT_NOTEBOOKS`); a
+        FileNotFoundError if it holds no notebook (a broken installation).
     """
     source = Path(STUDENT_NOTEBOOKS if source is None else source)
     found = {}
@@ -110,6 +88,9 @@ def course_files(source=None):
 def make_student_folder(folder, source=None):
     """Create or complete a student's folder: copy each course file that is not there yet.
 
+    A file already in ``folder`` (or anything else under its name: a folder, a link) is never
+    replaced; the :class:`FolderUpdate` returned says what was added and kept.
+
     Parameters
     ----------
     folder : str or os.PathLike
@@ -117,22 +98,12 @@ def make_student_folder(folder, source=None):
     source : str or os.PathLike, optional
         The student edition (:func:`course_files`).
 
-    Returns
-    -------
-    FolderUpdate
-        What was added and what was kept. A file already in ``folder`` (or anything else under
-        its name: a folder, a link) is never replaced.
-
     Raises
     ------
-    NotADirectoryError
-        ``folder``, or a folder on its path, is a file.
-    PermissionError
-        ``folder`` cannot be created, or no file can be created in it.
-    ValueError
-        ``folder`` is the student edition itself.
-    FileNotFoundError
-        The student edition is missing (:func:`course_files`).
+    NotADirectoryError, PermissionError
+        ``folder``, or a folder on its path, is a file; ``folder`` cannot be created or written in.
+    ValueError, FileNotFoundError
+        ``folder`` is the student edition itself; the student edition is missing.
     """
     files = course_files(source)
     target = _student_folder(folder, Path(STUDENT_NOTEBOOKS if source is None else source))

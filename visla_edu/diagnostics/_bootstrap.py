@@ -1,17 +1,12 @@
 """Cluster bootstrap of medians: resample whole clusters, vectorised over the resamples.
 
-Values that share an error (the pairs of one landmark share its triangulation error, those of
-landmarks anchored at the same frames the IMU's noise) are not independent; clusters of them
-are. Resampling clusters with replacement (``B`` times, seeded) gives each cluster a
-multiplicity ``W[m, b]``; resample ``b``'s median of the values is the weighted median with
-the weights of the values' clusters.
-
-A weighted median per resample by sorting costs ``B`` passes over all pairs. Here the pairs
-are binned once into ``G`` equal-count bins between the 2% and 98% quantiles (plus one bin
-below and one above); a sparse (bins x clusters) count matrix times ``W`` gives every
-resample's weighted histogram at once, and the median is interpolated linearly within the bin
-where the cumulative weight reaches half. With 192 bins the interpolation error is far below
-the resampling spread.
+Values that share an error (the pairs of one landmark, or of landmarks anchored at the same
+frames) are not independent; their clusters are. Resampling clusters with replacement gives each
+cluster a multiplicity ``W[m, b]``; resample ``b``'s median weighs each value by its cluster's.
+Instead of ``B`` sorts, the values are binned once into ``_BINS`` equal-count bins between the 2%
+and 98% quantiles (plus one below, one above): a sparse (bins x clusters) count matrix times ``W``
+gives every resample's histogram, and the median is interpolated linearly in the bin where the
+cumulative weight reaches half (with 192 bins, far below the resampling spread).
 """
 
 import numpy as np
@@ -25,21 +20,9 @@ _LOW_QUANTILE, _HIGH_QUANTILE = 0.02, 0.98
 
 
 def cluster_resamples(num_clusters, resamples, seed):
-    """Multiplicities of each cluster in ``resamples`` bootstrap resamples.
+    """Multiplicities (M, B), float32, of ``num_clusters`` M clusters in ``resamples`` B resamples.
 
-    Parameters
-    ----------
-    num_clusters : int
-        M, clusters (e.g. groups of landmarks) to resample with replacement, M at a time.
-    resamples : int
-        B.
-    seed : int
-        Seed of the generator: the same seed gives the same resamples.
-
-    Returns
-    -------
-    ndarray of float32, shape (M, B)
-        Counts (exact in float32); each column sums to M.
+    Exact counts; each column sums to M; the same ``seed`` gives the same resamples.
     """
     rng = np.random.default_rng(seed)
     index = np.int64 if resamples * num_clusters >= 2**31 else np.int32
@@ -50,22 +33,10 @@ def cluster_resamples(num_clusters, resamples, seed):
 
 
 def resampled_medians(values, cluster, weights):
-    """Median of ``values`` in every resample, the pairs weighted by their cluster's multiplicity.
+    """Medians (B,) of finite ``values`` (P,), each weighted by ``weights[cluster]`` (M, B), in every resample.
 
-    Parameters
-    ----------
-    values : ndarray, shape (P,)
-        Finite values of the pairs.
-    cluster : ndarray of int, shape (P,)
-        Cluster of each pair, ``0 <= cluster < M``.
-    weights : ndarray, shape (M, B)
-        Multiplicities from :func:`cluster_resamples`.
-
-    Returns
-    -------
-    ndarray, shape (B,)
-        Grouped-data medians (exact up to the linear interpolation within one bin of about
-        0.5% of the pairs; clamped to the 2% and 98% quantiles).
+    ``cluster`` (P,) int, ``0 <= cluster < M``. Exact up to the interpolation within one bin (about
+    0.5% of the values); clamped to the 2% and 98% quantiles.
     """
     edges = np.quantile(values, np.linspace(_LOW_QUANTILE, _HIGH_QUANTILE, _BINS + 1))
     bins = np.searchsorted(edges, values, side="right")  # 0 below, 1.._BINS inside, _BINS + 1 above

@@ -2,18 +2,16 @@
 
 The rules (one setting for every drive, never per-drive tuning):
 
-* **Extrinsic correction**: the track-reprojection evidence must choose it (every other
-  correction worse with 95% confidence, :class:`~._tracks.TrackScorer`), and the visual
-  odometry's slopes, when it has enough pairs, must not contradict it (verdict
-  "disagrees"); otherwise the file's calibration is kept (``"none"``).
-* **IMU lag**: the track evidence among the lags -2..+2 with that correction; otherwise 0.
-  The odometry's rotation residuals per lag are reported alongside.
+* **Extrinsic correction**: the one the track reprojection chooses (every other correction
+  worse with 95% confidence, :class:`~._tracks.TrackScorer`) unless the visual odometry, with
+  enough pairs, "disagrees" with it; otherwise the file's calibration (``"none"``).
+* **IMU lag**: the track evidence among the lags -2..+2 with that correction; otherwise 0
+  (:func:`_decide_lag`). The odometry's rotation residuals per lag are reported alongside.
 * **Velocity noise**: white + hold noise per axis, with floors (:mod:`._noise`).
 * **Gyro bias and velocity scale**: reported with a standard error and a verdict, not applied.
 
-:func:`calibrate` keeps its result in ``dataset.extra`` and, with ``cache=True``, in the user
-cache folder (:mod:`visla_edu.cache`), keyed by a content hash of the dataset's arrays and
-:data:`CALIBRATION_VERSION`: a second run on the same data reuses it.
+The result is kept in ``dataset.extra["calibration"]`` and in the user cache folder
+(:mod:`visla_edu.cache`, :func:`cache_path`): a second run on the same data reuses it.
 """
 
 import time
@@ -68,24 +66,16 @@ class VoEvidence:
     Attributes
     ----------
     frame_pairs, pairs : int
-        Consecutive frame pairs, and those usable (valid, at least 4 inliers).
+        Consecutive frame pairs, and those usable (:func:`~._vo.vo_pairs`).
     stale_pairs, stale_points : int
-        Frame pairs with stale copies (points whose pixels repeat the previous frame's bit for
-        bit) and the number of such points.
-    slope_lag : int
-        Lag of the slopes below.
-    rotation_slope, translation_slope : dict
-        Correction -> slope of the odometry's motion on the IMU's (1 = agreement).
-    rotation_slope_error, translation_slope_error : float or None
-    extrinsic_verdict : dict
-        Correction -> "agrees", "disagrees" or "not enough evidence".
-    lag_residual : list
-        Median rotation disagreement (rad per frame) for each lag of ``LAGS``.
-    lag_best : int or None
-        Lag with the smallest residual (None with too few pairs).
+        Frame pairs holding stale copies (pixels repeating the previous frame's bit for bit), and
+        such points.
+    rotation_slope, translation_slope, extrinsic_verdict : dict
+        Correction -> :class:`~._vo.ExtrinsicCheck`'s slope (at lag ``slope_lag``) and verdict.
+    lag_residual, lag_best : list, int or None
+        :func:`~._vo.time_alignment`'s residual (rad per frame) for each lag of ``LAGS``, best lag.
     gyro_bias, velocity_scale : dict
-        See :func:`~._motion.gyro_bias` and :func:`~._motion.velocity_scale` (at the chosen
-        correction and lag).
+        :func:`~._motion.gyro_bias`, :func:`~._motion.velocity_scale` (chosen correction and lag).
     """
 
     frame_pairs: int
@@ -111,30 +101,24 @@ class Calibration:
     Attributes
     ----------
     extrinsic_correction : str
-        Key of :data:`CORRECTIONS` applied to the file's ``imu_T_cam`` (to the chosen reading's,
-        for a file whose extrinsics have several readings).
+        Key of :data:`CORRECTIONS` applied to the file's ``imu_T_cam`` (or the chosen reading's).
     imu_T_cam : ndarray, shape (4, 4)
-        The calibration to use, ``CORRECTIONS[extrinsic_correction] @ dataset.imu_T_cam`` (the
-        chosen reading's left camera in place of ``dataset.imu_T_cam``).
+        ``CORRECTIONS[extrinsic_correction] @`` the ``imu_T_cam`` it applies to.
     imu_lag : int
-        The step ``t -> t+1`` uses the velocity sample ``u[t + imu_lag]``.
+        The step ``t -> t+1`` uses ``u[t + imu_lag]``.
     sigma_linear_velocity, sigma_angular_velocity : ndarray, shape (3,)
-        Velocity noise per axis (m/s, rad/s): ``sqrt(white^2 + hold^2)`` with floors.
+        Velocity noise per axis (m/s, rad/s): :func:`~._noise.imu_noise`'s ``sigma``.
     white_noise, hold_noise : ndarray, shape (6,)
-        The two parts, linear axes first.
+        Its two parts, linear axes first.
     reasons : dict
-        ``"extrinsic_correction"`` and ``"imu_lag"`` -> one line of why.
-    tracks : TrackEvidence
-    vo : VoEvidence
+        ``"extrinsic_correction"``, ``"imu_lag"``, ``"noise"`` -> one line of why.
     repeated_frames : list of int
         Frames repeating the previous frame exactly.
     outliers : dict
         :func:`outlier_indicators`.
-    track_correlation : float
+    track_correlation, correlated_tracks : float, int
         :func:`~._correlation.track_correlation` along the dead-reckoned poses (chosen lag and
         correction).
-    correlated_tracks : int
-        The tracks it pooled.
     seconds : float
         Time the computation took.
     source : str
@@ -142,8 +126,7 @@ class Calibration:
     version : int
         :data:`CALIBRATION_VERSION` of the code that computed it.
     reading : ReadingEvidence or None
-        For a file whose extrinsics may be read several ways (``dataset.extrinsic_readings``):
-        the evidence and the reading chosen (:func:`~._readings.choose_reading`); else None.
+        The reading of a file whose extrinsics have several (:func:`~._readings.choose_reading`).
     """
 
     extrinsic_correction: str
@@ -169,8 +152,7 @@ class Calibration:
                "white_noise": (6,), "hold_noise": (6,)}
 
     def report(self, name=""):
-        """The readable evidence and decision (what ``visla-edu info`` prints), ending with
-        "the filter will use: ..."."""
+        """The readable evidence and decision: what ``visla-edu info`` prints."""
         return calibration_report(self, name)
 
     def to_dict(self):
@@ -204,12 +186,7 @@ class Calibration:
 
 
 def _check_decisions(fields):
-    """Raise a ValueError unless the lag, the noise and the report's fields are what :func:`calibrate` writes.
-
-    A cache file that is valid JSON but edited or damaged (a lag of 10**6, a noise below the
-    floors, a reason that is not text) must read as no entry, not drive the filter or break
-    ``visla-edu info``.
-    """
+    """ValueError unless the lag, noise and report fields are what :func:`calibrate` writes (an edited cache)."""
     lag = fields["imu_lag"]
     if type(lag) is not int or lag not in LAGS:
         raise ValueError(f"imu_lag must be one of {LAGS}, got {lag!r}")
@@ -232,7 +209,7 @@ def _check_decisions(fields):
 
 
 def _noise_reason(noise, samples):
-    """How the filter's velocity noise was chosen (:func:`~visla_edu.diagnostics._noise.imu_noise`), one line."""
+    """How the filter's velocity noise was chosen, one line."""
     if noise["measured"]:
         return (f"measured from {samples} velocity samples: sqrt(white^2 + hold^2), floors {MIN_SIGMA_LINEAR:g} m/s "
                 f"and {MIN_SIGMA_ANGULAR:g} rad/s")
@@ -241,21 +218,17 @@ def _noise_reason(noise, samples):
 
 
 def outlier_indicators(dataset, epipolar_px=3.0):
-    """Shares of observations that break the rectified stereo geometry.
+    """A dict of the shares in [0, 1] of the observations that break the rectified stereo geometry.
+
+    ``non_positive_disparity`` (``uL - uR <= 0``), ``epipolar`` (``|vL - vR| > epipolar_px``, px)
+    and ``vo_rejected`` (tracked points of the valid odometry pairs that are not inliers). With two
+    intrinsics the right pixels are first mapped into the left camera's
+    (:func:`visla_edu.camera.right_in_left_pixels`).
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     epipolar_px : float
-        An observation breaks the epipolar line when ``|vL - vR|`` exceeds this.
-
-    Returns
-    -------
-    dict
-        ``non_positive_disparity`` (uL - uR <= 0), ``epipolar`` (|vL - vR| > epipolar_px),
-        and ``vo_rejected`` (share of the tracked points of the valid odometry pairs that are
-        not inliers), each in [0, 1]; with two intrinsics the right pixels are first mapped
-        into the left camera's (:func:`visla_edu.camera.right_in_left_pixels`).
     """
     z = right_in_left_pixels(dataset.obs_z, dataset.K, dataset.K_right)
     n = max(len(z), 1)
@@ -282,12 +255,10 @@ def _decide_correction(choice, check):
 
 
 def _decide_lag(choice):
-    """The lag to use and why, from the track choice among the lags.
+    """The lag and why: one that beats every other with 95% confidence, else the best if it beats lag 0 so.
 
-    A lag that beats every other with 95% confidence is used. Failing that, the best lag is
-    still used when it beats the course's convention (lag 0) with 95% confidence: the lags
-    it could not separate from are then about as good as it, and all better than 0 (on
-    dataset 0022, +1 and +2 both beat 0 but not each other).
+    The lags it cannot be told from are then all better than 0 too (dataset 0022: +1 and +2 both
+    beat 0, not each other); otherwise the course's convention, 0.
     """
     if choice.chosen is not None:
         return int(choice.chosen), "every other lag has a larger track-reprojection error with 95% confidence"
@@ -316,10 +287,7 @@ def _vo_evidence(dataset, check, slope_lag, imu_T_cam, lag):
 
 
 def _check_inputs(dataset):
-    """TypeError for a non-dataset, ValueError naming the first bad time stamp or velocity sample.
-
-    Pixels are checked by the odometry (:func:`visla_edu.diagnostics.odometry.visual_odometry`).
-    """
+    """TypeError for a non-dataset, ValueError naming the first bad time stamp or velocity sample."""
     if not isinstance(dataset, Dataset):
         raise TypeError(f"calibrate: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")
     stamps = np.asarray(dataset.time_stamps, dtype=float).reshape(-1)
@@ -368,26 +336,11 @@ def _compute(dataset):
 
 
 def cache_path(dataset):
-    """The cache file of ``dataset``'s calibration: ``<cache dir>/calibration-<content hash>.json``.
+    """The cache file of ``dataset``'s calibration, a :class:`pathlib.Path` (nothing is created).
 
-    The hash covers :data:`CACHED_ARRAYS` (with ``K_right`` and the readings' left cameras when
-    the dataset has them) and :data:`CALIBRATION_VERSION`.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-
-    Returns
-    -------
-    pathlib.Path
-        In :func:`visla_edu.cache.cache_dir`, with the 64-hex-digit
-        :func:`visla_edu.cache.content_hash` of the dataset's arrays; neither the folder nor the
-        file is created.
-
-    Raises
-    ------
-    ValueError
-        The cache folder's name cannot be expanded (:func:`visla_edu.cache.cache_dir`).
+    ``<cache dir>/calibration-<hash>.json`` in :func:`visla_edu.cache.cache_dir`, the 64-hex-digit
+    :func:`visla_edu.cache.content_hash` of :data:`CACHED_ARRAYS` and :data:`CALIBRATION_VERSION`; a
+    ValueError when the cache folder's name cannot be expanded.
     """
     arrays = {name: getattr(dataset, name) for name in CACHED_ARRAYS}
     if dataset.K_right is not None:
@@ -407,11 +360,7 @@ def _cache_path_or_none(dataset):
 
 
 def _load(path):
-    """The calibration cached at ``path``, or None (missing, unreadable, corrupt or another version).
-
-    Corrupt includes evidence its report cannot show (``visla-edu info`` prints it), e.g. a
-    slope table that is not a table.
-    """
+    """The calibration cached at ``path``, or None (missing, corrupt, unreportable, another version)."""
     stored = user_cache.load_json(path)
     if stored is None or stored.get("version") != CALIBRATION_VERSION:
         return None
@@ -424,29 +373,22 @@ def _load(path):
 
 
 def calibrate(dataset, cache=True):
-    """Calibration of a drive from its own data: extrinsic correction, IMU lag, velocity noise.
-
-    See the module docstring for the rules. The result is computed once per dataset object
-    (kept in ``dataset.extra["calibration"]``).
+    """The :class:`Calibration` of a drive from its own data, by the module docstring's rules.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     cache : bool
-        Reuse (and store) the result in the user cache folder (:func:`cache_path`); a corrupt
-        cache file is recomputed, a folder that cannot be written is skipped.
-
-    Returns
-    -------
-    Calibration
+        Reuse and store the result in the user cache folder (:func:`cache_path`); a corrupt cache
+        file is recomputed, a folder that cannot be written is skipped.
 
     Raises
     ------
     TypeError
         ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
     ValueError
-        A time stamp, velocity or pixel is not finite, the time stamps do not increase, or the
-        velocities have the wrong shape (the message names the frame).
+        A non-finite time stamp, velocity or pixel, time stamps that do not increase, or velocities
+        of the wrong shape (the message names the frame).
     """
     _check_inputs(dataset)
     if "calibration" in dataset.extra:

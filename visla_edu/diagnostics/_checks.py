@@ -1,9 +1,4 @@
-"""The single checks with their defaults taken from :func:`~._calibration.calibrate`.
-
-These keep the names the course and the driver have always used: :func:`resolve_extrinsics`
-(the camera the filter uses), :func:`check_time_alignment` and :func:`imu_noise_and_bias`
-(with the calibration found by default), and :func:`diagnose` (the report).
-"""
+"""The single checks the course and the driver have always used, with :func:`~._calibration.calibrate`'s defaults."""
 
 import numpy as np
 
@@ -22,23 +17,16 @@ def resolve_extrinsics(dataset, correction="auto"):
     ----------
     dataset : visla_edu.dataset.Dataset
     correction : str
-        ``"auto"`` (what :func:`calibrate` decides), ``"none"`` or a key of :data:`CORRECTIONS`.
+        ``"auto"`` (what :func:`calibrate` decides), or a key of :data:`CORRECTIONS` applied to
+        ``dataset.imu_T_cam`` (the loader's reading); ValueError otherwise.
 
     Returns
     -------
     imu_T_cam : ndarray, shape (4, 4)
     evidence : str
-        Why a correction was applied; with ``"auto"`` keeping the file's calibration, a
-        warning when the odometry contradicts it and every correction of it (an inverted or
-        foreign extrinsic, see :data:`UNEXPLAINED_SLOPE`); for a file whose extrinsics have
-        several readings (2025+), first the reading chosen and why (and any warning). Empty
-        otherwise. An explicit ``correction`` applies to ``dataset.imu_T_cam``, the loader's
-        reading.
-
-    Raises
-    ------
-    ValueError
-        An unknown ``correction``.
+        Why a correction was applied, or ``""``. With ``"auto"``, a 2025+ file's chosen reading,
+        why and any warning come first, and when the file's calibration is kept, a warning if the
+        odometry contradicts it and every correction of it (:data:`UNEXPLAINED_SLOPE`).
     """
     if correction == "auto":
         calibration = calibrate(dataset)
@@ -59,7 +47,7 @@ def resolve_extrinsics(dataset, correction="auto"):
 
 
 def _reading_lines(calibration):
-    """The reading of a 2025+ file's extrinsics the calibration chose, and its warning (``""`` for other files)."""
+    """The chosen reading of a 2025+ file's extrinsics and its warning (``""`` for other files)."""
     reading = calibration.reading
     if reading is None:
         return ""
@@ -74,11 +62,10 @@ UNEXPLAINED_SLOPE = 0.15
 
 
 def _unexplained_extrinsic_warning(calibration):
-    """A warning when the odometry contradicts the file's ``imu_T_cam`` and every axis correction of it.
+    """A warning when the odometry contradicts ``imu_T_cam`` and every axis correction of it.
 
-    That happens for an inverted extrinsic (``cam_T_imu`` stored as ``imu_T_cam``) or one in
-    another convention, never on the course files (one candidate agrees on each), and the
-    filters then produce garbage: the run goes on, but says so.
+    An inverted extrinsic or one in another convention (never on the course files): the filters
+    then produce garbage, and the run says so.
     """
     verdicts = calibration.vo.extrinsic_verdict if calibration.vo is not None else {}
     if not verdicts or any(v != DISAGREES for v in verdicts.values()):
@@ -93,21 +80,15 @@ def _unexplained_extrinsic_warning(calibration):
 
 
 def check_time_alignment(dataset, imu_T_cam=None, lags=LAGS):
-    """Which velocity sample best explains the odometry's rotation from frame t to t+1.
+    """Which velocity sample best explains the odometry's rotation (a dict, :func:`~._vo.time_alignment`).
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     imu_T_cam : ndarray, shape (4, 4), optional
-        Calibration to use (default: the one :func:`calibrate` chooses).
+        Default: :func:`calibrate`'s.
     lags : sequence of int
-        Candidate offsets: the step ``t -> t+1`` uses ``u[t + lag]``.
-
-    Returns
-    -------
-    dict
-        ``residual`` (lag -> median rotation disagreement, rad per frame), ``best`` (or None
-        without enough pairs), ``pairs``; see :func:`visla_edu.diagnostics._vo.time_alignment`.
+        Candidate lags.
     """
     if imu_T_cam is None:
         imu_T_cam = calibrate(dataset).imu_T_cam
@@ -121,16 +102,17 @@ def imu_noise_and_bias(dataset, imu_T_cam=None, lag=0):
     ----------
     dataset : visla_edu.dataset.Dataset
     imu_T_cam : ndarray, shape (4, 4), optional
-        Calibration for the odometry (default: the one :func:`calibrate` chooses).
+        Default: :func:`calibrate`'s.
     lag : int
-        The step ``t -> t+1`` uses ``u[t + lag]`` in the gyro-bias comparison.
+        Of the gyro-bias comparison.
 
     Returns
     -------
     dict
-        ``linear_noise`` (3,) m/s and ``angular_noise`` (3,) rad/s: the white noise from second
-        differences; ``linear_hold``, ``angular_hold`` (3,): the hold noise; ``gyro_bias`` (3,)
-        rad/s and ``gyro_bias_stderr`` (3,) (NaN and inf without usable pairs), ``gyro_bias_verdict``.
+        ``linear_noise`` (3,) m/s, ``angular_noise`` (3,) rad/s: the white noise; ``linear_hold``,
+        ``angular_hold`` (3,): the hold noise (:func:`~._noise.imu_noise`); ``gyro_bias`` (3,)
+        rad/s, ``gyro_bias_stderr`` (3,) (NaN and inf without usable pairs) and
+        ``gyro_bias_verdict`` (:func:`~._motion.gyro_bias`).
     """
     if imu_T_cam is None:
         imu_T_cam = calibrate(dataset).imu_T_cam
@@ -147,25 +129,5 @@ def imu_noise_and_bias(dataset, imu_T_cam=None, lag=0):
 
 
 def diagnose(dataset):
-    """The readable report of :func:`calibrate` (str): the diagnostics' evidence and decision.
-
-    Runs :func:`calibrate` with its defaults, so a result already kept in
-    ``dataset.extra["calibration"]`` or in the user cache is reused (and a new one is kept in
-    both).
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-
-    Returns
-    -------
-    str
-        :meth:`Calibration.report` with the dataset's name: what ``visla-edu info`` prints,
-        ending with "the filter will use: ...".
-
-    Raises
-    ------
-    TypeError, ValueError
-        As :func:`calibrate`.
-    """
+    """What ``visla-edu info`` prints: the :meth:`Calibration.report` of :func:`calibrate` (and its errors)."""
     return calibrate(dataset).report(dataset.name)

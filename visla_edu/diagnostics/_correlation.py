@@ -1,20 +1,18 @@
 """How long a track's pixel errors persist: the residual correlation along tracks.
 
 Every track of at least :data:`MIN_TRACK` observations is triangulated from a trajectory (linear
-least squares on all four pixel rows of all its observations), and its left-image residuals
-``r_t = uL_t - u(p, t)`` less their mean enter one pooled lag-1 autocorrelation over
+least squares on all four pixel rows of all its observations); its left-image residuals
+``r_t = uL_t - u(p, t)``, less their mean, enter one pooled lag-1 autocorrelation over
 consecutive frames::
 
     rho = sum_tracks sum_t r_t r_(t+1) / sum_tracks sum_t r_t^2
 
-White pixel noise gives ``rho`` near 0 (slightly below: the mean is removed); a tracker whose
-error persists from frame to frame (drift, a feature sliding along an edge, far features on a
-highway) gives ``rho`` near 1, and a track of ``L`` observations is then worth about
-``L (1 - rho) / (1 + rho)`` independent ones. Removing each track's mean biases ``rho`` down
-by about ``(1 + 4 rho) / L`` (a persistent error of 0.81 on tracks of about 10 frames reads as
-about 0.5), so it understates the persistence on short tracks. A trajectory's own errors also persist, so
-``rho`` describes the camera only where the trajectory is locally accurate (the gyro regime of
-:func:`visla_edu.filters.pixel_noise_inflation`, with the dead-reckoned poses).
+White pixel noise gives ``rho`` near 0 (slightly below); an error that persists from frame to
+frame (drift, a feature sliding along an edge, far features on a highway) near 1, and a track of
+``L`` observations is then worth about ``L (1 - rho) / (1 + rho)`` independent ones. Removing the
+mean biases ``rho`` down by about ``(1 + 4 rho) / L`` (0.81 reads as 0.5 on 10-frame tracks). The
+trajectory's own errors persist too, so ``rho`` describes the camera only where the trajectory is
+locally accurate (the gyro regime of :func:`visla_edu.filters.pixel_noise_inflation`).
 """
 
 import numpy as np
@@ -31,10 +29,10 @@ MAX_RESIDUAL = 20.0
 
 
 def _triangulate(Ks, cam_T_world, z):
-    """The world point (3,) whose projections best fit pixels ``z`` (L, 4) seen from ``cam_T_world`` (L, 4, 4).
+    """The homogeneous world point (4,) best fitting ``z`` (L, 4) seen from ``cam_T_world`` (L, 4, 4), or None.
 
-    Each pixel row ``k`` gives the linear equation ``(z_k e3 - Ks[k]) cam_T_world p = 0`` in the
-    homogeneous point ``p``; the right singular vector of the smallest singular value solves all.
+    Each pixel row ``k`` gives ``(z_k e3 - Ks[k]) cam_T_world p = 0``; the last right singular
+    vector solves all.
     """
     rows = (z[:, :, None] * cam_T_world[:, None, 2, :] - np.einsum("kj,ljc->lkc", Ks, cam_T_world)).reshape(-1, 4)
     _, _, Vt = np.linalg.svd(rows)
@@ -60,21 +58,14 @@ def track_correlation(dataset, world_T_imu, imu_T_cam):
     ----------
     dataset : visla_edu.dataset.Dataset
     world_T_imu : ndarray, shape (T, 4, 4)
-        One IMU pose per frame.
+        One IMU pose per frame (ValueError otherwise).
     imu_T_cam : ndarray, shape (4, 4)
-        The left camera (optical frame) in the IMU frame, as the filter will use it.
+        As the filter will use it.
 
     Returns
     -------
-    rho : float
-        In ``[-1, 1]``; 0 when no track qualifies.
-    tracks : int
-        The tracks that entered.
-
-    Raises
-    ------
-    ValueError
-        ``world_T_imu`` is not one pose per frame.
+    rho, tracks : float, int
+        ``rho`` in ``[-1, 1]`` (0 when no track qualifies), over ``tracks`` tracks.
     """
     world_T_imu = np.asarray(world_T_imu, dtype=float)
     if world_T_imu.shape != (dataset.num_frames, 4, 4):

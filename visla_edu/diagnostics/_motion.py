@@ -1,11 +1,10 @@
 """Visual-odometry evidence on the IMU's own errors: gyro bias and velocity scale.
 
-Both compare the odometry's motion (mapped into the IMU frame through ``imu_T_cam``) with the
-IMU's over the usable frame pairs (:func:`~visla_edu.diagnostics._vo.vo_pairs`), robustly: the
-median, with the standard error of a median from the median absolute deviation,
-``1.2533 * 1.4826 MAD / sqrt(n)`` (exact for a normal core; a heavy tail does not move it).
-They are reported with a verdict, not applied: on a sparse drive the odometry's own biases are
-as large as the effects (``0020``'s gyro-bias estimate disagrees with its ground truth).
+Both compare the odometry's motion in the IMU frame with the IMU's over the usable frame pairs
+(:func:`~visla_edu.diagnostics._vo.vo_pairs`) by :func:`robust_location` (exact for a normal
+core; a heavy tail does not move it). They are reported with a verdict, not applied: on a sparse
+drive the odometry's own biases are as large as the effects (``0020``'s gyro-bias estimate
+disagrees with its ground truth).
 """
 
 import numpy as np
@@ -28,16 +27,9 @@ NOT_ENOUGH = "not enough evidence"
 
 
 def robust_location(samples):
-    """Median of each column and its standard error from the median absolute deviation.
+    """Median of each column of ``samples`` (n,) or (n, k), and its standard error; NaN and inf if n = 0.
 
-    Parameters
-    ----------
-    samples : ndarray, shape (n,) or (n, k)
-
-    Returns
-    -------
-    location, standard_error : ndarray, shape () or (k,)
-        ``median`` and ``1.2533 * 1.4826 * median|x - median| / sqrt(n)``; NaN and inf if n = 0.
+    The standard error of a median from the MAD: ``1.2533 * 1.4826 MAD / sqrt(n)``.
     """
     samples = np.asarray(samples, dtype=float)
     if len(samples) == 0:
@@ -49,8 +41,7 @@ def robust_location(samples):
 
 
 def _used_motion(dataset, imu_T_cam, lag):
-    """Odometry motions in the IMU frame (P, 4, 4), IMU velocity samples (P, 6) and time steps (P,)
-    of the usable pairs."""
+    """Odometry motions in the IMU frame (P, 4, 4), velocities (P, 6), time steps (P,) of the usable pairs."""
     vo = odometry_of(dataset)
     used = vo_pairs(vo)
     return (vo_motion_in_imu_frame(vo, imu_T_cam)[used], select_twists(dataset.twists, lag)[used],
@@ -58,23 +49,20 @@ def _used_motion(dataset, imu_T_cam, lag):
 
 
 def gyro_bias(dataset, imu_T_cam, lag=0):
-    """Gyro bias: the robust mean of ``w_imu[t + lag] - w_vo`` over the usable frame pairs.
-
-    ``w_vo = log(R_vo) / tau_t`` is the odometry's rotation in the IMU frame per second.
+    """Gyro bias: the robust mean of ``w_imu[t + lag] - log(R_vo) / tau_t`` over the usable pairs.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     imu_T_cam : ndarray, shape (4, 4)
     lag : int
-        The step ``t -> t+1`` uses ``u[t + lag]``.
 
     Returns
     -------
     dict
         ``bias`` (3,) rad/s and ``stderr`` (3,) (None without pairs), ``pairs``, and ``verdict``:
         "not enough evidence" (fewer than ``MIN_VO_PAIRS`` pairs), "consistent with zero" or
-        "nonzero" (some axis ``SIGNIFICANCE`` standard errors from zero).
+        "nonzero" (some axis :data:`SIGNIFICANCE` standard errors from zero).
     """
     vo_motion, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
     w_vo = lie.so3_log(vo_motion[:, :3, :3]) / tau[:, None]
@@ -94,21 +82,14 @@ def gyro_bias(dataset, imu_T_cam, lag=0):
 def velocity_scale(dataset, imu_T_cam, lag=0):
     """Velocity scale: the median of ``|t_vo| / |tau v_imu[t + lag]|`` over the usable pairs.
 
-    ``t_vo`` is the translation of the odometry's motion in the IMU frame
-    (``imu_T_cam cam_T_next cam_T_imu``); steps shorter than :data:`MIN_STEP` by the IMU are left
-    out (the ratio is noise there).
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    imu_T_cam : ndarray, shape (4, 4)
-    lag : int
+    ``t_vo`` is the odometry's translation in the IMU frame; steps shorter than :data:`MIN_STEP`
+    by the IMU are left out (the ratio is noise there). Parameters as :func:`gyro_bias`.
 
     Returns
     -------
     dict
         ``scale`` and ``stderr`` (None without pairs), ``pairs``, and ``verdict``: "not enough
-        evidence", "consistent with 1", or "differs from 1 by x%" (``SIGNIFICANCE`` standard errors).
+        evidence", "consistent with 1", or "differs from 1 by x%" (as :func:`gyro_bias`).
     """
     vo_motion, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
     step = tau * np.linalg.norm(imu_twist[:, :3], axis=1)

@@ -1,25 +1,21 @@
 """The IMU velocity noise the filter should assume, per axis, from the velocities alone.
 
-Two parts add up (in variance):
+Two parts add up in variance, ``sigma = sqrt(white^2 + hold^2)``:
 
-* **white**: the sensor's own noise. For a smooth signal plus white noise of standard
-  deviation ``s``, ``var(x[t+1] - 2 x[t] + x[t-1]) = 6 s^2``; robustly,
+* **white**, the sensor's own noise: for a smooth signal plus white noise ``s``,
+  ``var(x[t+1] - 2 x[t] + x[t-1]) = 6 s^2``, so
   ``white = 1.4826 MAD(second differences) / sqrt(6)``.
-* **hold**: the motion model's own error. The filter holds each velocity sample constant over
-  its step while the true velocity changes within it; the first differences measure by how
-  much: ``rms(x[t+1] - x[t])^2 = change^2 + 2 white^2``, and holding a linearly changing
-  velocity at one end of the step is wrong by half the change on average:
-  ``hold = sqrt(max(rms(diff)^2 - 2 white^2, 0)) / 2``. The rms leaves out first differences
-  beyond :data:`GLITCH_MADS` robust standard deviations of the axis's first differences: one
-  glitched sample must not set the noise of a whole drive (the filter's divergence check
-  reports it at its frame instead).
+* **hold**, the motion model's error: the filter holds each sample over its step while the true
+  velocity changes by ``change``, with ``rms(x[t+1] - x[t])^2 = change^2 + 2 white^2``; holding a
+  linearly changing velocity is wrong by half the change on average, so
+  ``hold = sqrt(max(rms(diff)^2 - 2 white^2, 0)) / 2``, leaving out first differences beyond
+  :data:`GLITCH_MADS` robust sigmas (one glitched sample must not set the noise of a drive; the
+  filter's divergence check reports it at its frame).
 
-The filter's noise is ``sqrt(white^2 + hold^2)`` per axis, floored at
-:data:`MIN_SIGMA_LINEAR` and :data:`MIN_SIGMA_ANGULAR` (a velocity known better than that is
-not a physical sensor). A drive of fewer than :data:`MIN_NOISE_SAMPLES` velocity samples is too
-short to measure either part (a median of one or two differences is 0); its noise is then the
-course's own choice, :data:`UNMEASURED_SIGMA_LINEAR` and :data:`UNMEASURED_SIGMA_ANGULAR`, not the
-floors, which would make a filter trust a velocity nobody measured.
+``sigma`` is floored at :data:`MIN_SIGMA_LINEAR`, :data:`MIN_SIGMA_ANGULAR`. Fewer than
+:data:`MIN_NOISE_SAMPLES` samples measure neither part (a median of one or two differences is
+0): the noise is then the course's :data:`UNMEASURED_SIGMA_LINEAR`,
+:data:`UNMEASURED_SIGMA_ANGULAR`, not the floors, which would trust a velocity nobody measured.
 """
 
 import numpy as np
@@ -49,20 +45,13 @@ def imu_noise(twists):
     Parameters
     ----------
     twists : array_like, shape (T, 6)
-        Velocity samples ``[v; w]`` (m/s, rad/s).
+        Velocity samples ``[v; w]`` (m/s, rad/s); ValueError for another shape.
 
     Returns
     -------
     dict
-        ``white`` (6,), ``hold`` (6,) and ``sigma`` (6,) ``= max(sqrt(white^2 + hold^2), floor)``,
-        linear axes first, and ``measured`` (bool). With fewer than :data:`MIN_NOISE_SAMPLES`
-        samples ``measured`` is False, the parts are 0 and ``sigma`` is
-        ``UNMEASURED_SIGMA_LINEAR`` (3) and ``UNMEASURED_SIGMA_ANGULAR`` (3).
-
-    Raises
-    ------
-    ValueError
-        ``twists`` does not have shape (T, 6).
+        ``white``, ``hold`` and ``sigma`` (6,), linear axes first, and ``measured`` (bool; False for
+        a drive too short, whose parts are then 0 and ``sigma`` the unmeasured values).
     """
     twists = np.asarray(twists, dtype=float)
     floor = np.repeat([MIN_SIGMA_LINEAR, MIN_SIGMA_ANGULAR], 3)
@@ -79,7 +68,7 @@ def imu_noise(twists):
 
 
 def _rms_without_glitches(first):
-    """Per-axis rms of ``first`` (n, 6), leaving out values beyond :data:`GLITCH_MADS` robust sigmas."""
+    """Per-axis rms of ``first`` (n, 6) without values beyond :data:`GLITCH_MADS` robust sigmas."""
     centre = np.median(first, axis=0)
     scale = _MAD_TO_SIGMA * np.median(np.abs(first - centre), axis=0)
     keep = np.abs(first - centre) <= GLITCH_MADS * scale

@@ -1,28 +1,18 @@
 """Which way a 2025+ file's extrinsics point and which camera frame they use, decided from evidence.
 
 The file's ``extL_T_imu``, ``extR_T_imu`` may be read four ways
-(:func:`visla_edu.camera.extrinsic_readings`: camera->IMU or IMU->camera, optical or regular camera
-frame). Three kinds of evidence speak to the reading, and :func:`choose_reading` weighs them:
-
-* **Rig geometry** (the loader's, ``RigReading.problem``): under the right reading the right
-  camera is the left one moved along the left camera's x axis. A wrong camera frame puts it on
-  another axis, a wrong direction usually does too (the offset then lies along the camera's x axis
-  seen from the IMU).
-* **Track reprojection** (:class:`~._tracks.TrackScorer` with the readings as candidates): each
-  reading's left camera, moved by the dead-reckoned IMU motion, must land each track's first
-  observation on its later ones. The reading chosen is the one every other is worse than with
-  95% confidence.
-* **Visual odometry** (:func:`~._vo.check_extrinsics` with the readings as candidates): the
-  camera's own motion mapped into the IMU frame must agree with the IMU's (slopes near 1).
-
-Rules (the rig geometry first: it is exact when both extrinsics are written the same way, while
-a file's IMU axes may be flipped, dataset 03's are, which the motion would read as another
-reading; the axis flips are decided afterwards, on the chosen reading): the only reading under
-which the pair is rectified; among several, the one the tracks choose; else the loader's (the
-first rectified one of :data:`visla_edu.data.READING_ORDER`), with a warning. The motion evidence
-checks the choice: when the tracks choose another reading, or the odometry disagrees with the
-chosen one and agrees with another, or disagrees with all four while the tracks do not confirm
-the choice, the extrinsics match no reading consistently, and a warning says so.
+(:func:`visla_edu.camera.extrinsic_readings`: camera->IMU or IMU->camera, optical or regular
+camera frame). :func:`choose_reading` takes the only reading under which the rig is rectified
+(``RigReading.problem``: the right camera is the left one moved along the left camera's x axis;
+a wrong camera frame, and usually a wrong direction, puts it on another axis); among several,
+the one the track reprojection chooses (:class:`~._tracks.TrackScorer`, the readings as the
+candidates); else the loader's (the first rectified one of :data:`visla_edu.data.READING_ORDER`),
+with a warning. Geometry comes first: it is exact when both extrinsics are written the same way,
+while a file's IMU axes may be flipped (dataset 03's are), which the motion would read as another
+reading; the flips are decided afterwards, on the chosen reading. The motion evidence (the tracks
+and :func:`~._vo.check_extrinsics`) checks the choice: a warning says when the tracks choose
+another reading, or the odometry disagrees with it and agrees with another, or disagrees with all
+four while the tracks do not confirm it.
 """
 
 from dataclasses import asdict, dataclass
@@ -44,27 +34,19 @@ class ReadingEvidence:
     names : list of str
         The four readings, in :func:`visla_edu.camera.extrinsic_readings`'s order.
     geometry : dict
-        Name -> ``{"offset": [x, y, z] (m, the right camera in the left camera frame),
-        "rotation_deg": angle between the cameras, "problem": "" or why the pair is not
-        rectified}``.
-    loader : str
-        The reading the loader started from.
+        Name -> ``{"offset": [x, y, z], "rotation_deg": angle, "problem": text}``: the right camera
+        in the left camera frame (m), the angle between the cameras, ``""`` or why not rectified.
+    loader, chosen : str
+        The reading the loader started from, and the one used.
     track : TrackChoice
         Track reprojection among the readings (each at its best lag).
     track_scores : dict
         Name -> median left-image error (px) per lag of :data:`~._vo.LAGS` (None without pairs).
-    slope_lag : int
-        The lag of the odometry's slopes.
-    rotation_slope, translation_slope : dict
-        Name -> slope of the odometry's motion on the IMU's (1 = agreement; None without pairs).
-    vo_verdict : dict
-        Name -> "agrees", "disagrees" or "not enough evidence".
-    chosen : str
-        The reading used.
-    reason : str
-        Why, in one line.
-    warning : str
-        ``""``, or what the user should check (a conflict, or extrinsics that match no reading).
+    rotation_slope, translation_slope, vo_verdict : dict
+        Name -> :class:`~._vo.ExtrinsicCheck`'s slopes (at lag ``slope_lag``; None without pairs)
+        and verdict.
+    reason, warning : str
+        Why, in one line; ``""`` or what the user should check.
     """
 
     names: list
@@ -143,12 +125,7 @@ def _motion_words(chosen, track, vo_verdict):
 
 
 def choose_reading(dataset):
-    """The reading of ``dataset``'s extrinsics to use, and its :class:`ReadingEvidence`.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-        With ``extrinsic_readings`` (a 2025+ file).
+    """The reading of a 2025+ ``dataset``'s ``extrinsic_readings`` to use, and its :class:`ReadingEvidence`.
 
     Returns
     -------

@@ -98,17 +98,13 @@ def _reading_lines(reading):
 
 
 def calibration_report(calibration, name=""):
-    """Readable lines of a calibration's evidence, ending with "the filter will use: ...".
+    """Readable lines (str) of a calibration's evidence, ending with "the filter will use: ...".
 
     Parameters
     ----------
     calibration : visla_edu.diagnostics.Calibration
     name : str
         Dataset name for the first line.
-
-    Returns
-    -------
-    str
     """
     c = calibration
     origin = ("computed" if c.source == "computed" else f"reused from the {c.source}")

@@ -1,25 +1,22 @@
 """Track-reprojection evidence for the extrinsic axes and the IMU lag (works on sparse drives).
 
-For each landmark track, its first observation with disparity above :data:`MIN_DISPARITY` is
+Each landmark's first observation with disparity above :data:`MIN_DISPARITY` (its anchor) is
 triangulated, ``p_a`` in the left camera at frame ``a``, and paired with its later observations
-1 to :data:`MAX_GAP` frames later (left out: stale copies, pixels bit-identical to the
-landmark's previous observation, and non-positive disparities). The IMU's dead-reckoned
-relative motion with a candidate lag, through a candidate ``imu_T_cam = C X``, predicts the
-point in the later frame ``b``::
+1 to :data:`MAX_GAP` frames later, except stale copies (pixels bit-identical to the landmark's
+previous observation) and non-positive disparities. The IMU's dead-reckoned motion with a
+candidate lag, through a candidate ``imu_T_cam = C X``, predicts the point at frame ``b``::
 
     q = cam_T_imu  inv(S_a S_(a+1) ... S_(b-1))  imu_T_cam  p_a,    S_t = exp(tau_t u[t + lag]^)
 
-and the left-image pixel error ``|(u, v)(q) - (uL, vL)_b|`` of every pair is scored by its
-median over all pairs (robust to outlier tracks). The wrong axes or the wrong lag move the
-prediction off the track.
+A candidate's score is the median over all pairs (robust to outlier tracks) of the left-image
+error ``|(u, v)(q) - (uL, vL)_b|``: wrong axes or a wrong lag move the prediction off the track.
 
-Uncertainty: a bootstrap over landmarks (:mod:`._bootstrap`, seeded, :data:`RESAMPLES`
-resamples), in groups of landmarks anchored within :data:`BLOCK` frames of each other (they
-share the IMU's noise over the same steps), of each candidate's median minus the best
-candidate's. A candidate is chosen only
-when every competitor is worse with :data:`CONFIDENCE` confidence (the lower
-``1 - CONFIDENCE`` quantile of its difference above zero); otherwise the verdict is "not enough
-evidence" and the caller keeps its default.
+A seeded bootstrap (:mod:`._bootstrap`) of each candidate's median minus the best one's resamples
+groups of landmarks anchored in the same block of :data:`BLOCK` frames (they share the IMU's
+noise over the same steps: the groups are the independent units). A candidate is chosen only when
+every competitor is worse with :data:`CONFIDENCE` confidence (the lower ``1 - CONFIDENCE``
+quantile of its difference above zero); otherwise the verdict is "not enough evidence" and the
+caller keeps its default.
 """
 
 from dataclasses import asdict, dataclass
@@ -61,15 +58,14 @@ class TrackChoice:
 
     Attributes
     ----------
-    chosen : str or int or None
-        The candidate chosen, None when there is not enough evidence.
-    best : str or int or None
-        The candidate with the smallest median error (None without pairs).
+    chosen, best : str or int or None
+        The candidate chosen (None without enough evidence), and the one with the smallest median
+        error (None without pairs).
     verdict : str
         ``"chosen"`` or ``"not enough evidence: ..."`` with the reason.
     margins : dict
-        Competitor (its name, or its lag as ``"+1"``) -> ``[difference, lower]``: its median
-        minus the best one's (px) and the lower ``1 - CONFIDENCE`` bootstrap quantile of it.
+        Competitor (its name, or its lag as ``"+1"``) -> ``[difference, lower]``: its median minus
+        the best one's (px) and the lower ``1 - CONFIDENCE`` bootstrap quantile of it.
     """
 
     chosen: object
@@ -84,19 +80,14 @@ class TrackEvidence:
 
     Attributes
     ----------
-    lags : list of int
-    scores : dict
-        Correction name -> median left-image error (px) per lag (in ``lags`` order); None
-        without pairs.
+    lags, scores : list of int, dict
+        Correction name -> median left-image error (px) per lag of ``lags`` (None without pairs).
     pairs, landmarks, groups : int
-        Scored pairs, the landmarks they come from, and the resampling groups (blocks of
-        :data:`BLOCK` anchor frames) those fall into.
+        Scored pairs, their landmarks, and the resampling groups.
     resamples : int
         Bootstrap resamples (0 when there was not enough evidence to run it).
-    correction : TrackChoice
-        Among the corrections (each at its best lag).
-    lag : TrackChoice
-        Among the lags of one correction (the one the filter uses).
+    correction, lag : TrackChoice
+        Among the corrections (each at its best lag); among the lags of the one the filter uses.
     """
 
     lags: list
@@ -120,16 +111,7 @@ class TrackEvidence:
 
 
 def track_pairs(dataset):
-    """Anchor and later observations of the scored pairs.
-
-    Each landmark's anchor is its first observation with disparity above
-    :data:`MIN_DISPARITY`; it is paired with the landmark's later observations 1 to
-    :data:`MAX_GAP` frames after it, except stale copies (pixels bit-identical to the
-    landmark's previous observation) and observations with non-positive disparity.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
+    """Anchor and later observations of ``dataset``'s scored pairs (the pairing: the module docstring).
 
     Returns
     -------
@@ -161,10 +143,7 @@ def track_pairs(dataset):
 
 
 def _relative_motions(dataset, lag):
-    """``inv(S_a ... S_(a+g-1))`` for every gap ``g = 1..MAX_GAP`` and anchor frame ``a``, (MAX_GAP, T-1, 4, 4).
-
-    Entries whose window passes the last frame are the identity (never used).
-    """
+    """``inv(S_a ... S_(a+g-1))`` for gaps ``g = 1..MAX_GAP``, anchors ``a``: (MAX_GAP, T-1, 4, 4), identity past T."""
     steps_inv = lie.se3_inv(lie.se3_exp(dataset.time_steps[:, None] * select_twists(dataset.twists, lag)))
     n = len(steps_inv)
     out = np.broadcast_to(np.eye(4), (MAX_GAP, n, 4, 4)).copy()
@@ -181,23 +160,10 @@ def _apply(R, t, p):
 
 
 def reprojection_errors(dataset, imu_T_cams, lags=LAGS):
-    """Left-image errors (px) of every pair for every candidate, shape (len(lags), C, P).
+    """Left-image errors (px) of every pair for every candidate ``imu_T_cams`` (C, 4, 4) and lag.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    imu_T_cams : ndarray, shape (C, 4, 4)
-        Candidate calibrations.
-    lags : sequence of int
-
-    Returns
-    -------
-    errors : ndarray, shape (L, C, P)
-        Finite: a point predicted behind the camera gets ``1e6`` px.
-    anchor_frame : ndarray of int, shape (P,)
-        Frame of each pair's anchor observation.
-    landmark : ndarray of int, shape (P,)
-        Landmark id of each pair.
+    Returns ``errors`` (L, C, P), finite (a point predicted behind the camera gets ``1e6`` px), and
+    each pair's anchor frame and landmark id, (P,) each.
     """
     anchor, later, gap = track_pairs(dataset)
     frames = dataset.observation_frames()[anchor]
@@ -222,30 +188,23 @@ def reprojection_errors(dataset, imu_T_cams, lags=LAGS):
 class TrackScorer:
     """The reprojection errors of a drive's track pairs for every candidate, and the choices.
 
-    The bootstrap resamples landmarks in groups: all landmarks anchored within the same block
-    of :data:`BLOCK` frames are drawn together. Their pairs share the IMU's noise over the same
-    steps (and each landmark's pairs its triangulation error), so the groups, not single
-    landmarks or pairs, are the independent units.
-
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     candidates : dict of str to ndarray (4, 4), optional
-        Name -> candidate ``imu_T_cam``; default :func:`corrections_of` the dataset's
-        ``imu_T_cam`` (the axis flips). The readings of a 2025+ file's extrinsics are scored the
-        same way (:mod:`._readings`).
+        Name -> candidate ``imu_T_cam`` (e.g. the readings of a 2025+ file, :mod:`._readings`);
+        default :func:`corrections_of` ``dataset.imu_T_cam``.
 
     Attributes
     ----------
     names : list of str
         The candidates, in order.
-    errors : ndarray, shape (len(LAGS), len(names), P)
+    errors, scores : ndarray, shapes (len(LAGS), len(names), P) and (len(LAGS), len(names))
+        Each pair's error, and each candidate's median (NaN without pairs).
     group : ndarray of int, shape (P,)
         Resampling group of each pair (its anchor frame's block), ``0 <= group < num_groups``.
     num_groups, num_landmarks : int
         Groups and landmarks with scored pairs.
-    scores : ndarray, shape (len(LAGS), len(names))
-        Median error of each candidate (NaN without pairs).
     """
 
     def __init__(self, dataset, candidates=None):

@@ -1,15 +1,11 @@
 """Visual-odometry evidence: the extrinsic axes check and the time alignment.
 
 The robust stereo odometry (:func:`visla_edu.diagnostics.odometry.visual_odometry`) gives the left
-camera's motion ``cam_T_next`` between consecutive frames. Mapped into the IMU frame through
-a candidate ``imu_T_cam`` (``imu_T_cam cam_T_next cam_T_imu``) it must agree with the IMU's own
-motion ``exp(tau_t u[t + lag])``: a calibration whose axes disagree turns the slope of one on
-the other negative, and the lag that explains the motion best has the smallest rotation
-disagreement.
-
-Only frame pairs with a valid odometry of at least :data:`MIN_INLIERS` inliers are used: pairs
-of 3 points (common on sparse drives) have heavy-tailed rotation errors. Pairs whose points
-are stale copies of the previous frame are left out by the odometry itself.
+camera's motion ``cam_T_next`` between consecutive frames. Mapped into the IMU frame through a
+candidate ``imu_T_cam`` it must agree with the IMU's own motion ``exp(tau_t u[t + lag])``: axes
+that disagree turn the slope of one on the other negative, and the right lag has the smallest
+rotation disagreement. Only pairs with at least :data:`MIN_INLIERS` inliers are used: pairs of 3
+points (common on sparse drives) have heavy-tailed rotation errors.
 """
 
 from dataclasses import dataclass, field
@@ -67,85 +63,34 @@ def corrections_of(imu_T_cam):
 
 
 def odometry_of(dataset):
-    """The robust visual odometry of ``dataset``, computed once and kept in ``dataset.extra``.
-
-    Returns
-    -------
-    visla_edu.diagnostics.odometry.VisualOdometry
-    """
+    """The robust :class:`~.odometry.VisualOdometry` of ``dataset``, computed once and kept in ``dataset.extra``."""
     if "visual_odometry" not in dataset.extra:
         dataset.extra["visual_odometry"] = visual_odometry(dataset)
     return dataset.extra["visual_odometry"]
 
 
 def vo_pairs(vo):
-    """Frame pairs the checks use: valid odometry with at least :data:`MIN_INLIERS` inliers, (T-1,) bool.
-
-    Parameters
-    ----------
-    vo : visla_edu.diagnostics.odometry.VisualOdometry
-
-    Returns
-    -------
-    ndarray of bool, shape (T - 1,)
-        ``vo.valid & (vo.inliers >= MIN_INLIERS)``; entry ``t`` is the pair ``t, t + 1``.
-    """
+    """Frame pairs the checks use, (T-1,) bool: valid odometry with at least :data:`MIN_INLIERS` inliers."""
     return vo.valid & (vo.inliers >= MIN_INLIERS)
 
 
 def vo_motion_in_imu_frame(vo, imu_T_cam):
-    """VO motions as IMU motions ``imu_T_cam cam_T_next cam_T_imu``, shape (T-1, 4, 4).
+    """The IMU at ``t + 1`` in the IMU at ``t``, (T-1, 4, 4): ``imu_T_cam cam_T_next inv(imu_T_cam)``.
 
-    Parameters
-    ----------
-    vo : visla_edu.diagnostics.odometry.VisualOdometry
-        Its ``cam_T_next`` (T - 1, 4, 4): the left camera at ``t + 1`` in the one at ``t``.
-    imu_T_cam : ndarray, shape (4, 4)
-        The calibration (or a candidate correction of it).
-
-    Returns
-    -------
-    ndarray, shape (T - 1, 4, 4)
-        The IMU at ``t + 1`` in the IMU at ``t``, ``cam_T_imu = inv(imu_T_cam)``; invalid pairs
-        give the identity, as their ``cam_T_next`` is.
+    Invalid pairs give the identity, as their ``cam_T_next`` is.
     """
     return imu_T_cam @ vo.cam_T_next @ lie.se3_inv(imu_T_cam)
 
 
 def vo_in_imu_frame(vo, imu_T_cam):
-    """VO motions as IMU motions (:func:`vo_motion_in_imu_frame`), as twists ``[v; w]``, shape (T-1, 6).
-
-    Parameters
-    ----------
-    vo : visla_edu.diagnostics.odometry.VisualOdometry
-    imu_T_cam : ndarray, shape (4, 4)
-
-    Returns
-    -------
-    ndarray, shape (T - 1, 6)
-        ``se3_log`` of each motion: comparable with :func:`imu_step_twists`.
-    """
+    """``se3_log`` of :func:`vo_motion_in_imu_frame`: twists ``[v; w]`` (T-1, 6), as :func:`imu_step_twists`."""
     return lie.se3_log(vo_motion_in_imu_frame(vo, imu_T_cam))
 
 
 def imu_step_twists(dataset, lag=0):
-    """IMU motion over each frame interval as twists ``tau_t u[t + lag]`` (:func:`select_twists`), (T-1, 6).
+    """IMU motion over each frame interval, ``tau_t u[t + lag]`` (T-1, 6), ``tau_t = t_{t+1} - t_t``.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    lag : int
-        The step ``t -> t+1`` uses the velocity sample ``u[t + lag]`` (clipped at the ends).
-
-    Returns
-    -------
-    ndarray, shape (T - 1, 6)
-        ``tau_t = t_{t+1} - t_t`` times the selected twist ``[v; w]``.
-
-    Raises
-    ------
-    ValueError
-        The dataset's twists do not have shape (T, 6).
+    The lag is clipped at the ends (:func:`select_twists`); ValueError for twists not (T, 6).
     """
     return dataset.time_steps[:, None] * select_twists(dataset.twists, lag)
 
@@ -166,28 +111,28 @@ def _rms(x):
 
 @dataclass
 class ExtrinsicCheck:
-    """Result of :func:`check_extrinsics`.
+    """Result of :func:`check_extrinsics`, keyed by candidate name.
 
     Attributes
     ----------
     rotation_slope, translation_slope : dict
-        Correction name -> least-squares slope of the VO motion against the IMU motion
-        (rotation vectors, translations). Near +1 when the axes agree; a flipped axis pair
-        turns the rotation slope negative. NaN without usable pairs (see ``verdict``).
+        Least-squares slope of the VO motion on the IMU motion (rotation vectors, translations):
+        near +1 when the axes agree, negative rotation slope for a flipped axis pair; NaN without
+        usable pairs.
     rotation_rms : dict
-        Correction name -> RMS of the per-frame rotation disagreement (rad).
+        RMS of the per-frame rotation disagreement (rad).
     rotation_slope_error, translation_slope_error : float
-        Standard errors of the slopes (those of the best-fitting candidate): a drive with
-        little turning cannot tell the candidates apart. Infinite without pairs.
+        Standard errors of the slopes (of the best-fitting candidate; large for a drive with little
+        turning). Infinite without pairs.
     recommended : str
-        The odometry's own recommendation, only on strong evidence: the file's calibration
-        disagrees and another candidate agrees (the best such); otherwise ``"none"``.
+        The candidate that agrees where the file's calibration disagrees (the best such), or
+        ``"none"``.
     pairs : int
-        Frame pairs used (valid odometry with at least :data:`MIN_INLIERS` inliers).
+        Frame pairs used (:func:`vo_pairs`).
     verdict : dict
-        Correction name -> ``"agrees"`` (both slopes above :data:`MIN_SLOPE`), ``"disagrees"``
-        (a slope below it by :data:`MIN_SIGNIFICANCE` standard errors) or ``"not enough
-        evidence"`` (also with fewer than :data:`MIN_VO_PAIRS` pairs).
+        ``"agrees"`` (both slopes above :data:`MIN_SLOPE`), ``"disagrees"`` (a slope below it by
+        :data:`MIN_SIGNIFICANCE` standard errors) or ``"not enough evidence"`` (also with fewer than
+        :data:`MIN_VO_PAIRS` pairs).
     """
 
     rotation_slope: dict
@@ -234,22 +179,16 @@ def _verdict(rotation, translation, rotation_error, translation_error, pairs):
 def check_extrinsics(dataset, lag=0, candidates=None):
     """Score each axis-flip correction of ``imu_T_cam`` (or other candidates) against the IMU's motion.
 
-    For every usable frame pair (:func:`vo_pairs`), the VO twist mapped into the IMU frame is
-    regressed on ``tau u[t + lag]``: a calibration whose axes disagree with the IMU's shows up
-    as a negative rotation slope (turns seen the wrong way round) or translation slope.
+    For every usable frame pair the VO twist in the IMU frame is regressed on ``tau u[t + lag]``:
+    axes that disagree with the IMU's give a negative rotation slope (turns seen the wrong way
+    round) or translation slope. Returns an :class:`ExtrinsicCheck`.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     lag : int
-        Velocity sample used per interval (see :func:`visla_edu.motion.select_twists`).
     candidates : dict of str to ndarray (4, 4), optional
         Name -> candidate ``imu_T_cam``; default :func:`corrections_of` the dataset's.
-
-    Returns
-    -------
-    ExtrinsicCheck
-        Keyed by the candidates' names.
     """
     candidates = corrections_of(dataset.imu_T_cam) if candidates is None else candidates
     vo = odometry_of(dataset)
@@ -274,23 +213,11 @@ def check_extrinsics(dataset, lag=0, candidates=None):
 
 
 def time_alignment(dataset, imu_T_cam, lags=LAGS):
-    """Which velocity sample best explains the odometry's rotation from frame t to t+1.
+    """Which velocity sample best explains the odometry's rotation from frame t to t+1 (a dict).
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    imu_T_cam : ndarray, shape (4, 4)
-        Calibration to map the odometry into the IMU frame.
-    lags : sequence of int
-        Candidate offsets: the step ``t -> t+1`` uses ``u[t + lag]``.
-
-    Returns
-    -------
-    dict
-        ``residual``: lag -> median over the usable pairs of the rotation disagreement
-        ``|log(R_vo) - tau w[t + lag]|`` (rad per frame; rotation changes faster than speed, so
-        it carries the timing); ``best``: the lag with the smallest, or None with fewer than
-        :data:`MIN_VO_PAIRS` pairs (residuals then NaN); ``pairs``: the pairs used.
+    ``residual``: lag -> median over the usable pairs of ``|log(R_vo) - tau w[t + lag]|`` (rad per
+    frame; rotation changes faster than speed, so it carries the timing); ``best``: the lag with the
+    smallest, None with fewer than :data:`MIN_VO_PAIRS` pairs (residuals then NaN); ``pairs``.
     """
     vo = odometry_of(dataset)
     used = vo_pairs(vo)

@@ -1,32 +1,25 @@
 """Robust frame-to-frame stereo visual odometry of the left camera.
 
 For consecutive frames ``(t, t + 1)``, the landmarks seen in both with positive disparity in
-both are triangulated: ``p_prev`` in the camera at ``t``, ``p_next`` in the camera at ``t + 1``.
-The motion ``cam_T_next`` (camera at ``t + 1`` in the camera at ``t``) maps
-``p_prev = cam_T_next p_next``. All steps are vectorised over frame pairs and hypotheses:
+both are triangulated: ``p_prev`` in the camera at ``t``, ``p_next`` in the camera at ``t + 1``;
+the motion ``cam_T_next`` (camera at ``t + 1`` in the camera at ``t``) maps
+``p_prev = cam_T_next p_next``. Vectorised over frame pairs and hypotheses:
 
 1. **Hypotheses** (RANSAC): rigid alignments of random triples of points in closed form
-   (:func:`align_triples`), each refined by 2 Gauss-Newton steps on its own reprojection
-   (3-D alignment lets the depth error of far points, which grows with depth squared, tilt
-   the rotation; pixels do not).
-2. **Scoring by reprojection**: frame ``t + 1``'s points moved by a hypothesis are projected
-   into frame ``t``, ``z_pred = Ks pi(cam_T_next p_next)`` (:func:`transfer_pixels`), and
-   compared with the measured ``z_prev = [uL, vL, uR, vR]``. Each residual carries the noise
-   of both frames, about ``sqrt(2) pixel_sigma`` per pixel, so a point is an inlier when
-   ``|r|^2 / 2 < pixel_sigma^2 chi2_4(probability)`` (defaults 1 px and 99%: ``|r| < 5.15``
-   px). Most inliers win (ties: the smaller sum of inlier errors).
-3. **Gauss-Newton on SE(3)**, right perturbation ``cam_T_next = mu exp(hat(delta))``, with
-   ``J_z_motion = Ks dpi/dq(q) mu odot(p_next)`` (:func:`visla_edu.camera.project_points`): first
-   on the RANSAC inliers; then the inliers again, with each residual's own covariance
-   ``sigma^2 (I + A A^T)`` (``A`` carries frame ``t + 1``'s pixel noise through triangulation and
-   transfer) in the chi-square test, plus a cap on the plain residual in both directions; then
-   weighted by ``W = (I + A A^T)^-1``. The covariance of ``delta`` is ``s^2 H^-1``,
-   ``H = J^T W J``, with ``s^2`` the measured ``sum r^T W r / (4 n - 6)`` of the pair's ``n``
-   inliers, shrunk toward the drive's pooled value (a pair of 3 points has only 6 residual
-   degrees of freedom).
+   (:func:`align_triples`), each refined by 2 Gauss-Newton steps on its own reprojection.
+2. **Scoring by reprojection**: ``z_pred = Ks pi(cam_T_next p_next)`` (:func:`transfer_pixels`)
+   against the measured ``z_prev = [uL, vL, uR, vR]``. A residual carries the noise of both
+   frames, about ``sqrt(2) pixel_sigma`` per pixel, so a point is an inlier when
+   ``|r|^2 / 2 < pixel_sigma^2 chi2_4(probability)`` (defaults 1 px and 99%: ``|r| < 5.15`` px).
+   Most inliers win (ties: the smaller sum of inlier errors).
+3. **Gauss-Newton on SE(3)** (right perturbation, see :mod:`visla_edu.lie`): on the RANSAC
+   inliers; then the inliers again with each residual's own covariance ``sigma^2 (I + A A^T)``
+   (:func:`_transfer_information`, :func:`_inliers`), and Gauss-Newton weighted by
+   ``W = (I + A A^T)^-1``. The covariance of the motion is ``s^2 H^-1``, ``H = J^T W J``, with
+   ``s^2`` the pair's measured pixel variance shrunk toward the drive's (:func:`_pixel_variance`).
 
 Points whose pixels at ``t + 1`` repeat those at ``t`` bit for bit are stale copies (the course
-files have whole frame pairs of them while the vehicle turns) and are left out. Pairs with
+files have whole frame pairs of them while the vehicle turns), left out and counted. Pairs with
 fewer than ``min_inliers`` inliers are invalid: identity motion, infinite covariance, never
 NaN. The result is deterministic for a given ``seed``.
 """
@@ -61,23 +54,18 @@ _ITERATIONS = 1
 
 @dataclass
 class VisualOdometry:
-    """Frame-to-frame motion of the left camera from stereo tracks.
+    """Frame-to-frame motion of the left camera from stereo tracks; entry ``t`` is the pair ``t, t + 1``.
 
     Attributes
     ----------
     cam_T_next : ndarray, shape (T - 1, 4, 4)
-        Pose of the left camera at ``t + 1`` in the left camera at ``t`` (identity if invalid).
+        The left camera at ``t + 1`` in the left camera at ``t`` (identity if invalid).
     covariance : ndarray, shape (T - 1, 6, 6)
-        Covariance of the right-perturbation twist ``[v; w]`` of ``cam_T_next``
-        (``cam_T_next_true = cam_T_next exp(hat(delta))``); infinite diagonal if invalid.
+        Of the right perturbation ``[v; w]`` of ``cam_T_next``; infinite diagonal if invalid.
     valid : ndarray of bool, shape (T - 1,)
-    inliers : ndarray of int, shape (T - 1,)
-        Points consistent with the motion (reprojection test).
-    tracked : ndarray of int, shape (T - 1,)
-        Points seen in both frames with positive disparity in both (stale copies excluded).
-    stale : ndarray of int, shape (T - 1,)
-        Points whose pixels at ``t + 1`` repeat those at ``t`` bit for bit: stale copies,
-        left out (a pair of only stale points is invalid: it measures no motion).
+    inliers, tracked, stale : ndarray of int, shape (T - 1,)
+        Points consistent with the motion; seen in both frames with positive disparity in both
+        (stale copies excluded); stale copies (a pair of only those measures no motion: invalid).
     rms_px : ndarray, shape (T - 1,)
         RMS of the inliers' transfer residuals per pixel coordinate (0 if invalid).
     pixel_variance : ndarray, shape (T - 1,)
@@ -103,15 +91,15 @@ class VisualOdometry:
 def align_triples(p_prev, p_next):
     """Rigid motions aligning triples of points, ``p_prev ~ R p_next + t``, in closed form.
 
-    Three points span a plane, so the least-squares (Kabsch) rotation maps the plane of
-    ``p_next`` onto the plane of ``p_prev`` (normals ``n = (p1 - p0) x (p2 - p0)``) and then
-    turns within it by the 2-D Procrustes angle ``atan2(sum a x b, sum a . b)`` of the centred
-    in-plane coordinates. With ``F = [e1, e2, n]`` (``e1`` along ``p1 - p0``) for each set::
+    The Kabsch rotation of three points maps the plane of ``p_next`` onto that of ``p_prev``
+    (normals ``n = (p1 - p0) x (p2 - p0)``), then turns within it by the 2-D Procrustes angle
+    ``atan2(sum a x b, sum a . b)`` of the centred in-plane coordinates. With ``F = [e1, e2, n]``
+    (``e1`` along ``p1 - p0``) for each set::
 
         R = F_prev Rz(angle) F_next^T,    t = mean(p_prev) - R mean(p_next)
 
-    This is the Kabsch solution among motions that keep the triangle's orientation (a gross
-    outlier can flip it; such samples only lose), without an SVD: fast for many hypotheses.
+    This is Kabsch among motions that keep the triangle's orientation (a gross outlier can flip it;
+    such samples only lose), without an SVD: fast for many hypotheses.
 
     Parameters
     ----------
@@ -123,7 +111,7 @@ def align_triples(p_prev, p_next):
     R : ndarray, shape (..., 3, 3)
     t : ndarray, shape (..., 3)
     ok : ndarray of bool, shape (...)
-        False for (nearly) collinear or non-finite triples; their ``R, t`` are meaningless.
+        False for (nearly) collinear or non-finite triples, whose ``R, t`` are meaningless.
     """
     F_prev, ok_prev = _plane_frame(p_prev)
     F_next, ok_next = _plane_frame(p_next)
@@ -160,9 +148,9 @@ def _plane_frame(p):
 def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
     """Stereo pixels in frame ``t`` of points triangulated in frame ``t + 1``, and their Jacobian.
 
-    ``q = cam_T_next p_next``, ``z = Ks pi(q)``: :func:`visla_edu.camera.project_points` with the
-    motion as the transform, so for the right perturbation ``cam_T_next = mu exp(hat(delta))``,
-    ``delta = [v; w]``::
+    ``z = Ks pi(cam_T_next p_next)``: :func:`visla_edu.camera.project_points` with the motion as
+    the transform, so for ``cam_T_next = mu exp(hat(delta))`` (right perturbation, see
+    :mod:`visla_edu.lie`)::
 
         J_z_motion = Ks dpi/dq(q) mu odot(p_next) = [J_z_point, -J_z_point hat(p_next)]
 
@@ -173,9 +161,8 @@ def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
     p_next : ndarray, shape (..., N, 3)
         Points in the camera at ``t + 1``.
     Ks : ndarray, shape (4, 4)
-        Stereo matrix, see :func:`visla_edu.camera.stereo_matrix`.
+        Stereo matrix (:func:`visla_edu.camera.stereo_matrix`).
     jacobian : bool
-        Also return ``J_z_motion``.
 
     Returns
     -------
@@ -191,26 +178,19 @@ def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
 
 
 def camera_motion(world_T_imu, imu_T_cam):
-    """Left-camera motion between consecutive IMU poses: ``inv(W_t C) W_{t+1} C``.
+    """Left-camera motion ``cam_T_next`` (T-1, 4, 4) between consecutive IMU poses: ``inv(W_t C) W_{t+1} C``.
 
     Parameters
     ----------
     world_T_imu : ndarray, shape (T, 4, 4)
     imu_T_cam : ndarray, shape (4, 4)
-
-    Returns
-    -------
-    cam_T_next : ndarray, shape (T - 1, 4, 4)
     """
     world_T_cam = np.asarray(world_T_imu, dtype=float) @ np.asarray(imu_T_cam, dtype=float)
     return lie.se3_inv(world_T_cam[:-1]) @ world_T_cam[1:]
 
 
 def motion_errors(cam_T_next, cam_T_next_true):
-    """Rotation (rad) and translation (m) error of each frame-to-frame motion.
-
-    ``E = inv(T_true) T``: rotation error ``|so3_log(R_E)|``, translation error
-    ``|p_E| = |p - p_true|``.
+    """Rotation (rad) and translation (m) errors ``|so3_log(R_E)|``, ``|p_E|`` of ``E = inv(T_true) T``.
 
     Parameters
     ----------
@@ -280,18 +260,11 @@ def _sample_triples(counts, hypotheses, rng):
 
 
 def _transfer_information(cam_T_next, z_next, p_next, rig):
-    """Inverse of the transfer residual's covariance in units of the pixel variance.
+    """Inverse (..., N, 4, 4) of the transfer residual's covariance ``sigma^2 (I + A A^T)``, over ``sigma^2``.
 
-    The residual ``z_prev - Ks pi(cam_T_next p_next(z_next))`` carries the noise of both
-    frames' pixels, so its covariance is ``sigma^2 (I + A A^T)`` with
-    ``A = Ks dpi/dq(q)[:, :3] R J_p_z(z_next)`` (:func:`visla_edu.camera.triangulation_jacobian`).
-    ``A`` is close to the identity on ``uL, vL, uR`` for small motions; a translation turns the
-    depth error of ``p_next`` (large for far points) into a pixel error that depends on where
-    the point is in the image.
-
-    Returns
-    -------
-    ndarray, shape (..., N, 4, 4)
+    ``A = Ks dpi/dq(q)[:, :3] R J_p_z(z_next)`` carries frame ``t + 1``'s pixel noise through the
+    triangulation and the transfer: near the identity on ``uL, vL, uR`` for small motions, while a
+    translation turns the depth error of far points into a pixel error.
     """
     J_z_point = project_points(rig.Ks, cam_T_next, p_next)[2]  # Ks dpi/dq R, the derivative w.r.t. p_next
     A = J_z_point @ rig.triangulation_jacobian(z_next)
@@ -301,13 +274,7 @@ def _transfer_information(cam_T_next, z_next, p_next, rig):
 
 
 def _errors(cam_T_next, z_prev, p_next, Ks):
-    """Half squared transfer residual ``|r|^2 / 2`` per point (``r^T W r`` for the small-motion
-    ``W = I / 2``); inf for points moved behind the camera.
-
-    Computed component by component for the stereo matrix of
-    :func:`visla_edu.camera.stereo_matrix` (one or two intrinsics): the hot loop of the
-    hypothesis scoring.
-    """
+    """Half squared transfer residual ``|r|^2 / 2`` (``r^T W r``, ``W = I / 2``) per point, inf behind the camera."""
     p_prev = p_next @ np.swapaxes(cam_T_next[..., :3, :3], -1, -2)
     inv_depth = 1.0 / (p_prev[..., 2] + cam_T_next[..., None, 2, 3])
     x = (p_prev[..., 0] + cam_T_next[..., None, 0, 3]) * inv_depth
@@ -323,11 +290,10 @@ def _errors(cam_T_next, z_prev, p_next, Ks):
 
 
 def _inliers(cam_T_next, batch, information, Ks, threshold):
-    """The inlier test: ``r^T W r < threshold`` for the transfer into frame ``t``, and in both
-    directions ``|r|^2 / 2 < _MAX_MAGNIFICATION^2 threshold`` (points in front of the camera).
+    """Inliers (P, N): ``r^T W r < threshold``, and both ways ``|r|^2 / 2 < _MAX_MAGNIFICATION^2 threshold``.
 
-    The cap keeps a wrong motion (one that moves the points far closer to or farther from the
-    camera, where their expected transfer error is large) from buying itself a lenient test.
+    The cap keeps a wrong motion (moving points far closer or farther, where the expected transfer
+    error is large) from buying itself a lenient test.
     """
     z_prev, z_next, p_prev, p_next, mask = batch
     z, p_moved = project_points(Ks, cam_T_next, p_next, jacobians=False)
@@ -342,9 +308,8 @@ def _inliers(cam_T_next, batch, information, Ks, threshold):
 def _ransac(batch, Ks, settings, rng):
     """Best 3-point hypothesis per pair: motions (P, 4, 4) and inlier masks (P, N).
 
-    Each sample's closed-form alignment (:func:`align_triples`) is refined by Gauss-Newton on
-    the sample's own transfer residuals: 3-D alignment weighs the depth errors of far points
-    (which grow with depth squared) like lateral ones, reprojection does not.
+    Each is refined on its own reprojection: 3-D alignment lets the depth error of far points
+    (growing with depth squared) tilt the rotation; pixels do not.
     """
     z_prev, _, p_prev, p_next, mask = batch
     rows = np.arange(len(mask))[:, None, None]
@@ -366,12 +331,9 @@ def _ransac(batch, Ks, settings, rng):
 
 
 def _normal_equations(cam_T_next, z_prev, p_next, weight, Ks):
-    """Gauss-Newton normal equations ``H = J^T W J``, ``g = J^T W r`` summed over points.
+    """``H = J^T W J`` (..., 6, 6), ``g = J^T W r`` (..., 6), ``sum r^T W r`` (...) and ``|r|^2`` (..., N).
 
-    Shapes: motions (..., 4, 4), pixels (..., N, 4), points (..., N, 3); ``weight`` is the
-    information ``W`` (..., N, 4, 4) or a scalar per point (..., N) (``W = w I``), zero for
-    points left out. Returns H (..., 6, 6), g (..., 6), the weighted ``sum r^T W r`` (...) and
-    the squared residuals ``|r|^2`` (..., N).
+    ``weight``: ``W`` (..., N, 4, 4), or ``w`` (..., N) for ``W = w I``; zero for points left out.
     """
     z, J = transfer_pixels(cam_T_next, p_next, Ks)
     residual = z_prev - z
@@ -398,12 +360,7 @@ def _gauss_newton(cam_T_next, z_prev, p_next, weight, Ks, iterations):
 
 
 def _estimate(batch, rig, settings, rng):
-    """RANSAC; Gauss-Newton on its inliers; the inliers again (:func:`_inliers`); Gauss-Newton
-    on them weighted by the information of their transfer residuals.
-
-    The information of each point's transfer residual is computed once, at the motion of the
-    first refinement. Returns what :func:`_summary` returns.
-    """
+    """RANSAC, Gauss-Newton on its inliers, the inliers again, weighted Gauss-Newton: :func:`_summary`'s tuple."""
     z_prev, z_next, _, p_next, _ = batch
     Ks = rig.Ks
     cam_T_next, inlier = _ransac(batch, Ks, settings, rng)
@@ -435,12 +392,11 @@ def _summary(cam_T_next, H, chi2, squared, inlier, settings):
 
 
 def _pixel_variance(chi2, dof, valid):
-    """Residual variance per pair: ``(chi2 + n0 s0^2) / (dof + n0)`` (0 if invalid).
+    """Residual variance per pair, ``(chi2 + n0 s0^2) / (dof + n0)``, shrunk toward the pooled ``s0^2``.
 
-    The pair's own ``chi2 / dof`` is shrunk toward the drive's pooled value
-    ``s0^2 = sum chi2 / sum dof`` with the weight of ``n0 = _PRIOR_DOF`` residuals: a pair of
-    3 points has only 6 residual degrees of freedom, so its own estimate scatters by +-58%.
-    Floored at ``_MIN_PIXEL_VARIANCE`` so that noise-free pixels keep an invertible covariance.
+    ``n0 = _PRIOR_DOF``: 3 points have 6 residual dof, so their own estimate scatters by +-58%.
+    Floored at ``_MIN_PIXEL_VARIANCE`` (noise-free pixels keep an invertible covariance); 0 if
+    invalid.
     """
     if not np.any(valid):
         return np.zeros(len(valid))
@@ -453,19 +409,10 @@ def _pixel_variance(chi2, dof, valid):
 
 
 def _pair_matches(dataset, rig):
-    """Points seen in frames t and t + 1 with positive disparity in both (``rig.disparity``), and stale copies.
+    """Points seen at t and t + 1 with positive disparity in both, and the stale copies (left out).
 
-    A point whose four pixels at ``t + 1`` are bit-identical to those at ``t`` is a stale
-    copy, not a measurement (the course files have whole frame pairs of them, while the
-    vehicle turns); it is left out and counted.
-
-    Returns
-    -------
-    pair : ndarray of int, shape (K,)
-        Frame pair ``t`` of each match, increasing.
-    z_prev, z_next : ndarray, shape (K, 4)
-    stale_pair : ndarray of int, shape (S,)
-        Frame pair of each stale copy.
+    Returns the frame pair ``t`` of each match (K,), increasing, ``z_prev``, ``z_next`` (K, 4), and
+    the frame pair of each stale copy (S,).
     """
     frames = dataset.observation_frames().astype(np.int64)
     key = frames * max(dataset.num_landmarks, 1) + dataset.obs_ids
@@ -521,29 +468,22 @@ def _padded(chunk, ptr, counts, arrays):
 
 
 def visual_odometry(dataset, pixel_sigma=1.0, probability=0.99, hypotheses=16, min_inliers=3, seed=0):
-    """Robust stereo visual odometry of the left camera over consecutive frame pairs.
-
-    See the module docstring for the method.
+    """Robust stereo visual odometry of the left camera (the module docstring): a :class:`VisualOdometry`.
 
     Parameters
     ----------
     dataset : visla_edu.dataset.Dataset
     pixel_sigma : float
-        Pixel noise (px) assumed by the inlier test (not by the covariance, which uses the
-        measured residuals).
+        Pixel noise (px) of the inlier test (the covariance uses the measured residuals).
     probability : float
         Chi-square probability of the inlier test.
     hypotheses : int
         3-point hypotheses per frame pair; 16 draw an all-inlier sample with probability
         ``1 - (1 - 0.7^3)^16 = 99.9%`` even with 30% outliers.
     min_inliers : int
-        Fewer inliers make a pair invalid.
+        Fewer make a pair invalid.
     seed : int
-        Seed of the sampling: the same seed gives the same result.
-
-    Returns
-    -------
-    VisualOdometry
+        The same seed gives the same result.
     """
     settings = _settings(pixel_sigma, probability, hypotheses, min_inliers, seed)
     _check_dataset(dataset)
