@@ -475,9 +475,9 @@ def test_repeated_frame_gets_no_update(tiny, mode):
     np.testing.assert_allclose(rec.world_T_imu, motion.predict_pose(recs[t - 1].world_T_imu, u, ds.time_steps[t - 1]),
                                atol=1e-12)
     assert recs[t + 1].nis_dof > 0  # the filter carries on
-    # without skipping, the repeated frame is used like any other
-    rec_used = list(run.iterate_filter(ds, mode, FilterConfig(extrinsic_correction="none",
-                                                              skip_repeated_frames=False)))[t]
+    # without skipping, the repeated frame is used like any other (its observations are also stale copies)
+    rec_used = list(run.iterate_filter(ds, mode, FilterConfig(extrinsic_correction="none", skip_repeated_frames=False,
+                                                              skip_stale_copies=False)))[t]
     assert rec_used.nis_dof > 0
 
 

@@ -140,7 +140,8 @@ def test_filter_settings_lists_exactly_what_the_smoother_model_reads(tiny):
 
     base = run.resolve_config(tiny, CFG)
     changed = {"sigma_pixel": 2.0, "sigma_linear_velocity": 0.3, "sigma_angular_velocity": 0.03, "imu_lag": 1,
-               "min_init_disparity": 5.0, "skip_repeated_frames": False, "landmark_prior_inflation": 3.0,
+               "min_init_disparity": 5.0, "skip_repeated_frames": False, "skip_stale_copies": False,
+               "landmark_prior_inflation": 3.0,
                "landmark_prior_sigma": 9.0, "initial_pose_sigma": 0.5, "gate_probability": 0.9,
                "landmark_cross_covariance": False, "mapping_motion_noise": False, "vio_refine_landmarks": True,
                "slam_error": "right", "reinit_gated_landmarks": False, "pixel_noise_inflation": 2.0,

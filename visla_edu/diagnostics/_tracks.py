@@ -2,9 +2,9 @@
 
 Each landmark's first observation with disparity above :data:`MIN_DISPARITY` (its anchor) is
 triangulated, ``p_a`` in the left camera at frame ``a``, and paired with its later observations
-1 to :data:`MAX_GAP` frames later, except stale copies (pixels bit-identical to the landmark's
-previous observation) and non-positive disparities. The IMU's dead-reckoned motion with a
-candidate lag, through a candidate ``imu_T_cam = C X``, predicts the point at frame ``b``::
+1 to :data:`MAX_GAP` frames later, except stale copies (:func:`visla_edu.dataset.stale_copies`)
+and non-positive disparities. The IMU's dead-reckoned motion with a candidate lag, through a
+candidate ``imu_T_cam = C X``, predicts the point at frame ``b``::
 
     q = cam_T_imu  inv(S_a S_(a+1) ... S_(b-1))  imu_T_cam  p_a,    S_t = exp(tau_t u[t + lag]^)
 
@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from visla_edu import lie
+from visla_edu.dataset import stale_copies
 from visla_edu.diagnostics._bootstrap import cluster_resamples, resampled_medians
 from visla_edu.diagnostics._vo import LAGS, corrections_of
 from visla_edu.motion import select_twists
@@ -121,13 +122,11 @@ def track_pairs(dataset):
         Frames from the anchor to the later observation, ``1..MAX_GAP``.
     """
     frames = dataset.observation_frames()
-    ids, z = dataset.obs_ids, dataset.obs_z
-    order = np.lexsort((frames, ids))  # landmark by landmark, in time
-    ids_sorted, frames_sorted, z_sorted = ids[order], frames[order], z[order]
+    order = np.lexsort((frames, dataset.obs_ids))  # landmark by landmark, in time
+    ids_sorted, frames_sorted = dataset.obs_ids[order], frames[order]
     same = np.zeros(len(order), dtype=bool)  # the same landmark as the observation before
     same[1:] = ids_sorted[1:] == ids_sorted[:-1]
-    stale = same.copy()
-    stale[1:] &= np.all(z_sorted[1:] == z_sorted[:-1], axis=1)
+    stale = stale_copies(dataset)[order]
     disparity = dataset.disparity()[order]
     can_anchor = disparity > MIN_DISPARITY
     # the first anchor-able observation of each landmark (big: none)

@@ -31,6 +31,7 @@ import numpy as np
 from visla_edu import lie
 from visla_edu.metrics import chi2_quantile
 from visla_edu.camera import StereoCamera, project_points, single_intrinsics
+from visla_edu.dataset import stale_copies
 
 __all__ = ["VisualOdometry", "visual_odometry", "align_triples", "transfer_pixels", "camera_motion", "motion_errors"]
 
@@ -424,7 +425,7 @@ def _pair_matches(dataset, rig):
     z_next = dataset.obs_z[found]
     z_prev = dataset.obs_z[order[pos[found]]]
     pair = frames[found] - 1
-    stale = np.all(z_prev == z_next, axis=1)
+    stale = stale_copies(dataset)[found]
     keep = ~stale & (rig.disparity(z_prev) > 0) & (rig.disparity(z_next) > 0)
     return pair[keep], z_prev[keep], z_next[keep], pair[stale]
 
