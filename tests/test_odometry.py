@@ -194,6 +194,21 @@ def test_pairs_without_enough_points_are_invalid_not_nan():
         assert not np.isnan(field).any()
 
 
+def test_a_point_a_hypothesis_moves_onto_the_camera_plane_gets_no_weight_not_an_error():
+    """A bad RANSAC hypothesis can move a point to nearly zero depth in frame t: its noise transfer A is then
+    ~1e20 px per px and I + A A^T is singular in floats. The point gets zero information (it once raised
+    numpy's LinAlgError from the calibration of a noisy simulated drive); the others are unchanged."""
+    rng = np.random.default_rng(11)
+    p_next = np.column_stack([rng.uniform(-10, 10, 5), rng.uniform(-2, 2, 5), rng.uniform(4, 50, 5)])
+    z_next = camera.projection(np.c_[p_next, np.ones(5)]) @ KS_RIG.T
+    rig = camera.StereoCamera(K_RIG, B_RIG, np.eye(4))
+    onto_plane = np.eye(4)
+    onto_plane[2, 3] = -p_next[0, 2] + 1e-9  # point 0 lands a nanometre in front of the camera at t
+    W = odometry._transfer_information(onto_plane, z_next, p_next, rig)
+    np.testing.assert_array_equal(W[0], np.zeros((4, 4)))
+    np.testing.assert_allclose(W[1:], odometry._transfer_information(onto_plane, z_next[1:], p_next[1:], rig))
+
+
 def test_same_seed_same_result():
     ds = simulate.simulate_drive("tiny", seed=5, outlier_share=0.1)
     first, second = odometry.visual_odometry(ds, seed=7), odometry.visual_odometry(ds, seed=7)

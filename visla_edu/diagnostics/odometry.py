@@ -46,6 +46,10 @@ _PRIOR_DOF = 12
 _MIN_PIXEL_VARIANCE = 1e-6
 #: Largest transfer residual accepted, in multiples of the small-motion inlier radius.
 _MAX_MAGNIFICATION = 3.0
+#: Largest entry of a point's noise transfer ``A`` (px per px) that carries information: beyond it
+#: ``I + A A^T`` is singular in floating point (a hypothesis moved the point to nearly zero depth), and
+#: the point gets none.
+_MAX_TRANSFER_GAIN = 1e6
 #: Gauss-Newton steps refining each 3-point hypothesis on its own reprojection (simulated drives:
 #: 1 step gives +18% median and +78% RMS rotation error, none 4 mrad instead of 1).
 _SAMPLE_ITERATIONS = 2
@@ -265,11 +269,13 @@ def _transfer_information(cam_T_next, z_next, p_next, rig):
 
     ``A = Ks dpi/dq(q)[:, :3] R J_p_z(z_next)`` carries frame ``t + 1``'s pixel noise through the
     triangulation and the transfer: near the identity on ``uL, vL, uR`` for small motions, while a
-    translation turns the depth error of far points into a pixel error.
+    translation turns the depth error of far points into a pixel error. A point whose ``A`` is not
+    finite, or beyond ``_MAX_TRANSFER_GAIN``, gets no information (zeros).
     """
     J_z_point = project_points(rig.Ks, cam_T_next, p_next)[2]  # Ks dpi/dq R, the derivative w.r.t. p_next
     A = J_z_point @ rig.triangulation_jacobian(z_next)
     finite = np.all(np.isfinite(A), axis=(-2, -1))
+    finite[finite] &= np.abs(A[finite]).max(axis=(-2, -1)) < _MAX_TRANSFER_GAIN  # else I + A A^T is singular in floats
     A[~finite] = 0.0
     return np.linalg.inv(np.eye(4) + A @ np.swapaxes(A, -1, -2)) * finite[..., None, None]
 
