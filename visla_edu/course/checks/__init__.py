@@ -1,42 +1,30 @@
 """Checks for the notebook exercises: compare a student's function with the library.
 
-Every ``check_<name>(fn, hidden=False)`` calls the student's function ``fn`` (its signature is
-in the check's summary line) on random and edge-case inputs (near the identity, near pi, far
-points, empty frames...), compares with the library version and
+Every ``check_<name>(fn, hidden=False)`` calls the student's ``fn`` (its signature in the check's
+summary line) on random and edge-case inputs, compares with the library version and
 
-* prints one ``✓ ...`` line when everything agrees (``hidden=True`` runs other cases instead,
-  their random ones drawn from ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed,
-  and prints nothing on success; a value of that variable that is not a non-negative integer
-  raises ``ValueError``);
-* raises ``AssertionError`` otherwise: a result of the wrong type, shape or values, or a
-  function that raised, called a hidden library function or changed ``visla_edu`` (nbgrader
-  counts the cell as failed). The message's first line (at most 79 characters, see
-  :mod:`~visla_edu.course.checks._core`) names the likely mistake in its first words; details
-  follow. Mistakes are recognised by computing deliberately wrong variants from the library
-  (twist order ``[w; v]``, a transposed rotation, a missing minus sign, a closed form without
-  its small-angle series...) and seeing whether the student's output equals one of them (the
-  ``(hint, variant)`` lists beside each check);
-* raises ``NotImplementedError`` (with a pointer to the cell to fill in) while the exercise
-  is still the stub of the student notebook.
+* prints one ``✓ ...`` line when everything agrees (``hidden=True`` runs other cases, drawn from
+  ``VISLA_EDU_HIDDEN_SEED`` if set, else from a built-in seed, and prints nothing on success; a
+  value of that variable that is not a non-negative integer raises ``ValueError``);
+* raises ``AssertionError`` otherwise (a wrong type, shape or values, a crash, a call to a hidden
+  library function, a change to ``visla_edu``). The message's first line (at most 79 characters,
+  :mod:`~visla_edu.course.checks._core`) names the likely mistake, a deliberately wrong variant
+  that the output equals (the ``(hint, variant)`` lists beside each check);
+* raises ``NotImplementedError`` while the exercise is still the student notebook's stub.
 
 A check's docstring gives its reference, its tolerances (else those of
-:func:`~visla_edu.course.checks._core.compare`, ``rtol=1e-7``, ``atol=1e-9``) and what it
-hides: while the student's function runs, calling those library functions under any name
-raises "write your own ...", and the library must stay as installed
-(:mod:`visla_edu.course.checks._hiding`). Camera checks use the simulator's rig, their hidden
-cases another (:func:`~visla_edu.course.checks._inputs.rig`), so code that reads the
-notebook's rig instead of its arguments fails.
+:func:`~visla_edu.course.checks._core.compare`, ``rtol=1e-7``, ``atol=1e-9``) and what it hides
+(:mod:`visla_edu.course.checks._hiding`). Camera checks' hidden cases use another rig
+(:func:`~visla_edu.course.checks._inputs.rig`). The visible inputs come from a fixed seed.
 
-Graded cells load a fresh copy, so that nothing an answer cell assigned to the checks counts
-(re-executing this file reloads each submodule below, in order)::
+Graded cells load a fresh copy, so that nothing an answer cell assigned to the checks counts::
 
     import importlib, visla_edu.course.checks
     _checks = importlib.reload(visla_edu.course.checks)
     _checks.check_hat(hat)
 
 Conventions (twists ``[v; w]``, the right perturbation): :mod:`visla_edu.lie`; the motion
-model: :mod:`visla_edu.motion`. The visible inputs are drawn from a fixed seed, so a check
-gives the same verdict every time.
+model: :mod:`visla_edu.motion`.
 """
 
 import importlib as _importlib

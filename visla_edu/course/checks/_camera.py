@@ -25,17 +25,10 @@ def _calibrations(generator, hidden=False):
 
 @exercise_check
 def check_stereo_matrix(stereo_matrix, hidden=False):
-    """Exercise 02: ``stereo_matrix(K, b) -> Ks (4, 4)``.
+    """Exercise 02: ``stereo_matrix(K (3, 3), b) -> Ks (4, 4)``, the baseline ``b`` in m.
 
     Compares with :func:`visla_edu.camera.stereo_matrix` for the simulator's rig, a KITTI-like one
     and random ones (hidden: random ones only). Hides ``camera.stereo_matrix``.
-
-    Parameters
-    ----------
-    stereo_matrix : callable
-        Intrinsics ``K`` (3, 3) and the baseline ``b`` (m) to the stereo matrix.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "stereo_matrix"
     call = student(stereo_matrix, name, hide=[cam.stereo_matrix])
@@ -73,20 +66,13 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
 
 @exercise_check
 def check_project(project, hidden=False):
-    """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)``.
+    """Exercise 02: ``project(Ks, cam_T_imu, world_T_imu (4, 4 each), p_world (M, 3)) -> z (M, 4)``.
 
-    Compares with :meth:`visla_edu.camera.StereoCamera.predict` (``rtol=1e-7``, ``atol=1e-6`` px)
-    at the identity and random poses, for points in view from 2 m to 300 m. Hides the
-    ``StereoCamera`` methods ``predict``, ``predict_with_jacobians`` and ``points_in_camera``,
-    ``camera.stereo_projection``, ``camera.project_points`` and the ``project`` of
-    ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    project : callable
-        ``Ks``, ``cam_T_imu``, ``world_T_imu`` (4, 4 each) and world points to ``[uL, vL, uR, vR]``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    Pixels ``[uL, vL, uR, vR]``, compared with :meth:`visla_edu.camera.StereoCamera.predict`
+    (``rtol=1e-7``, ``atol=1e-6`` px) at the identity and random poses, for points in view from 2 m
+    to 300 m. Hides the ``StereoCamera`` methods ``predict``, ``predict_with_jacobians`` and
+    ``points_in_camera``, ``camera.stereo_projection``, ``camera.project_points`` and the ``project``
+    of ``capstone.library_parts()``.
     """
     name = "project"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -111,16 +97,9 @@ def check_project(project, hidden=False):
 def check_triangulate(triangulate, hidden=False):
     """Exercise 02: ``triangulate(z (M, 4), K, b) -> (M, 3)`` points in the left camera (disparity form).
 
-    From the exact pixels of points at 1.5 to 120 m (hidden: to 400 m), for the calibrations of
-    :func:`check_stereo_matrix`; compares with the true points (``rtol=atol=1e-6``). Hides
-    ``camera.triangulate_disparity`` and ``camera.triangulate_bearing``.
-
-    Parameters
-    ----------
-    triangulate : callable
-        Pixels ``[uL, vL, uR, vR]``, intrinsics ``K`` (3, 3) and the baseline ``b`` (m).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    From the exact pixels ``[uL, vL, uR, vR]`` of points at 1.5 to 120 m (hidden: to 400 m), for the
+    calibrations ``K`` (3, 3), ``b`` (m) of :func:`check_stereo_matrix`; compares with the true points
+    (``rtol=atol=1e-6``). Hides ``camera.triangulate_disparity`` and ``camera.triangulate_bearing``.
     """
     name = "triangulate"
     generator = rng(hidden)
@@ -163,17 +142,10 @@ def _init_variants(p_cam, imu_T_cam, T):
 def check_init_landmark(init_landmark, hidden=False):
     """Exercise 05: ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> (3,)`` world point.
 
-    From one noise-free observation of a landmark at 2 to 60 m (hidden: to 200 m), at the identity
-    and random poses; compares with the true landmark (``rtol=atol=1e-6``). Hides
-    ``StereoCamera.triangulate``, ``ekf.initialize_landmarks`` and the ``init_landmark`` of
+    From one noise-free observation of a landmark at 2 to 60 m (hidden: to 200 m), ``K`` (3, 3) and
+    ``b`` (m), at the identity and random poses; compares with the true landmark (``rtol=atol=1e-6``).
+    Hides ``StereoCamera.triangulate``, ``ekf.initialize_landmarks`` and the ``init_landmark`` of
     ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    init_landmark : callable
-        One observation, ``K`` (3, 3), the baseline ``b`` (m), ``imu_T_cam`` and ``world_T_imu``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "init_landmark"
     generator, (K, b, imu_T_cam), camera = rng(hidden), rig(hidden), stereo_camera(hidden)

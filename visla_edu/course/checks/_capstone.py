@@ -2,10 +2,9 @@
 
 Each check tests the student's function on random states through spy parts that record which
 of the notebooks' functions it calls (the assembly must go through ``parts``). ``predict`` and
-``slam_update`` then drive :func:`visla_edu.course.capstone.run_capstone` on ``sim-tiny``
-(hidden: a ``"tiny"`` drive of another seed): every position must stay within
-:data:`LOOP_TOLERANCE` of the reference's (for SLAM: the library's ``slam_error="right"``
-joint filter, which a correct assembly reproduces to rounding error).
+``slam_update`` then drive :func:`visla_edu.course.capstone.run_capstone` on ``sim-tiny`` (hidden:
+a ``"tiny"`` drive of another seed), every position within :data:`LOOP_TOLERANCE` of the reference
+(for SLAM the library's ``slam_error="right"`` joint filter, reproduced to rounding error).
 """
 
 from dataclasses import fields, replace
@@ -91,12 +90,7 @@ REFERENCE = capstone.Steps(_reference_predict, _reference_add_landmarks, _refere
 def reference_capstone_steps():
     """The checks' reference assembly as :class:`visla_edu.course.capstone.Steps` (nothing printed).
 
-    Notebook 07 runs the capstone's VIO loop with it and the student's ``pose_update``, before the
-    capstone's exercises exist.
-
-    Returns
-    -------
-    visla_edu.course.capstone.Steps
+    Notebook 07 runs the capstone's VIO loop with it and the student's ``pose_update``.
     """
     return REFERENCE
 
@@ -185,15 +179,9 @@ def check_capstone_predict(predict, hidden=False):
     A tuple equal to ``(world_T_imu @ parts.se3_exp(tau u), Sigma')``, ``Sigma'`` with the pose rows
     and columns moved by ``F = parts.pose_transition(u, tau)`` and ``W`` added to the pose block
     (``rtol=1e-9``; ``atol=1e-9`` for the pose, 1e-12 for the covariance), through those two
-    parts; then the VIO loop (``parts.pose_update``). Hides ``motion.predict_pose``,
-    ``predict_pose_covariance``, ``predict_joint_covariance``, ``imu_step`` and the reference's.
-
-    Parameters
-    ----------
-    predict : callable
-        ``parts``, the pose mean, the joint covariance, the twist ``[v; w]``, ``tau`` (s) and ``W``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    parts (``u = [v; w]``, ``tau`` in s); then the VIO loop (``parts.pose_update``). Hides
+    ``motion.predict_pose``, ``predict_pose_covariance``, ``predict_joint_covariance``, ``imu_step``
+    and the reference's.
     """
     name = "predict"
     generator, spy = rng(hidden), _Spy()
@@ -268,15 +256,7 @@ def check_capstone_landmarks(add_landmarks, hidden=False):
     new block ``G Sigma_pp G^T + C_pixels`` (one (3k, 3k) block) and the cross-covariance
     ``G Sigma_px``, ``G = (world_T_imu @ parts.odot(s))[:3]`` for the new point ``s`` in the IMU
     frame (``rtol=1e-8``; ``atol=1e-8`` for the means, 1e-12 for the covariance), through those
-    two parts. No loop is run. Hides ``ekf.initialize_landmarks`` and the reference's helpers.
-
-    Parameters
-    ----------
-    add_landmarks : callable
-        ``parts``, the pose mean, the joint covariance, the new observations, ``K``, ``b`` (m),
-        ``imu_T_cam`` and the new covariances' pixel part.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    two parts (``b`` in m). No loop is run. Hides ``ekf.initialize_landmarks`` and the reference's helpers.
     """
     name = "add_landmarks"
     generator, spy = rng(hidden), _Spy()
@@ -328,16 +308,9 @@ def check_capstone_slam(slam_update, hidden=False):
     ``parts.se3_exp(dx[:6])``, every landmark moved by ``dx[6:]``, ``(I - L H) Sigma``
     symmetrised; pose and landmarks ``rtol=1e-7``, ``atol=1e-8``, covariance ``rtol=1e-6``,
     ``atol=1e-10``), using ``parts.project``, ``pose_jacobian`` and ``landmark_jacobian`` too;
-    then the SLAM loop against ``run.run_filter(ds, "slam", config)``. Hides the library's joint
-    and pose updates, the camera's Jacobians and the reference's update.
-
-    Parameters
-    ----------
-    slam_update : callable
-        ``parts``, the pose mean, the joint covariance, the landmark means in slot order, the slots
-        and observations of the observed ones, ``Ks``, ``cam_T_imu`` and the pixel variance (px^2).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    then the SLAM loop against ``run.run_filter(ds, "slam", config)``. ``p_active`` is in slot order,
+    ``noise_var`` in px^2. Hides the library's joint and pose updates, the camera's Jacobians and the
+    reference's update.
     """
     name = "slam_update"
     generator, spy = rng(hidden), _Spy()
@@ -390,15 +363,6 @@ def capstone_steps(predict, add_landmarks, slam_update):
     function). Each is called once, with the library's parts and nothing hidden, on a fixed probe
     (seed 9: 3 landmarks, 2 observed, and 2 new observations) and used if it runs (no exception)
     and each output is ``numpy.allclose`` to the reference's (``rtol=1e-6``, ``atol=1e-8``).
-
-    Parameters
-    ----------
-    predict, add_landmarks, slam_update : callable
-        The student's assembly functions (signatures of :class:`visla_edu.course.capstone.Steps`).
-
-    Returns
-    -------
-    visla_edu.course.capstone.Steps
     """
     generator, library = np.random.default_rng(9), capstone.library_parts()
     c, T, Sigma, p_active, slots, z = _slam_case(generator, 3, 2)

@@ -13,16 +13,9 @@ __all__ = ["check_motion_noise", "check_nees", "check_average_nees_bounds", "che
 def check_motion_noise(motion_noise, hidden=False):
     """Exercise 10: ``motion_noise(tau, sigma_v, sigma_w) -> W (6, 6)`` for twists ``[v; w]``.
 
-    ``W = tau^2 diag(sigma_v^2 I3, sigma_w^2 I3)``, each sigma one number: compares with
-    :func:`visla_edu.motion.motion_noise` (``rtol=1e-9``, ``atol=1e-15``) for fixed cases (hidden:
-    edge cases, zero sigmas among them, and random ones). Hides ``motion.motion_noise``.
-
-    Parameters
-    ----------
-    motion_noise : callable
-        The step ``tau`` (s) and the velocity noise ``sigma_v`` (m/s) and ``sigma_w`` (rad/s).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``W = tau^2 diag(sigma_v^2 I3, sigma_w^2 I3)``, ``tau`` in s, each sigma one number (m/s, rad/s):
+    compares with :func:`visla_edu.motion.motion_noise` (``rtol=1e-9``, ``atol=1e-15``) for fixed cases
+    (hidden: edge cases, zero sigmas among them, and random ones). Hides ``motion.motion_noise``.
     """
     name = "motion_noise"
     cases = [(0.1, 0.5, 0.02), (0.104, 1.0, 0.05), (0.5, 0.2, 0.3)]
@@ -54,12 +47,6 @@ def check_nees(nees, hidden=False):
     For errors drawn from random covariances; the result must be one number (an array of one entry
     fails). Compares with :func:`visla_edu.metrics.nees` (``rtol=1e-7``). Hides ``metrics.nees``
     and ``ekf.mahalanobis_squared``.
-
-    Parameters
-    ----------
-    nees : callable
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "nees"
     generator = rng(hidden)
@@ -85,16 +72,9 @@ def check_nees(nees, hidden=False):
 def check_average_nees_bounds(average_nees_bounds, hidden=False):
     """Exercise 10: ``average_nees_bounds(dof, n, probability=0.95) -> (lo, hi)`` for a mean of n NEES.
 
-    The chi-square quantiles of ``n dof`` degrees of freedom at ``(1 - p) / 2`` and
-    ``1 - (1 - p) / 2``, divided by ``n``: compares both (``rtol=1e-6``). Hides
+    ``dof`` of one NEES: the chi-square quantiles of ``n dof`` degrees of freedom at ``(1 - p) / 2``
+    and ``1 - (1 - p) / 2``, divided by ``n``: compares both (``rtol=1e-6``). Hides
     ``metrics.average_nees_bounds`` and ``metrics.chi2_bounds``.
-
-    Parameters
-    ----------
-    average_nees_bounds : callable
-        One NEES's degrees of freedom, the number of values averaged and the probability.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "average_nees_bounds"
     cases = [(6, 1, 0.95), (6, 50, 0.95), (4, 200, 0.99), (3, 10, 0.9)]
@@ -158,16 +138,9 @@ def _gate_variants(r, S, probability):
 def check_gate(gate, hidden=False):
     """Exercise 11: ``gate(innovations (k, 4), S (k, 4, 4), probability) -> (k,) bool``, inside the gate.
 
-    ``r_i^T S_i^-1 r_i <= chi2.ppf(probability, 4)`` per observation: the mask must equal the
-    library's (:func:`visla_edu.ekf.mahalanobis_squared`, :func:`visla_edu.metrics.chi2_quantile`)
-    exactly. Hides :func:`visla_edu.ekf.mahalanobis_squared`.
-
-    Parameters
-    ----------
-    gate : callable
-        Innovations ``z - z_pred`` (px), their covariances and the probability; True: use it.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``r_i^T S_i^-1 r_i <= chi2.ppf(probability, 4)`` per innovation ``r_i = z - z_pred`` (px): the mask
+    must equal the library's (:func:`visla_edu.ekf.mahalanobis_squared`,
+    :func:`visla_edu.metrics.chi2_quantile`) exactly. Hides :func:`visla_edu.ekf.mahalanobis_squared`.
     """
     name = "gate"
     call = student(gate, name, hide=[ekf.mahalanobis_squared])
@@ -233,18 +206,11 @@ def _align_cases(generator, hidden):
 def check_align_rigid(align_rigid, hidden=False):
     """Exercise 11: ``align_rigid(p_est (N, 3), p_gt (N, 3)) -> gt_T_est (4, 4)``, the best rigid alignment.
 
-    The ``R``, ``p`` minimising ``sum |p_gt - (R p_est + p)|^2`` (Kabsch, no scale):
-    ``R = Q diag(1, 1, det(Q U^T)) U^T`` from ``U diag(s) Q^T = svd(sum (p_est - c_est)(p_gt -
-    c_gt)^T)`` and ``p = c_gt - R c_est``, also for flat points against their mirror image (an SVD
-    reflection); compares with :func:`visla_edu.metrics.align_se3` (``rtol=1e-7``, ``atol=1e-8``).
-    Hides it and :func:`visla_edu.metrics.ate`.
-
-    Parameters
-    ----------
-    align_rigid : callable
-        Estimated and true positions, row ``i`` the same frame.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    Row ``i`` of both is the same frame. The ``R``, ``p`` minimising ``sum |p_gt - (R p_est + p)|^2``
+    (Kabsch, no scale): ``R = Q diag(1, 1, det(Q U^T)) U^T`` from ``U diag(s) Q^T = svd(sum (p_est -
+    c_est)(p_gt - c_gt)^T)`` and ``p = c_gt - R c_est``, also for flat points against their mirror
+    image (an SVD reflection); compares with :func:`visla_edu.metrics.align_se3` (``rtol=1e-7``,
+    ``atol=1e-8``). Hides it and :func:`visla_edu.metrics.ate`.
     """
     name = "align_rigid"
     call = student(align_rigid, name, hide=[metrics.align_se3, metrics.ate])

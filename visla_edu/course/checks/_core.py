@@ -39,11 +39,9 @@ _DEFAULT_HIDDEN_SEED = 1827
 def exercise_check(check):
     """Decorator of the public checks: failures show the message, not the checks' own frames.
 
-    ``run(fn, hidden=False)`` (:func:`functools.wraps` of ``check``) raises an ``AssertionError`` or
-    ``NotImplementedError`` without a ``__cause__`` again from itself, with the message wrapped by
-    :func:`wrap_message` (``from None``), so a notebook shows the student's cell and the message;
-    one with a cause (a crash of the student's code, with its traceback) and any other exception
-    propagate unchanged.
+    An ``AssertionError`` or ``NotImplementedError`` without a ``__cause__`` is raised again ``from None``,
+    its message wrapped by :func:`wrap_message`; one with a cause (a crash of the student's code, with
+    its traceback) and any other exception propagate unchanged.
     """
 
     @functools.wraps(check)
@@ -73,10 +71,9 @@ def _hidden_seed():
 
 
 def rng(hidden=False):
-    """The random generator (new at each call) of a check's visible or hidden cases.
+    """A new generator seeded with :data:`SEED`, or if ``hidden`` with :data:`HIDDEN_SEED_VARIABLE`'s integer.
 
-    Seeded with :data:`SEED`, or if ``hidden`` with the integer in :data:`HIDDEN_SEED_VARIABLE`
-    (a built-in seed if it is unset or empty; ``ValueError`` if it is not a non-negative integer).
+    ``ValueError`` if that variable is not a non-negative integer; unset or empty: a built-in seed.
     """
     return np.random.default_rng(_hidden_seed() if hidden else SEED)
 
@@ -88,11 +85,7 @@ def ok(message, hidden=False):
 
 
 def fmt(x):
-    """Short text for an input in a failure message.
-
-    A function's ``__name__`` (or ``"a function"``), the ``repr`` of a non-numeric value, an
-    array's values on one line (6 digits) if it has at most 8, else ``"an array of shape (...)"``.
-    """
+    """Text of an input in a failure message: a function's name, a ``repr``, <= 8 values on one line, or the shape."""
     if callable(x):
         return getattr(x, "__name__", "a function")
     arr = np.asarray(x)
@@ -115,10 +108,7 @@ def _split_first_line(text):
 
 
 def wrap_message(text):
-    """``text`` with its first line at most 79 characters and every later line wrapped at 79.
-
-    A message already in that shape is returned unchanged.
-    """
+    """``text`` with its first line at most 79 characters, every later line wrapped at 79 (unchanged if already so)."""
     first, rest = _split_first_line(text)
     lines = [first]
     for line in rest.split("\n") if rest else ():
@@ -130,9 +120,8 @@ def wrap_message(text):
 def fail(name, hint, *details):
     """An ``AssertionError`` (to be raised): ``"{name}: {first line of hint}"``, then the details.
 
-    ``name`` is the student's function ("" if ``hint`` names it already); ``hint``'s first line is
-    the mistake in a few words, its later lines the explanation; ``details`` are further lines (the
-    input, expected and actual values...), empty ones skipped. Wrapped as by :func:`wrap_message`.
+    ``name``: the student's function ("" if ``hint`` names it); ``hint``: the mistake in a few words, then
+    the explanation; ``details``: further lines (empty ones skipped). Wrapped as by :func:`wrap_message`.
     """
     first, rest = _split_first_line(f"{name}: {hint}" if name else hint)
     lines = [first]
@@ -239,9 +228,8 @@ def _shown(args):
 def student(fn, name, hide=()):
     """Wrap the student's ``fn``: calls hide ``hide`` (library functions) and guard the library.
 
-    The wrapper takes ``fn``'s arguments (and copies them), returns its output as float arrays,
-    and raises ``NotImplementedError`` for a stub and ``AssertionError`` for a crash, a call to a
-    hidden function or a change to visla_edu.
+    The wrapper copies ``fn``'s arguments and returns its output as float arrays; ``NotImplementedError``
+    for a stub, ``AssertionError`` for a crash, a call to a hidden function or a change to visla_edu.
     """
     return _Student(fn, name, hide)
 
@@ -303,32 +291,21 @@ def _matching_variant(got, variants, rtol, atol, expected=None):
 
 
 def compare(name, got, expected, where, variants=(), rtol=1e-7, atol=1e-9, nan_hint="", extra=None):
-    """Fail with the most specific message if ``got`` differs from ``expected``.
+    """Raise an ``AssertionError`` with the most specific hint if ``got`` differs from ``expected`` (:func:`close`).
 
-    In order: ``got`` agrees (:func:`close`) and nothing happens; NaN or inf where ``expected`` is
-    finite; a matching variant; ``extra``; else the message shows both arrays.
+    The hint, in order: "NaN or inf" and ``nan_hint`` if ``got`` has them and ``expected`` not; the
+    matching variant; ``extra(got)``, a hint or "" from a property of the output (e.g. "not a
+    rotation"); else none, and the message shows both arrays.
 
     Parameters
     ----------
     name, where : str
         The message's first word (the student's function) and its second line (the input).
-    got, expected : array_like
-        The student's output (numeric) and the reference.
     variants : sequence of (hint, callable)
         Each callable returns the output of one deliberate mistake on the same input (one that
         raises is skipped). Of those matching ``got`` to at least ``rtol = 1e-6``, ``atol = 1e-8``,
         the closest names the mistake, if ``got`` is closer to it than to ``expected``. A hint's
         first line is short.
-    rtol, atol : float
-    nan_hint : str
-        Hint when ``got`` has NaN or inf and ``expected`` has not.
-    extra : callable, optional
-        ``extra(got)`` returns a hint (or "") from a property of the output (e.g. "not a rotation").
-
-    Raises
-    ------
-    AssertionError
-        ``got`` differs from ``expected``.
     """
     if close(got, expected, rtol, atol):
         return
@@ -352,25 +329,12 @@ def _close_nested(got, expected, rtol=1e-5, atol=1e-7):
 
 
 def student_or_reference(student_fn, reference_fn, *probe_args, name=None):
-    """The student's function if it runs on ``probe_args`` and agrees with the reference.
+    """``student_fn`` if it runs on ``probe_args`` and agrees with ``reference_fn`` (same signature), else the latter.
 
-    So that an unfinished exercise never blocks a notebook's later cells. Prints ``"using your
-    {name}"``, or ``"using the library's {name} (yours is not finished or disagrees)"``.
-
-    Parameters
-    ----------
-    student_fn, reference_fn : callable
-        The student's function and the library's, with the same arguments and outputs.
-    *probe_args
-        One input for both; the outputs (arrays, or tuples and lists of them) must agree to
-        ``rtol = 1e-5``, ``atol = 1e-7``. Any exception (e.g. a stub's) counts as disagreement.
-    name : str, optional
-        Shown in the printed line; default ``student_fn.__name__``.
-
-    Returns
-    -------
-    callable
-        ``student_fn`` if it agrees, else ``reference_fn``.
+    So that an unfinished exercise never blocks a notebook's later cells. The outputs (arrays, or
+    tuples and lists of them) must agree to ``rtol = 1e-5``, ``atol = 1e-7``; any exception (e.g. a
+    stub's) counts as disagreement. Prints ``"using your {name}"`` or ``"using the library's {name}
+    (yours is not finished or disagrees)"``, ``name`` by default ``student_fn.__name__``.
     """
     name = name or getattr(student_fn, "__name__", "your function")
     try:

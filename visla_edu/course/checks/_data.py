@@ -68,18 +68,11 @@ def _check_frame(call, name, features, t):
 
 @exercise_check
 def check_observations_at(observations_at, hidden=False):
-    """Exercise 00: ``observations_at(features, t) -> (ids (k,), z (k, 4))`` from dense features.
+    """Exercise 00: ``observations_at(features (4, M, T), t) -> (ids (k,), z (k, 4))`` from dense features.
 
-    At every frame of random dense arrays (unseen landmarks, an empty frame among them): a tuple,
-    ``ids`` the landmarks with ``features[0, i, t] != -1``, increasing, and
-    ``z[j] = features[:, ids[j], t]``. Hides :meth:`visla_edu.dataset.Dataset.observations`.
-
-    Parameters
-    ----------
-    observations_at : callable
-        The dense course array (4, M, T) (:mod:`visla_edu.data`) and a frame index.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    At every frame of random dense course arrays (:mod:`visla_edu.data`; unseen landmarks, an empty
+    frame among them): a tuple, ``ids`` the landmarks with ``features[0, i, t] != -1``, increasing,
+    and ``z[j] = features[:, ids[j], t]``. Hides :meth:`visla_edu.dataset.Dataset.observations`.
     """
     name = "observations_at"
     call = student(observations_at, name, hide=[Dataset.observations])
@@ -120,17 +113,10 @@ def _check_spans(call, name, features):
 
 @exercise_check
 def check_track_spans(track_spans, hidden=False):
-    """Exercise 00: ``track_spans(features) -> (M, 2)`` first and last frame, -1 if never seen.
+    """Exercise 00: ``track_spans(features (4, M, T)) -> (M, 2)`` first and last frame, -1 if never seen.
 
     On the arrays of :func:`check_observations_at`, must equal ``[first, last]`` (inclusive) of
     every landmark, ``[-1, -1]`` if never seen. Hides :meth:`visla_edu.dataset.Dataset.track_spans`.
-
-    Parameters
-    ----------
-    track_spans : callable
-        The dense course array (4, M, T) (:mod:`visla_edu.data`).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "track_spans"
     call = student(track_spans, name, hide=[Dataset.track_spans])

@@ -54,16 +54,10 @@ def _white_cases(generator, hidden):
 def check_white_noise(white_noise, hidden=False):
     """Exercise 04: ``white_noise(twists (T, 6)) -> (6,)``, the white noise of each velocity axis.
 
-    ``1.4826 MAD(x[t+1] - 2 x[t] + x[t-1]) / sqrt(6)`` per axis, the MAD about the median, on a
-    smooth drive plus white noise and a few glitches: compares with the ``white`` part of
-    :func:`visla_edu.diagnostics.imu_noise` (``rtol=1e-9``, ``atol=1e-12``), which it hides.
-
-    Parameters
-    ----------
-    white_noise : callable
-        Velocity samples ``[v; w]`` (m/s, rad/s).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``1.4826 MAD(x[t+1] - 2 x[t] + x[t-1]) / sqrt(6)`` per axis, the MAD about the median, on
+    velocities ``[v; w]`` (m/s, rad/s) of a smooth drive plus white noise and a few glitches:
+    compares with the ``white`` part of :func:`visla_edu.diagnostics.imu_noise` (``rtol=1e-9``,
+    ``atol=1e-12``), which it hides.
     """
     name = "white_noise"
     call = student(white_noise, name, hide=[diagnostics.imu_noise])

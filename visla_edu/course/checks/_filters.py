@@ -80,16 +80,10 @@ def _pair(out, name, what):
 def check_landmark_update(landmark_update, hidden=False):
     """Exercise 05: ``landmark_update(m, Sigma, z, world_T_imu, Ks, cam_T_imu, noise_var) -> (m, Sigma)``.
 
-    A landmark at 4 to 40 m seen with 2 px noise, a prior mean 1 m off: the tuple must agree with
-    :func:`visla_edu.ekf.landmark_update` (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``,
-    ``atol=1e-8``). Hides it, ``ekf.joint_update``, ``ekf.cholesky_update`` and ``kalman.update``.
-
-    Parameters
-    ----------
-    landmark_update : callable
-        Mean (3,), covariance (3, 3), one observation (4,), the transforms and the variance (px^2).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``m`` (3,), ``Sigma`` (3, 3), ``z`` (4,), ``noise_var`` in px^2. A landmark at 4 to 40 m seen with
+    2 px noise, a prior mean 1 m off: the tuple must agree with :func:`visla_edu.ekf.landmark_update`
+    (mean ``rtol=atol=1e-6``; covariance ``rtol=1e-6``, ``atol=1e-8``). Hides it, ``ekf.joint_update``,
+    ``ekf.cholesky_update`` and ``kalman.update``.
     """
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -171,17 +165,10 @@ def check_pose_update(pose_update, hidden=False):
 
     Compares with the update written out here (``H`` stacked over the observations, ``L = Sigma
     H^T (H Sigma H^T + noise_var I)^-1``, ``mu exp(L r)``, ``(I - L H) Sigma``; mean ``rtol=1e-6``,
-    ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``), ``noise_var`` changing from case to
-    case. Hides ``ekf.pose_update``, ``ekf.joint_update``, ``ekf.cholesky_update``,
-    ``kalman.update`` and the ``pose_update`` of ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    pose_update : callable
-        Pose mean and right-perturbation covariance (6, 6), observations of known world points,
-        ``Ks``, ``cam_T_imu`` and the pixel noise variance (px^2).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``atol=1e-7``; covariance ``rtol=1e-6``, ``atol=1e-10``), ``noise_var`` (px^2) changing from case
+    to case, ``Sigma`` (6, 6) that of the right perturbation. Hides ``ekf.pose_update``,
+    ``ekf.joint_update``, ``ekf.cholesky_update``, ``kalman.update`` and the ``pose_update`` of
+    ``capstone.library_parts()``.
     """
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -245,14 +232,7 @@ def check_landmark_observation_noise(landmark_observation_noise, hidden=False):
 
     ``noise_var I4 + H_i Sigma_i H_i^T`` per observation, the pixel noise plus the landmark's
     uncertainty seen in the image: compares with :func:`visla_edu.ekf.innovation_covariances`
-    (``rtol=1e-9``, ``atol=1e-12``). Hides it and :func:`visla_edu.ekf.pose_update`.
-
-    Parameters
-    ----------
-    landmark_observation_noise : callable
-        Landmark Jacobians, the landmarks' covariances and the pixel noise variance (px^2).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    (``rtol=1e-9``, ``atol=1e-12``; ``noise_var`` in px^2). Hides it and :func:`visla_edu.ekf.pose_update`.
     """
     name = "landmark_observation_noise"
     call = student(landmark_observation_noise, name, hide=[ekf.innovation_covariances, ekf.pose_update])
@@ -284,14 +264,8 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
 
     ``H`` must equal exactly the matrix with rows ``4 i .. 4 i + 3`` holding ``J_pose[i]`` in
     columns 0-5 and ``J_landmark[i]`` in columns ``6 + 3 slots[i] .. 6 + 3 slots[i] + 2``, zero
-    elsewhere. Hides ``ekf.slot_columns`` and the ``slam_jacobian`` of ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    slam_jacobian : callable
-        Pose and landmark Jacobians, the observed landmarks' slots and the landmarks in the state.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    elsewhere (``n`` landmarks in the state). Hides ``ekf.slot_columns`` and the ``slam_jacobian`` of
+    ``capstone.library_parts()``.
     """
     name = "slam_jacobian"
     generator = rng(hidden)
@@ -318,21 +292,9 @@ def check_slam_jacobian(slam_jacobian, hidden=False):
 def reference_dense_covariance_bytes(num_landmarks, stride=1):
     """Bytes ``(6 + 3 n)^2 * 8`` of the dense float64 joint covariance, ``n = ceil(num_landmarks / stride)``.
 
-    Notebook 09's fallback when the exercise is not finished (hidden while its check runs).
-
-    Parameters
-    ----------
-    num_landmarks, stride : int
-        M, the landmarks of the drive; landmarks ``0, stride, 2 stride, ...`` are kept.
-
-    Returns
-    -------
-    int
-
-    Raises
-    ------
-    ValueError
-        ``num_landmarks`` is not a non-negative integer, or ``stride`` not a positive one.
+    Landmarks ``0, stride, 2 stride, ...`` of the drive's ``num_landmarks`` are kept; ``ValueError`` if
+    ``num_landmarks`` is not a non-negative integer or ``stride`` not a positive one. Notebook 09's
+    fallback when the exercise is not finished (hidden while its check runs).
     """
     hints = {"num_landmarks": "a non-negative integer", "stride": "a positive integer (1 keeps every landmark)"}
     for name, value, low in (("num_landmarks", num_landmarks, 0), ("stride", stride, 1)):
@@ -349,13 +311,6 @@ def check_dense_covariance_bytes(dense_covariance_bytes, hidden=False):
 
     Compares with :func:`reference_dense_covariance_bytes` (hidden) to within half a byte. The
     success line prints the sizes for 5105 and 13289 landmarks.
-
-    Parameters
-    ----------
-    dense_covariance_bytes : callable
-        As :func:`reference_dense_covariance_bytes`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "dense_covariance_bytes"
     cases = [(5105, 1), (13289, 1), (5105, 10), (13289, 20), (7, 3), (1, 1)]
@@ -392,12 +347,6 @@ def check_marginalize(marginalize, hidden=False):
 
     Compares with ``Sigma[np.ix_(keep, keep)]`` for random covariances. Hides the ``marginalize``
     of ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    marginalize : callable
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "marginalize"
     generator = rng(hidden)

@@ -1,16 +1,13 @@
 """What a check guards while it runs the student's code: hidden library functions, intact state.
 
-* The library's own version of the exercise (and the functions that would make it trivial)
-  is **hidden**: its ``__code__`` is swapped for a stub raising :class:`LibraryFunctionHidden`,
-  so every alias fails alike (``lie.hat``, ``visla_edu.lie.hat``, a ``from visla_edu.lie
-  import hat`` binding, every library function calling it); a ``finally`` puts it back.
-* The **library and the checks must stay as shipped**: before and after each call every
-  function of every loaded ``visla_edu`` module must come from the package's files (not a
-  notebook cell), and a module attribute the call reassigned (``importlib.reload``,
-  ``checks._core.compare = ...``) is put back and reported.
-* So must **what the verdicts rest on**: numpy's and numpy.linalg's functions (an
-  ``np.allclose = lambda *a, **k: True`` would pass every wrong answer) and the builtins the
-  checks call (``bool``, ``float``...), checked and restored the same way.
+* **Hidden** functions (the library's version of the exercise and those that would make it
+  trivial) get a stub ``__code__`` raising :class:`LibraryFunctionHidden`, so every alias fails
+  alike (``lie.hat``, a ``from visla_edu.lie import hat`` binding, every library caller) until a
+  ``finally`` puts it back.
+* Before and after each call every function of a loaded ``visla_edu`` module must come from the
+  package's files (not a notebook cell), and a module attribute the call reassigned is put back
+  and reported; so too for numpy, numpy.linalg and the builtins the verdicts use (an
+  ``np.allclose = lambda *a, **k: True`` would pass every wrong answer).
 
 The checks compute every expected value after the call, with nothing hidden.
 """
@@ -40,28 +37,14 @@ MAX_FIRST_LINE = 79
 
 
 class LibraryFunctionHidden(RuntimeError):
-    """Raised by a library function that a check hides (:func:`hide`) while it runs the student's code.
-
-    Its text is :func:`hidden_message`'s; the checks turn it into an ``AssertionError`` whose first
-    line asks the student to write their own version.
-    """
+    """Raised by a library function that a check hides (:func:`hide`); its text is :func:`hidden_message`'s."""
 
 
 def function_label(fn):
     """Short dotted name of a function: ``lie.hat``, ``camera.StereoCamera.predict``, ``scipy.linalg.expm``.
 
-    The module path without ``visla_edu`` (for course scaffolding also without ``course``:
-    ``numdiff.central_jacobian``, as a notebook imports it) and without private module names,
-    then ``fn.__qualname__``; other packages (scipy) keep their name.
-
-    Parameters
-    ----------
-    fn : function
-        Anything with ``__module__`` and ``__qualname__``.
-
-    Returns
-    -------
-    str
+    The module path without ``visla_edu``, ``course`` (``numdiff.central_jacobian``, as a notebook
+    imports it) and private module names, then ``fn.__qualname__``; other packages keep their name.
     """
     package, *rest = fn.__module__.split(".")
     if package == "visla_edu" and rest[:1] == ["course"]:
@@ -73,8 +56,8 @@ def function_label(fn):
 def hidden_message(exercise, fn):
     """The error text of hiding ``fn`` from ``exercise`` (the student's function): a short line, then why.
 
-    Its first line is the most explicit of four phrasings within :data:`MAX_FIRST_LINE` characters,
-    else "write your own {exercise}" (never cut); ``fn`` is named by :func:`function_label`.
+    First line: the most explicit of four phrasings within :data:`MAX_FIRST_LINE`, else "write your own
+    {exercise}" (never cut).
     """
     name = function_label(fn)
     first = next((line for line in (
@@ -101,8 +84,8 @@ def _stub_code(fn, message):
 def hide(functions, exercise):
     """Within the block, calling any of ``functions`` raises :class:`LibraryFunctionHidden`.
 
-    ``functions`` are plain Python functions without closures (module functions or methods);
-    ``exercise``, the student's function, is named in the error message.
+    ``functions``: plain Python functions without closures (module functions or methods); ``exercise``
+    (the student's function) is named in the error message.
     """
     saved = []
     try:
@@ -156,10 +139,9 @@ def _in_package(filename):
 
 
 def verify_library(modules=None):
-    """Fail if a function of a loaded library module was replaced by notebook code.
+    """Fail, naming the first one, if a function of ``modules`` was replaced by notebook code.
 
-    ``AssertionError`` naming the first one; ``modules`` default to all loaded ``visla_edu``
-    modules but the checks.
+    ``modules`` default to all loaded ``visla_edu`` modules but the checks.
     """
     if modules is None:
         modules = [module for _, module in _visla_modules(include_checks=False)]
@@ -186,11 +168,10 @@ def _builtin_impostor(name, value):
 
 
 def verify_foundations():
-    """Fail if a numpy function or a builtin the checks use was replaced (e.g. by notebook code).
+    """Fail, naming the first one, if a numpy function or a :data:`TRUSTED_BUILTINS` entry was replaced.
 
-    Every callable attribute of ``numpy`` and ``numpy.linalg`` must come from numpy (its
-    ``__module__`` starts with ``numpy``), each of :data:`TRUSTED_BUILTINS` be Python's own type
-    or built-in function of that name; else ``AssertionError`` naming the first replaced one.
+    Every callable of ``numpy`` and ``numpy.linalg`` must have a ``__module__`` starting with ``numpy``,
+    each trusted builtin be Python's own type or built-in function of that name.
     """
     for module in (numpy, numpy.linalg):
         for attr, value in list(vars(module).items()):
@@ -232,13 +213,11 @@ def _restore_changes(snapshot):
 def guard(functions, exercise):
     """Verify the library, hide ``functions`` (:func:`hide`), run the block, restore and verify again.
 
-    Before the block: :func:`verify_library` (the checks excepted), :func:`verify_foundations`,
-    and a copy of the namespaces of all loaded ``visla_edu`` modules (the checks included), of
-    numpy, numpy.linalg and the trusted builtins. After it, whatever the block reassigned there
-    (or in ``sys.modules``) is put back and the library verified again. ``AssertionError`` if the
-    library, numpy or a trusted builtin was replaced before the block (or the library after it,
-    when the block completed), or the block reassigned a copied attribute (put back first; this
-    error replaces any exception of the block); ``exercise``, the student's function, is named.
+    Before: :func:`verify_library` (the checks excepted), :func:`verify_foundations` and a copy of the
+    namespaces of all loaded ``visla_edu`` modules (the checks included), numpy, numpy.linalg and the
+    trusted builtins. After: what the block reassigned there (or in ``sys.modules``) is put back and
+    reported by an ``AssertionError`` naming ``exercise`` (it replaces any exception of the block);
+    if the block completed, :func:`verify_library` again.
     """
     modules = _visla_modules()
     library = [module for name, module in modules if not name.startswith("visla_edu.course.checks")]

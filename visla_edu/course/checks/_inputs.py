@@ -76,10 +76,9 @@ def random_pose(rng, scale=10.0):
 def rig(hidden=False):
     """A KITTI-like stereo rig: left intrinsics ``K`` (3, 3), baseline ``b`` (m), left camera ``imu_T_cam`` (4, 4).
 
-    Visible: :func:`visla_edu.simulate.default_rig`, the rig of the notebooks' simulated drives.
-    Hidden: KITTI odometry's focal lengths (``fsv`` slightly off ``fsu``) and baseline and a
-    camera mounted elsewhere, so a function that takes the notebook's rig (``rig.Ks``,
-    ``rig.cam_T_imu``) instead of its arguments fails.
+    Visible: :func:`visla_edu.simulate.default_rig`, the notebooks' rig. Hidden: KITTI odometry's focal
+    lengths (``fsv`` slightly off ``fsu``) and baseline and a camera mounted elsewhere, so that a
+    function using the notebook's rig (``rig.Ks``, ``rig.cam_T_imu``) instead of its arguments fails.
     """
     from visla_edu.simulate import default_rig
 
@@ -105,10 +104,9 @@ NOTEBOOK_RIG_HINT = (
 
 
 def notebook_rig_variant(hidden, variant):
-    """The mistake "used the notebook's rig" as variants for :func:`~visla_edu.course.checks._core.compare`.
+    """``[(NOTEBOOK_RIG_HINT, variant)]`` if ``hidden`` (only the hidden rig differs from the notebook's), else ``[]``.
 
-    ``[(NOTEBOOK_RIG_HINT, variant)]`` if ``hidden`` (only the hidden rig differs from the
-    notebook's), else empty; ``variant()`` is the output with the visible rig, ``stereo_camera()``.
+    ``variant()``: the output with the visible rig, ``stereo_camera()``.
     """
     return [(NOTEBOOK_RIG_HINT, variant)] if hidden else []
 
@@ -150,10 +148,7 @@ def not_rotation(R):
 
 
 def not_se3(T):
-    """A hint if ``T`` (4, 4) is not a pose, else "": its bottom row (``atol=1e-9``), then its rotation block.
-
-    The block's hint is :func:`not_rotation`'s, worded "the rotation block is not a rotation".
-    """
+    """A hint if ``T`` (4, 4) is not a pose, else "": its bottom row (``atol=1e-9``), then :func:`not_rotation`."""
     T = np.asarray(T)
     if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
         return "the bottom row of a pose must be [0, 0, 0, 1]: the result is not in SE(3)"
@@ -174,10 +169,7 @@ def rotation_transposed(T):
 
 
 def wrong_inverses(T):
-    """Inverses of ``T = [[R, p], [0, 1]]`` written with R where R^T belongs: a list of three (4, 4).
-
-    ``[[R, -R p]]``, ``[[R, -R^T p]]`` and ``[[R^T, -R p]]``, bottom row ``[0, 0, 0, 1]``.
-    """
+    """Wrong inverses (4, 4) of ``T = [[R, p], [0, 1]]``: ``[[R, -R p]]``, ``[[R, -R^T p]]``, ``[[R^T, -R p]]``."""
     R, p = T[:3, :3], T[:3, 3]
     out = []
     for block, shift in ((R, -R @ p), (R, -R.T @ p), (R.T, -R @ p)):
@@ -190,8 +182,7 @@ def wrong_inverses(T):
 def project_with(Ks, cam_T_imu, imu_T_world, p_world):
     """Stereo pixels (M, 4) ``Ks pi(cam_T_imu imu_T_world m)`` of world points (M, 3), ``pi(q) = q / q_3``.
 
-    With explicit transforms, so that the checks can pass wrong ones (the pose not inverted, a
-    rotation transposed) to get a mistake's pixels.
+    Explicit transforms, so that the checks can pass wrong ones to get a mistake's pixels.
     """
     p_h = np.c_[p_world, np.ones(len(p_world))]
     return cam.projection(p_h @ (cam_T_imu @ imu_T_world).T) @ Ks.T

@@ -26,16 +26,9 @@ reference_numerical_jacobian = numdiff.central_jacobian
 def check_projection_jacobian(projection_jacobian, hidden=False):
     """Exercise 03: ``projection_jacobian(q (4,)) -> dpi/dq (4, 4)`` of ``pi(q) = q / q3``.
 
-    At random ``q = [x, y, z, 1]`` with depths 1 to 50 (hidden: also depths 1e-3 and 500 and
-    ``q4 = 0.5``); compares with :func:`visla_edu.camera.projection_jacobian` (``rtol=1e-7``,
+    At random camera-frame ``q = [x, y, z, 1]`` with depths 1 to 50 (hidden: also depths 1e-3 and 500
+    and ``q4 = 0.5``); compares with :func:`visla_edu.camera.projection_jacobian` (``rtol=1e-7``,
     ``atol=1e-12``), which it hides.
-
-    Parameters
-    ----------
-    projection_jacobian : callable
-        A homogeneous point in the camera frame.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "projection_jacobian"
     generator = rng(hidden)
@@ -61,15 +54,8 @@ def check_projection_jacobian(projection_jacobian, hidden=False):
 def check_odot(odot, hidden=False):
     """Exercise 03: ``odot(s (4,)) -> (4, 6)`` with ``twist_hat(u) @ s == odot(s) @ u``.
 
-    At random points ``s = [p, 1]`` (hidden: also the origin and a point of size 1e4); compares
-    with :func:`visla_edu.lie.odot`, which it hides.
-
-    Parameters
-    ----------
-    odot : callable
-        A homogeneous point ``s`` to ``[[I, -hat(s)], [0, 0]]``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``[[I, -hat(s)], [0, 0]]`` at random points ``s = [p, 1]`` (hidden: also the origin and a point of
+    size 1e4); compares with :func:`visla_edu.lie.odot`, which it hides.
     """
     name = "odot"
     generator = rng(hidden)
@@ -122,17 +108,10 @@ def _jacobian_cases(generator, hidden):
 
 @exercise_check
 def check_numerical_jacobian(numerical_jacobian, hidden=False):
-    """Exercise 03: ``numerical_jacobian(f, x, eps=1e-6) -> (m, n)`` by central differences.
+    """Exercise 03: ``numerical_jacobian(f, x (n,), eps=1e-6) -> (m, n)`` by central differences, ``f(x)`` (m,).
 
     Called as ``numerical_jacobian(f, x)`` (the student's default ``eps``) on maps with known
     Jacobians, which it compares with (``rtol=atol=1e-7``). Hides ``numdiff.central_jacobian``.
-
-    Parameters
-    ----------
-    numerical_jacobian : callable
-        ``f`` from (n,) to (m,), a point ``x`` (n,) and the step ``eps``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "numerical_jacobian"
     call = student(numerical_jacobian, name, hide=[numdiff.central_jacobian])
@@ -192,17 +171,11 @@ def _pose_jacobian_variants(camera, mu, m, ref):
 def check_pose_jacobian(pose_jacobian, hidden=False):
     """Exercise 03: ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` for ``T = mu exp(delta^)``.
 
-    ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``, one landmark at 2 to 60 m (hidden: to 200 m):
-    compares with :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``,
-    ``atol=1e-8``). Hides it, ``StereoCamera.predict_with_jacobians``, ``camera.stereo_projection``,
-    ``camera.project_points`` and the ``pose_jacobian`` of ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    pose_jacobian : callable
-        ``Ks``, ``cam_T_imu``, the mean ``mu = world_T_imu`` and a world point; columns ``[v; w]``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``-Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``, ``mu = world_T_imu``, columns ``[v; w]``, for one world
+    landmark ``m`` at 2 to 60 m (hidden: to 200 m): compares with
+    :meth:`visla_edu.camera.StereoCamera.jacobian_pose` (``rtol=1e-6``, ``atol=1e-8``). Hides it,
+    ``StereoCamera.predict_with_jacobians``, ``camera.stereo_projection``, ``camera.project_points``
+    and the ``pose_jacobian`` of ``capstone.library_parts()``.
     """
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
@@ -251,13 +224,6 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     result fails at once. Hides it, ``StereoCamera.predict_with_jacobians``,
     ``camera.stereo_projection``, ``camera.project_points`` and the ``landmark_jacobian`` of
     ``capstone.library_parts()``.
-
-    Parameters
-    ----------
-    landmark_jacobian : callable
-        ``Ks``, ``cam_T_imu``, ``world_T_imu`` and a world point ``m``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "landmark_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

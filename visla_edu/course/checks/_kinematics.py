@@ -33,12 +33,6 @@ def check_hat(hat, hidden=False):
 
     On ``[1, 2, 3]``, zero and random vectors (hidden: also an integer array, a list and a vector of
     size 1e8); compares with :func:`visla_edu.lie.hat`, which it hides.
-
-    Parameters
-    ----------
-    hat : callable
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "hat"
     call = student(hat, name, hide=[lie.hat])
@@ -103,21 +97,14 @@ def _tiny_angle_failure(name, t, error):
 
 @exercise_check
 def check_so3_exp(so3_exp, hidden=False):
-    """Exercise 01: Rodrigues' formula ``so3_exp(w) -> (3, 3)``, accurate near 0 and near pi.
+    """Exercise 01: Rodrigues' formula ``so3_exp(w (3,) rad) -> (3, 3)``, accurate near 0 and near pi.
 
     Compares with :func:`visla_edu.lie.so3_exp` (``atol=1e-9``) on
-    :func:`~visla_edu.course.checks._inputs.rotation_vectors`, then ``atol=1e-15`` at tiny angles.
-    A closed form guarded at exactly 0 passes: ``(1 - cos t)/t^2`` loses digits near 0 but
-    multiplies ``hat(w)^2``, of size ``t^2`` (the cancellation that matters is in
-    :func:`check_se3_exp` and :func:`check_so3_log`). Hides ``lie.so3_exp``, ``lie.se3_exp``, the
-    library's sin(t)/t and (1 - cos t)/t^2 and ``scipy.linalg.expm``; ``lie.hat`` stays.
-
-    Parameters
-    ----------
-    so3_exp : callable
-        A rotation vector (rad).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    :func:`~visla_edu.course.checks._inputs.rotation_vectors`, then ``atol=1e-15`` at tiny angles,
+    which a closed form guarded at exactly 0 passes (its ``(1 - cos t)/t^2`` loses digits but
+    multiplies ``hat(w)^2``, of size ``t^2``; :func:`check_se3_exp` and :func:`check_so3_log` test
+    the cancellation). Hides ``lie.so3_exp``, ``lie.se3_exp``, the library's sin(t)/t and
+    (1 - cos t)/t^2 and ``scipy.linalg.expm``; ``lie.hat`` stays.
     """
     name = "so3_exp"
     generator = rng(hidden)
@@ -187,12 +174,6 @@ def check_se3_exp(se3_exp, hidden=False):
     off by about ``eps / t``: the small-angle series is needed), the rotation ``atol=1e-15``.
     Hides ``lie.se3_exp``, the library's (t - sin t)/t^3, the SE(3) right Jacobian and its inverse
     and ``scipy.linalg.expm``; ``lie.so3_exp`` and ``lie.hat`` stay.
-
-    Parameters
-    ----------
-    se3_exp : callable
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "se3_exp"
     generator = rng(hidden)
@@ -283,19 +264,12 @@ def _dead_reckon_variants(time_stamps, samples, lag, ref):
 
 @exercise_check
 def check_dead_reckon(dead_reckon, hidden=False):
-    """Exercise 04: ``dead_reckon(time_stamps (T,), twists (T, 6), lag=0) -> (T, 4, 4)`` from the identity.
+    """Exercise 04: ``dead_reckon(time_stamps (T,), twists (T, 6), lag=0) -> world_T_imu (T, 4, 4)`` from the identity.
 
-    ``T_{t+1} = T_t exp(tau_t u_{t+lag}^)``, ``t + lag`` clipped to ``0 .. T-1``
-    (:func:`visla_edu.motion.select_twists`); compares with :func:`visla_edu.motion.dead_reckon`
-    (``atol=1e-8``) for lags 0 and +1 (hidden: also -1 and +2, irregular steps and a stop). Hides
-    it, ``motion.select_twists`` and ``motion.predict_pose``.
-
-    Parameters
-    ----------
-    dead_reckon : callable
-        Time stamps (s), body twists ``[v; w]`` and the lag (int) to ``world_T_imu``.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``T_{t+1} = T_t exp(tau_t u_{t+lag}^)`` (time stamps in s, body twists ``[v; w]``), ``t + lag``
+    clipped to ``0 .. T-1`` (:func:`visla_edu.motion.select_twists`); compares with
+    :func:`visla_edu.motion.dead_reckon` (``atol=1e-8``) for lags 0 and +1 (hidden: also -1 and +2,
+    irregular steps and a stop). Hides it, ``motion.select_twists`` and ``motion.predict_pose``.
     """
     name = "dead_reckon"
     T = 45 if hidden else 30
@@ -361,20 +335,13 @@ def _log_variants(R, ref):
 
 @exercise_check
 def check_so3_log(so3_log, hidden=False):
-    """Exercise 01: ``so3_log(R (3, 3)) -> w (3,)``, the rotation vector, accurate at small angles.
+    """Exercise 01: ``so3_log(R (3, 3)) -> w (3,)``, ``so3_exp(w) == R``, ``|w|`` in [0, pi], accurate at small angles.
 
     Compares with :func:`visla_edu.lie.so3_log` for angles 0 to 3 rad (``atol=1e-12``; near pi the
     library needs another formula), then at 3 tiny angles (``atol=1e-15``), where an ``arccos``
     angle is off by about ``eps / t`` and ``atan2`` of the antisymmetric part is not. Hides
     ``lie.so3_log``, ``lie.se3_log`` and the library's sin(t)/t; ``lie.vee`` and ``lie.hat`` stay
     (``scipy.linalg.logm`` cannot be hidden: the exercise text asks for the formula).
-
-    Parameters
-    ----------
-    so3_log : callable
-        A rotation to ``w`` with ``so3_exp(w) == R``, ``|w|`` in [0, pi].
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "so3_log"
     cases, tiny = _log_cases(rng(hidden), hidden)

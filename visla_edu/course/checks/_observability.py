@@ -1,9 +1,8 @@
 """Checks of the unobservable directions: the joint SLAM null space (08), the invariant pose Jacobian (10).
 
-Moving the whole world (every pose and every landmark) by one rigid motion leaves every pixel
-unchanged: these six directions of the joint state are unobservable, so the joint Jacobian
-``H`` maps them to zero. In the right perturbation they depend on the estimate (the null
-space ``N`` has ``Ad(inv(mu))`` and ``hat(m_j)`` in it); in the invariant error they do not.
+Moving the whole world (every pose and landmark) by one rigid motion leaves every pixel unchanged:
+the joint Jacobian ``H`` maps these six directions to zero. In the right perturbation they depend on
+the estimate (``Ad(inv(mu))`` and ``hat(m_j)`` in the null space ``N``); in the invariant error not.
 """
 
 import numpy as np
@@ -16,12 +15,12 @@ __all__ = ["reference_slam_null_space", "check_slam_null_space", "check_invarian
 
 
 def reference_slam_null_space(world_T_imu, p_landmarks):
-    """The state directions (6 + 3n, 6) of moving the whole world, in the right perturbation.
+    """The state directions ``[[Ad(inv(mu))]; [I, -hat(m_1)]; ...; [I, -hat(m_n)]]`` of moving the whole world.
 
-    Column ``k``: the first-order change of ``[delta; m_1; ...; m_n]`` when every pose and landmark
-    is moved by ``exp(hat(eps))`` on the left (in the world frame), ``eps = e_k = [eps_v; eps_w]``.
-    The pose ``exp(hat(eps)) T = T exp(hat(Ad(inv(T)) eps))`` gives ``delta = Ad(inv(T)) eps``; a
-    landmark ``exp(hat(eps)) m ~ m + eps_v + eps_w x m`` gives ``[I, -hat(m)] eps``.
+    Column ``k``: the first-order change of the right-perturbation state ``[delta; m_1; ...; m_n]``
+    when every pose and landmark is moved by ``exp(hat(eps))`` on the left (in the world frame),
+    ``eps = e_k = [eps_v; eps_w]``: ``exp(hat(eps)) T = T exp(hat(Ad(inv(T)) eps))`` and
+    ``exp(hat(eps)) m ~ m + eps_v + eps_w x m``.
 
     Parameters
     ----------
@@ -33,7 +32,6 @@ def reference_slam_null_space(world_T_imu, p_landmarks):
     Returns
     -------
     ndarray, shape (6 + 3 n, 6)
-        ``[[Ad(inv(mu))]; [I, -hat(m_1)]; ...; [I, -hat(m_n)]]``.
     """
     p_landmarks = np.asarray(p_landmarks, dtype=float).reshape(-1, 3)
     blocks = [lie.adjoint(lie.se3_inv(world_T_imu))]
@@ -78,13 +76,6 @@ def check_slam_null_space(slam_null_space, hidden=False):
 
     Compares with :func:`reference_slam_null_space` (``rtol=atol=1e-9``), which it hides, at the
     identity and random poses; ``lie.adjoint``, ``lie.hat`` and ``lie.se3_inv`` stay.
-
-    Parameters
-    ----------
-    slam_null_space : callable
-        As :func:`reference_slam_null_space`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "slam_null_space"
     generator = rng(hidden)
@@ -124,14 +115,7 @@ def check_invariant_pose_jacobian(invariant_pose_jacobian, hidden=False):
     ``[-H_lm, 0]`` in the invariant error ``xi = [p; theta]``, ``H_lm`` the landmark Jacobian of
     notebook 05: compares with :func:`visla_edu.ekf.invariant_pose_jacobian` (the derivation;
     hidden) of :meth:`~visla_edu.camera.StereoCamera.jacobian_landmark` (``rtol=1e-6``,
-    ``atol=1e-8``), which the student may use for ``H_lm``.
-
-    Parameters
-    ----------
-    invariant_pose_jacobian : callable
-        ``Ks``, ``cam_T_imu``, the pose estimate ``world_T_imu`` and a world point.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``atol=1e-8``), which the student may use for ``H_lm``; ``m`` is a world point.
     """
     name = "invariant_pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)

@@ -63,13 +63,6 @@ def check_kalman_update_1d(kalman_update_1d, hidden=False):
     variance)``, a pair of single numbers: compares with :func:`visla_edu.course.kalman.update_1d`
     (``rtol=1e-9``, ``atol=1e-12``), also (hidden) for a prior or a sensor of variance 0. Hides
     ``kalman.update_1d``, ``kalman.update`` and ``ekf.cholesky_update``.
-
-    Parameters
-    ----------
-    kalman_update_1d : callable
-        Prior mean and variance, the measurement and its noise variance.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "kalman_update_1d"
     call = student(kalman_update_1d, name, hide=[kalman.update_1d, kalman.update, ekf.cholesky_update])
@@ -99,18 +92,11 @@ def _predict_cases(hidden):
 
 @exercise_check
 def check_kalman_predict(kalman_predict, hidden=False):
-    """Exercise 00b: ``kalman_predict(x, Sigma, F, W) -> (F x, F Sigma F^T + W)``.
+    """Exercise 00b: ``kalman_predict(x (n,), Sigma, F, W (n, n each)) -> (F x, F Sigma F^T + W)``.
 
     On a position-velocity model and random ones (``F`` not symmetric); compares with
     :func:`visla_edu.course.kalman.predict` (``rtol=1e-9``, ``atol=1e-12``). Hides it and
     ``motion.predict_pose_covariance`` (``F P F^T + W`` for any size).
-
-    Parameters
-    ----------
-    kalman_predict : callable
-        Mean ``x`` (n,), covariance, transition and motion noise (n, n each).
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "kalman_predict"
     call = student(kalman_predict, name, hide=[kalman.predict, motion.predict_pose_covariance])

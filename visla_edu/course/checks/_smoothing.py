@@ -25,17 +25,15 @@ def reference_motion_residual(world_T_prev, world_T_next, step_inv):
 
     Parameters
     ----------
-    world_T_prev, world_T_next : ndarray, shape (4, 4)
-        The poses at the start and the end of the step.
-    step_inv : ndarray, shape (4, 4)
-        ``exp(-tau u^)``, the inverse of the IMU's predicted step.
+    world_T_prev, world_T_next, step_inv : ndarray, shape (4, 4)
+        The poses at the start and the end of the step; ``exp(-tau u^)``, the inverse of the IMU's step.
 
     Returns
     -------
     e : ndarray, shape (6,)
         The residual twist ``[rho; phi]``.
     J_prev, J_next : ndarray, shape (6, 6)
-        Its Jacobians for the right perturbations of the two poses: ``J_next = J_r(e)^-1``,
+        For the right perturbations of the two poses: ``J_next = J_r(e)^-1``,
         ``J_prev = -J_r(e)^-1 Ad(T_next^-1 T_prev)`` (:func:`visla_edu.smoother.motion_residuals`).
     """
     e, J_prev, J_next = motion_residuals(np.stack([world_T_prev, world_T_next]), step_inv[None])
@@ -90,13 +88,6 @@ def check_motion_residual(motion_residual, hidden=False):
     A tuple of three for steps whose next pose is the IMU prediction times an error: compares with
     :func:`reference_motion_residual` (``e``: ``rtol=1e-7``, ``atol=1e-9``; Jacobians ``rtol=1e-6``,
     ``atol=1e-9``). Hides it, the library's motion factor and ``numdiff.central_jacobian``.
-
-    Parameters
-    ----------
-    motion_residual : callable
-        As :func:`reference_motion_residual`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "motion_residual"
     call = student(motion_residual, name, hide=[motion_residuals, reference_motion_residual,
@@ -122,12 +113,9 @@ def reference_schur_reduce(H_pp, H_pm, H_mm, g_p, g_m):
 
     Parameters
     ----------
-    H_pp : ndarray, shape (p, p)
-    H_pm : ndarray, shape (p, 3 L)
+    H_pp, H_pm, g_p, g_m : ndarray, shapes (p, p), (p, 3 L), (p,), (3 L,)
     H_mm : ndarray, shape (L, 3, 3)
         The landmarks' diagonal blocks (each inverted with ``numpy.linalg.inv``).
-    g_p : ndarray, shape (p,)
-    g_m : ndarray, shape (3 L,)
 
     Returns
     -------
@@ -185,13 +173,6 @@ def check_schur_reduce(schur_reduce, hidden=False):
 
     For random systems of ``J^T J`` form, the tuple ``(S, b)``: compares with
     :func:`reference_schur_reduce`, which it hides.
-
-    Parameters
-    ----------
-    schur_reduce : callable
-        As :func:`reference_schur_reduce`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "schur_reduce"
     call = student(schur_reduce, name, hide=[reference_schur_reduce])
@@ -211,14 +192,8 @@ def check_schur_reduce(schur_reduce, hidden=False):
 def reference_pose_marginal_covariance(H_pp, H_pm, H_mm):
     """The poses' marginal covariance ``(H_pp - H_pm H_mm^-1 H_pm^T)^-1``, the inverse of the Schur complement.
 
-    The pose block of ``H^-1`` (block inverse, ``H`` as in :func:`reference_schur_reduce`): the
-    landmarks' uncertainty included.
-
-    Parameters
-    ----------
-    H_pp : ndarray, shape (p, p)
-    H_pm : ndarray, shape (p, 3 L)
-    H_mm : ndarray, shape (L, 3, 3)
+    The pose block of ``H^-1``, the landmarks' uncertainty included; inputs as in
+    :func:`reference_schur_reduce`.
 
     Returns
     -------
@@ -251,13 +226,6 @@ def check_pose_marginal_covariance(pose_marginal_covariance, hidden=False):
     On the systems of :func:`check_schur_reduce`; compares with
     :func:`reference_pose_marginal_covariance` (``rtol=1e-6``, ``atol=1e-10``). Hides it and
     :func:`reference_schur_reduce` (the student's own ``schur_reduce`` may be used).
-
-    Parameters
-    ----------
-    pose_marginal_covariance : callable
-        As :func:`reference_pose_marginal_covariance`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "pose_marginal_covariance"
     call = student(pose_marginal_covariance, name, hide=[reference_pose_marginal_covariance, reference_schur_reduce])
@@ -341,13 +309,6 @@ def check_gauss_newton_step(gauss_newton_step, hidden=False):
 
     With 1 cm noise on ``q_world``; compares with :func:`reference_gauss_newton_step`
     (``rtol=1e-6``, ``atol=1e-8``) and hides the step it computes with.
-
-    Parameters
-    ----------
-    gauss_newton_step : callable
-        As :func:`reference_gauss_newton_step`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "gauss_newton_step"
     call = student(gauss_newton_step, name, hide=[_step])

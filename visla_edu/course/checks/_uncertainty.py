@@ -16,12 +16,6 @@ def check_curly_hat(curly_hat, hidden=False):
 
     On ``[1, 2, 3, 4, 5, 6]`` and random twists (hidden: zero, a tiny rotation and random ones);
     compares with :func:`visla_edu.lie.curly_hat`, which it hides.
-
-    Parameters
-    ----------
-    curly_hat : callable
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "curly_hat"
     generator = rng(hidden)
@@ -48,17 +42,10 @@ def check_curly_hat(curly_hat, hidden=False):
 def check_pose_transition(pose_transition, hidden=False):
     """Exercise 06: ``pose_transition(u, tau) -> F (6, 6) = exp(-tau curly_hat(u))`` in closed form.
 
-    On every other :func:`~visla_edu.course.checks._inputs.twists` (``w = 0`` among them), ``tau``
-    of 0.05 to 0.2 s; a 4x4 result fails at once. Compares with
-    :func:`visla_edu.motion.pose_transition` (``rtol=1e-7``, ``atol=1e-9``). Hides it,
-    ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp`` stays.
-
-    Parameters
-    ----------
-    pose_transition : callable
-        A body twist ``[v; w]`` and the step ``tau`` (s); ``F`` acts on right perturbations.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
+    ``F`` acts on right perturbations, ``u = [v; w]`` is a body twist. On every other
+    :func:`~visla_edu.course.checks._inputs.twists` (``w = 0`` among them), ``tau`` of 0.05 to 0.2 s;
+    a 4x4 result fails at once. Compares with :func:`visla_edu.motion.pose_transition`
+    (``rtol=1e-7``, ``atol=1e-9``). Hides it, ``motion.imu_step`` and ``lie.adjoint``; ``lie.se3_exp`` stays.
     """
     name = "pose_transition"
     generator = rng(hidden)
@@ -85,20 +72,19 @@ def check_pose_transition(pose_transition, hidden=False):
 def reference_left_pose_prediction(mu, Sigma, u, tau, W):
     """The library's left-perturbation prediction of a pose: ``(mu exp(tau u^), Sigma + Ad(mu_next) W Ad(mu_next)^T)``.
 
-    The pose part of :func:`visla_edu.motion.predict_invariant_covariance` (the invariant filter's
-    error is the left perturbation): the transition is the identity and the step's body-frame noise
-    enters rotated into the world frame (``J_r(tau u)`` is dropped as in the right form). Notebook
-    cells fall back on it (:func:`~visla_edu.course.checks._core.student_or_reference`).
+    The pose part of :func:`visla_edu.motion.predict_invariant_covariance`: the transition is the
+    identity, the step's body-frame noise enters rotated into the world frame (``J_r(tau u)`` dropped
+    as in the right form). Notebooks fall back on it (:func:`~visla_edu.course.checks._core.student_or_reference`).
 
     Parameters
     ----------
     mu : ndarray, shape (4, 4)
-    Sigma : ndarray, shape (6, 6)
-        Covariance of the left perturbation ``xi = [p; theta]`` of ``T = exp(xi^) mu``.
+    Sigma, W : ndarray, shape (6, 6)
+        Covariance of the left perturbation ``xi = [p; theta]`` of ``T = exp(xi^) mu``; the twist noise.
     u : ndarray, shape (6,)
-        The body twist ``[v; w]``; ``tau`` is the step (s), ``W`` the twist noise.
+        The body twist ``[v; w]``.
     tau : float
-    W : ndarray, shape (6, 6)
+        The step (s).
 
     Returns
     -------
@@ -156,13 +142,6 @@ def check_left_pose_prediction(left_pose_prediction, hidden=False):
     from the identity pose: compares the mean (``atol=1e-9``) and the covariance (``rtol=1e-7``,
     ``atol=1e-12``). Also hides :func:`visla_edu.motion.predict_invariant_covariance` and
     :func:`visla_edu.motion.invariant_noise_factor`; ``lie.adjoint`` and ``lie.se3_exp`` stay.
-
-    Parameters
-    ----------
-    left_pose_prediction : callable
-        As :func:`reference_left_pose_prediction`.
-    hidden : bool
-        Run the hidden cases (:mod:`visla_edu.course.checks`).
     """
     name = "left_pose_prediction"
     call = student(left_pose_prediction, name,
