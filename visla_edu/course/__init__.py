@@ -1,17 +1,10 @@
 """Course scaffolding: what the course ships to students and how it gets to them.
 
-The notebooks teach with :mod:`~visla_edu.course.checks`, :mod:`~visla_edu.course.capstone`,
-:mod:`~visla_edu.course.kalman` and :mod:`~visla_edu.course.numdiff`. ``notebooks/``
-(:data:`STUDENT_NOTEBOOKS`, package data) is the student edition, generated from the repository's
-``solutions/`` by ``visla-edu release`` (:mod:`~visla_edu.course.release`,
-:mod:`~visla_edu.course.manifest`) and checked in: the only copy, which the wheel carries (and
-nothing of the solutions), so a student who ``pip install``-ed the package has it. ``visla-edu
-student`` (:mod:`~visla_edu.course.student`) copies it into a student's folder, ``visla-edu book``
-(:mod:`~visla_edu.course.book`) makes the course site, and :mod:`~visla_edu.course.project` is
-the summative project and its grader.
-
-Nothing is imported or read at import time (``visla-edu`` builds its parser without loading
-the grader).
+``notebooks/`` (:data:`STUDENT_NOTEBOOKS`) is the student edition, generated from ``solutions/`` by
+``visla-edu release`` (:mod:`~visla_edu.course.release`) and checked in: the only copy the wheel carries
+(none of the solutions). Entry points: ``visla-edu student`` (:mod:`~visla_edu.course.student`),
+``visla-edu book`` (:mod:`~visla_edu.course.book`), the project and its grader (:mod:`~visla_edu.course.project`).
+Nothing is imported or read at import time (``visla-edu`` builds its parser without loading the grader).
 """
 
 from pathlib import Path

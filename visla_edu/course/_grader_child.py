@@ -1,18 +1,14 @@
 """The process that runs one submission: ``python -m visla_edu.course._grader_child REQUEST.json``.
 
-Started by :mod:`visla_edu.course._runner` in a folder of its own, it reads the request
-(:func:`visla_edu.course._runner.write_request`), loads the drive and the config, lowers its
-limits (:func:`limit_resources`), hides the library (:mod:`visla_edu.course._sandbox`), then
-imports the submission, calls ``make_filter(dataset, config)`` and steps the filter once per
-frame, checking each record (:func:`check_record`) and writing where it is to ``progress``
-(``import``, ``make_filter``, ``frame N``). It leaves, for :mod:`visla_edu.course.project`:
+Started by :mod:`visla_edu.course._runner`: loads the request's drive and config, lowers its limits
+(:func:`limit_resources`), hides the library (:mod:`visla_edu.course._sandbox`), then imports the
+submission, calls ``make_filter(dataset, config)`` and steps once per frame (:func:`check_record`),
+writing ``progress`` (``import``, ``make_filter``, ``frame N``). It leaves:
 
-* ``estimate.npz``, the frames done: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6), ``nis``
-  (k,), ``nis_dof`` (k,), ``step_seconds`` (k,);
-* ``outcome.json``: ``status`` (a key of :data:`STATUSES`), ``message`` (one line, without the
-  submission's name: the parent adds it), ``frames`` done, ``seconds`` of the submission's own
-  time, ``hidden_calls`` (:data:`visla_edu.course._sandbox.HIDDEN_CALLS`), ``traceback`` (of the
-  submission's error, for its report; ``""`` if none) and ``notes``.
+* ``estimate.npz``, the k frames done: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6), ``nis``,
+  ``nis_dof``, ``step_seconds`` (k,);
+* ``outcome.json``: ``status`` (a key of :data:`STATUSES`), ``message`` (one line, without the submission's
+  name), ``frames``, ``seconds`` (the submission's own), ``hidden_calls``, ``traceback`` (``""`` if none), ``notes``.
 """
 
 import json
@@ -139,8 +135,7 @@ def check_filter(flt):
 def check_record(rec, t):
     """The pose (4, 4), covariance (6, 6), NIS and its dof of frame ``t``'s record, checked.
 
-    :class:`_Failure` ``wrong-type`` (not a StepRecord, another frame, wrong shapes, not numbers),
-    ``non-finite`` or ``not-se3`` (not rigid to :data:`visla_edu.validation.POSE_RIGID_TOL`).
+    :class:`_Failure` ``wrong-type``, ``non-finite`` or ``not-se3`` (to :data:`visla_edu.validation.POSE_RIGID_TOL`).
     """
     if not isinstance(rec, StepRecord):
         raise _Failure("wrong-type", f"step() returned a {type(rec).__name__} at frame {t}, not a "

@@ -1,11 +1,8 @@
 """What the project grader writes: a report per submission with its figures, the summary, the table.
 
-``DIR/<name>/``: ``report.md``, ``trajectory.png`` (top-down, with the ground truth, dead
-reckoning and the library's filters), ``errors.png`` (position error over time),
-``consistency.png`` (pose NEES and NIS per dof with their chi-square bands), ``estimate.npz``,
-``output.txt`` and, when it raised, ``traceback.txt``; ``DIR/summary.md`` and ``DIR/grades.csv``
-list every submission. Figures are :class:`matplotlib.figure.Figure` objects (no pyplot state);
-every file is written atomically.
+``DIR/<name>/``: ``report.md``, ``trajectory.png``, ``errors.png``, ``consistency.png``, ``estimate.npz``,
+``output.txt`` and ``traceback.txt`` (when it raised); ``DIR/summary.md`` and ``DIR/grades.csv``. Figures
+are :class:`matplotlib.figure.Figure` objects (no pyplot state); every file is written atomically.
 """
 
 import csv

@@ -1,7 +1,5 @@
-"""The measured part of the project's rubric: its bands, PROJECT.md's table of them, the points.
-
-One place for the numbers: :func:`rubric_table` renders them as the table PROJECT.md holds (a
-test keeps the two equal), :func:`measured_points` scores a submission with them.
+"""The measured part of the project's rubric, its one home: the bands, :func:`rubric_table` (PROJECT.md's
+table, kept equal by a test) and :func:`measured_points`.
 """
 
 from visla_edu.codes import DEADRECKON, SLAM, VIO
@@ -44,15 +42,10 @@ def rubric_table():
 
 
 def accuracy_unscored(references):
-    """Why accuracy is not scored on a drive (``""`` when it is), from the library's runs on it.
+    """Why accuracy is not scored on a drive (``""`` when it is): no ground truth, or dead reckoning earns the top band.
 
-    Not without ground truth, nor where dead reckoning alone earns the top band (the 2019 KITTI
-    drives, nearly noise-free): such a drive cannot show what the camera adds.
-
-    Parameters
-    ----------
-    references : dict of str to visla_edu.course.project.Measures
-        The library's, by mode (``slam``, ``vio``, ``deadreckon``).
+    ``references``: dict of mode (``slam``, ``vio``, ``deadreckon``) to the library's
+    :class:`visla_edu.course.project.Measures` on the drive.
     """
     if references[SLAM].evaluation is None:
         return "the drive has no ground truth"
@@ -67,21 +60,9 @@ def accuracy_unscored(references):
 def measured_points(measures, references, completed, simulated):
     """The grader's points of one submission: ``{"completes": p, "accuracy": p, "consistency": p}``.
 
-    Parameters
-    ----------
-    measures : visla_edu.course.project.Measures or None
-    references : dict of str to visla_edu.course.project.Measures
-        As :func:`accuracy_unscored`.
-    completed : bool
-        The submission ran every frame (status ``ok``).
-    simulated : bool
-        The ground truth is a simulation's (:data:`CONSISTENCY_BANDS`).
-
-    Returns
-    -------
-    dict of str to int or None
-        None where the criterion is not scored on this drive (accuracy: :func:`accuracy_unscored`;
-        consistency: no ground truth, or a real drive).
+    ``measures`` (or None) and ``references`` as :func:`accuracy_unscored`; ``completed``: status ``ok``;
+    ``simulated``: the ground truth is a simulation's. A value is None where that criterion is not scored
+    on this drive (accuracy: :func:`accuracy_unscored`; consistency: no ground truth, or a real drive).
     """
     has_truth = references[SLAM].evaluation is not None
     scored = not accuracy_unscored(references)

@@ -1,16 +1,13 @@
 """Start the grading process of one submission with its limits, and read what it left.
 
-:func:`run_submission` starts ``python -m visla_edu.course._grader_child REQUEST`` in a folder
-and a process group of its own (its output, the submission's prints included, to ``output.txt``
-there), waits with the time limit and reads the outcome; a child without one is reported by how
-it ended: at the time limit (``timeout``), by a signal or an early exit (``crashed``).
+:func:`run_submission` runs ``python -m visla_edu.course._grader_child REQUEST`` in a folder and process
+group of its own (output to ``output.txt``), waits with the time limit and reads the outcome; a child
+without one is reported as ``timeout`` (time limit) or ``crashed`` (a signal or an early exit).
 
-**The limits** of a submission: the time limit, wall clock, for its import, ``make_filter`` and
-every step together (counted from the child's first ``progress``, so the grader's own start-up
-is not the submission's time; then the whole group is killed); CPU seconds of that plus
-:data:`CPU_MARGIN`; address space (None: no limit); :data:`FILE_LIMIT` bytes a file; no new
-processes or threads. The child sets all but the first on itself for good
-(:func:`visla_edu.course._grader_child.limit_resources`; Linux and macOS).
+**The limits**: the time limit, wall clock, for import, ``make_filter`` and every step together (counted
+from the child's first ``progress``; then the whole group is killed); CPU seconds of that plus
+:data:`CPU_MARGIN`; address space (None: no limit); :data:`FILE_LIMIT` bytes a file; no new processes or
+threads. The child sets all but the first on itself (:func:`visla_edu.course._grader_child.limit_resources`).
 """
 
 import json
@@ -57,11 +54,9 @@ _SIGNALS = {
 class ChildOutcome:
     """What one submission's grading process reported, or how it ended.
 
-    ``status, message, frames, seconds, hidden_calls, traceback, notes`` as in ``outcome.json``
-    (:mod:`visla_edu.course._grader_child`); without it ``status`` is a key of :data:`EXIT_STATUSES`
-    and ``seconds`` NaN. ``arrays``: ``estimate.npz``, ``k = frames`` rows each (empty without it).
-    ``output``: the end of what the process printed (the submission's prints), at most 4000
-    characters.
+    Fields as in ``outcome.json`` (:mod:`visla_edu.course._grader_child`); without it ``status`` is a key of
+    :data:`EXIT_STATUSES` and ``seconds`` NaN. ``arrays``: ``estimate.npz``, ``frames`` rows each (or empty);
+    ``output``: the last 4000 characters the process printed.
     """
 
     status: str
@@ -171,8 +166,7 @@ def _read_text(path, limit=None):
 def read_outcome(folder, returncode, timed_out, time_limit, num_frames):
     """The :class:`ChildOutcome` of the grading process that ran in ``folder``.
 
-    RuntimeError when the process failed before the submission ran (loading the drive, its
-    imports): the grader's problem, not the submission's (the command line reports it as a bug).
+    RuntimeError if the process failed before the submission ran: the grader's problem, not the submission's.
     """
     import numpy as np  # here: the command line imports this module to build its parser
 
@@ -202,9 +196,8 @@ def read_outcome(folder, returncode, timed_out, time_limit, num_frames):
 def run_submission(submission, drive_file, config, folder, time_limit, memory_limit, num_frames):
     """Grade one submission in its own process, in the empty ``folder``; return its :class:`ChildOutcome`.
 
-    ``drive_file``: the prepared drive (no ground truth, :func:`visla_edu.data.save`); ``config``:
-    the resolved FilterConfig; ``time_limit`` (s) and ``memory_limit`` (bytes of address space,
-    None: no limit) as in the module docstring; ``num_frames`` of the drive, for the messages.
+    ``drive_file``: the prepared drive without ground truth (:func:`visla_edu.data.save`); ``config``: the
+    resolved FilterConfig; ``time_limit`` (s), ``memory_limit`` (bytes or None); ``num_frames``, for messages.
     """
     request = write_request(folder, submission, drive_file, config, time_limit, memory_limit)
     command = [sys.executable, "-m", "visla_edu.course._grader_child", str(request)]

@@ -1,19 +1,13 @@
 """What a graded submission may use of visla_edu, and how the rest is hidden from it.
 
-The project asks for a whole filter, so while the grader runs a submission only the geometry and
-the interface stay usable (:data:`ALLOWED_MODULES`, :data:`ALLOWED_PACKAGES`,
-:data:`ALLOWED_NAMES`, :data:`FILTERS_INTERFACE`; PROJECT.md, "What you may use"); the rest is
-**hidden**, in three layers, the first two in the grading process only
-(:mod:`visla_edu.course._grader_child`, which exits afterwards, so nothing is put back):
+Usable: :data:`ALLOWED_MODULES`, :data:`ALLOWED_PACKAGES`, :data:`ALLOWED_NAMES`, :data:`FILTERS_INTERFACE`
+(PROJECT.md, "What you may use"). The rest is hidden in three layers, the first two only in the grading
+process (:mod:`visla_edu.course._grader_child`, which exits afterwards, so nothing is put back):
 
-1. :func:`hide_library` swaps the code of every function and method of a loaded hidden module
-   for a stub that records the call in :data:`HIDDEN_CALLS` (caught or not) and raises
-   :class:`SubmissionUsedLibrary`, so every alias fails alike (as
-   :func:`visla_edu.course.checks._hiding.hide` does for the exercise checks);
-2. :func:`block_imports` refuses to load a hidden module, or to reload one (``importlib.reload``
-   would rebuild it with its real code);
-3. :func:`scan_source` marks for a human the imports of hidden modules and the constructs that
-   could go around layers 1 and 2; it refuses nothing.
+1. :func:`hide_library` swaps every function's code for a stub that records the call in :data:`HIDDEN_CALLS`
+   and raises :class:`SubmissionUsedLibrary`, so every alias fails alike (as ``checks._hiding.hide``);
+2. :func:`block_imports` refuses to load or reload a hidden module (a reload would restore its code);
+3. :func:`scan_source` marks for a human what could go around layers 1 and 2; it refuses nothing.
 
 Code in the same process can still defeat this (TEACHING.md, "Running students' code safely").
 """
@@ -110,10 +104,7 @@ def _methods_of(cls):
 
 
 def hide_library():
-    """Make every function and method of the loaded hidden modules raise :class:`SubmissionUsedLibrary`.
-
-    Returns how many functions were hidden (int).
-    """
+    """Make every function and method of loaded hidden modules raise :class:`SubmissionUsedLibrary`; return how many."""
     found = {}  # all of them first: the labels and stubs are made with functions that get hidden too
     for name, module in sorted(sys.modules.items()):
         if isinstance(module, types.ModuleType) and is_hidden(name):
@@ -194,10 +185,8 @@ def _marks_of(node):
 def scan_source(source):
     """What a human should look at in a submission's Python text: ``"line N: ..."`` marks, in line order.
 
-    Each import of a hidden visla_edu module or name (but the names of :data:`FILTERS_INTERFACE`) or
-    of :data:`MARKED_MODULES`, each call of :data:`MARKED_CALLS` and each use of
-    :data:`MARKED_ATTRIBUTES`; ``[]`` for a text that does not parse (the grader reports the syntax
-    error itself).
+    Imports of hidden visla_edu modules or names and of :data:`MARKED_MODULES`, calls of :data:`MARKED_CALLS`,
+    uses of :data:`MARKED_ATTRIBUTES`; ``[]`` for a text that does not parse.
     """
     try:
         tree = ast.parse(source)

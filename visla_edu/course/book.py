@@ -1,15 +1,11 @@
 """The course site: ``visla-edu book DIR`` builds the lessons as static HTML pages (TEACHING.md, 8).
 
-One page per notebook of ``solutions/`` (file-name order) and an index. Each page is the
-**student edition** (:func:`visla_edu.course.release.student_notebook`), executed by nbclient
-(if it has code) with errors allowed, never the solutions: no output can carry a model answer,
-and where a later cell falls back on the library because the exercise is a stub, the page says
-``using the library's ...``, true for its reader. Exercise and graded cells are shown without
-outputs; an error in any other cell stops the build (:class:`BookError`); each widget becomes
-the figures its ``Output`` widgets held. Sphinx with myst-nb renders the executed pages (it
-executes nothing); nothing is downloaded when the site is built or read (the theme's files and
-the ``jupyter-server-mathjax`` package's MathJax 2 are copied in). The site is built beside
-``DIR`` and moved into place, so an interrupted build leaves the previous site whole.
+An index and one page per notebook of ``solutions/`` (file-name order): its **student edition**
+(:func:`visla_edu.course.release.student_notebook`), never the solutions, executed by nbclient with errors
+allowed, so no output carries a model answer. Exercise and graded cells lose their outputs; an error in any
+other cell stops the build (:class:`BookError`); widgets become the figures they held. Sphinx with myst-nb
+renders (executes nothing); nothing is downloaded (MathJax 2 comes from ``jupyter-server-mathjax``). Built
+beside ``DIR`` and moved into place, so an interrupted build leaves the previous site whole.
 """
 
 import contextlib
@@ -88,14 +84,7 @@ def notebook_paths(src_dir):
 
 
 def check_site_folder(out_dir):
-    """``out_dir`` as an absolute path, if the site may be written there (else a ValueError).
-
-    Parameters
-    ----------
-    out_dir : str or os.PathLike
-        New, empty, or a site built before (it has Sphinx's ``.buildinfo``): nothing else is
-        ever overwritten.
-    """
+    """``out_dir`` as an absolute path if new, empty or a site built before (has ``.buildinfo``); else ValueError."""
     out_dir = Path(out_dir).expanduser().absolute()
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"{out_dir} is a file, not a folder: give a new or empty folder for the site")
@@ -201,17 +190,8 @@ def _freeze_widgets(nb):
 def student_page(path, work_dir, course_data=True):
     """The page (a NotebookNode) of one notebook: its student edition, executed, exercises blank, widgets frozen.
 
-    Raises :class:`BookError` when a cell outside the exercises raised, ValueError for unbalanced
-    markers (:func:`visla_edu.course.release.student_notebook`).
-
-    Parameters
-    ----------
-    path : pathlib.Path
-        A solution notebook.
-    work_dir : str or os.PathLike
-        The kernel's working folder.
-    course_data : bool
-        As :func:`build_book`.
+    ``path``: a solution notebook; ``work_dir``: the kernel's folder. :class:`BookError` when a cell outside the
+    exercises raised, ValueError for unbalanced markers (:func:`visla_edu.course.release.student_notebook`).
     """
     import nbformat
 
@@ -346,32 +326,13 @@ def _pages(paths, course_data, log):
 def build_book(out_dir, src_dir=None, course_data=True, repository=None, branch="main", log=print):
     """Build the course site into ``out_dir``; return ``out_dir / "index.html"``.
 
-    Parameters
-    ----------
-    out_dir : str or os.PathLike
-        New, empty or a site built before (:func:`check_site_folder`).
-    src_dir : str or os.PathLike, optional
-        The solution notebooks (default: the repository's ``solutions/``).
-    course_data : bool
-        Let the kernels see ``VISLA_EDU_DATA``, so real-data cells run; False
-        (``--no-course-data``): hidden, as on Binder, for a site with nothing from files the
-        course may not redistribute.
-    repository : str, optional
-        ``https://github.com/OWNER/NAME`` (or gitlab.com): Binder and Colab buttons on each page and
-        the Colab recipe in the index.
-    branch : str
-        The branch those buttons open.
-    log : callable
-        Called with each progress line (one per notebook, then Sphinx's warnings).
+    ``src_dir``: the solution notebooks (default ``solutions/``); ``course_data``: let kernels see
+    ``VISLA_EDU_DATA`` (False, ``--no-course-data``: hidden, as on Binder, so nothing non-redistributable
+    shows); ``repository``: ``https://github.com/OWNER/NAME`` (or gitlab.com) for Binder and Colab buttons
+    opening ``branch``; ``log``: called with each progress line.
 
-    Raises
-    ------
-    ValueError
-        The ``book`` extra is missing, ``out_dir`` cannot or must not be written, a bad ``repository``.
-    FileNotFoundError
-        No solutions folder or no notebook in it.
-    BookError
-        A notebook failed outside its exercises, or Sphinx failed.
+    ValueError (no ``book`` extra, bad ``out_dir`` or ``repository``), FileNotFoundError (no solutions),
+    :class:`BookError` (a notebook failed outside its exercises, or Sphinx failed).
     """
     require_book_tools()
     _check_repository(repository, branch)

@@ -1,11 +1,8 @@
 """Notebook 12's loop skeleton: VIO and joint SLAM assembled from functions passed in.
 
-The part students do not write: a filter with the library's step interface (so
-:class:`visla_edu.stepper.Stepper` can step it) whose loop (data, landmark bookkeeping, gating,
-retiring finished tracks, what is recorded) calls :class:`Parts`, the exercises of notebooks
-01-09, and :class:`Steps`, notebook 12's assembly. In the right perturbation (see
-:mod:`visla_edu.lie`) a correct assembly reproduces ``FilterConfig(slam_error="right")``'s joint
-filter. The state is ``[pose (6); landmarks (3 each, in slot order)]``.
+:class:`CapstoneFilter` (the library's step interface) runs the loop and calls :class:`Parts` (notebooks 01-09)
+and :class:`Steps` (notebook 12). In the right perturbation (:mod:`visla_edu.lie`) a correct assembly reproduces
+``FilterConfig(slam_error="right")``'s joint filter. The state is ``[pose (6); landmarks (3 each, in slot order)]``.
 """
 
 from dataclasses import dataclass
@@ -28,22 +25,14 @@ POSE_DIM = 6
 class Parts:
     """The exercise functions of notebooks 01-09, with the notebooks' signatures (notebook in brackets).
 
-    Attributes
-    ----------
-    se3_exp : callable, ``se3_exp(u (6,)) -> (4, 4)`` (01)
-    project : callable, ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)`` (02)
-    pose_jacobian : callable, ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` (03)
-    odot : callable, ``odot(s (4,)) -> (4, 6)`` (03)
-    landmark_jacobian : callable
-        ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)`` (05).
-    init_landmark : callable, ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> m (3,)`` (05)
-    pose_transition : callable, ``pose_transition(u (6,), tau) -> F (6, 6)`` (06)
-    pose_update : callable
-        ``pose_update(mu, Sigma (6, 6), z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var)
-        -> (mu, Sigma)`` (07).
-    slam_jacobian : callable
-        ``slam_jacobian(J_pose (k, 4, 6), J_landmark (k, 4, 3), slots (k,), n) -> H (4k, 6 + 3n)`` (08).
-    marginalize : callable, ``marginalize(Sigma, keep) -> Sigma[keep][:, keep]`` (09)
+    ``se3_exp(u (6,)) -> (4, 4)`` (01); ``project(Ks, cam_T_imu, world_T_imu, p_world (M, 3)) -> z (M, 4)`` (02);
+    ``pose_jacobian(Ks, cam_T_imu, mu, m (3,)) -> (4, 6)`` (03); ``odot(s (4,)) -> (4, 6)`` (03);
+    ``landmark_jacobian(Ks, cam_T_imu, world_T_imu, m (3,)) -> (4, 3)`` (05);
+    ``init_landmark(z (4,), K, b, imu_T_cam, world_T_imu) -> m (3,)`` (05);
+    ``pose_transition(u (6,), tau) -> F (6, 6)`` (06);
+    ``pose_update(mu, Sigma (6, 6), z (k, 4), p_world (k, 3), Ks, cam_T_imu, noise_var) -> (mu, Sigma)`` (07);
+    ``slam_jacobian(J_pose (k, 4, 6), J_landmark (k, 4, 3), slots (k,), n) -> H (4k, 6 + 3n)`` (08);
+    ``marginalize(Sigma, keep) -> Sigma[keep][:, keep]`` (09).
     """
 
     se3_exp: Callable
@@ -62,18 +51,11 @@ class Parts:
 class Steps:
     """The three assembly functions of notebook 12, each taking :class:`Parts` first.
 
-    Attributes
-    ----------
-    predict : callable
-        ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W (6, 6)) -> (world_T_imu,
-        Sigma)``, in VIO and in SLAM.
-    add_landmarks : callable
-        ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
-        -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``: SLAM only (VIO uses ``parts.init_landmark``).
-    slam_update : callable
-        ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks,
-        cam_T_imu, noise_var) -> (world_T_imu, Sigma, p_active)``: SLAM only (VIO uses
-        ``parts.pose_update``).
+    ``predict(parts, world_T_imu, Sigma (D, D), u (6,), tau, W (6, 6)) -> (world_T_imu, Sigma)``, VIO and SLAM;
+    ``add_landmarks(parts, world_T_imu, Sigma, z (k, 4), K, b, imu_T_cam, C_pixels (k, 3, 3))
+    -> (p_new (k, 3), Sigma (D + 3k, D + 3k))``, SLAM only (VIO uses ``parts.init_landmark``);
+    ``slam_update(parts, world_T_imu, Sigma, p_active (n, 3), slots (k,), z (k, 4), Ks, cam_T_imu, noise_var)
+    -> (world_T_imu, Sigma, p_active)``, SLAM only (VIO uses ``parts.pose_update``).
     """
 
     predict: Callable
@@ -127,9 +109,7 @@ def _marginalize(Sigma, keep):
 def library_parts():
     """The library's versions of the notebooks' exercises, as :class:`Parts`.
 
-    Swap in your own with ``dataclasses.replace(library_parts(), pose_update=my_pose_update)``. Its
-    ``se3_exp``, ``odot`` and ``pose_transition`` are :mod:`visla_edu.lie`'s and
-    :mod:`visla_edu.motion`'s; the others are this module's, on the camera's projection.
+    Swap in your own with ``dataclasses.replace(library_parts(), pose_update=my_pose_update)``.
     """
     return Parts(se3_exp=lie.se3_exp, pose_transition=motion.pose_transition, project=_project,
                  pose_jacobian=_pose_jacobian, landmark_jacobian=_landmark_jacobian,
@@ -141,37 +121,19 @@ def library_parts():
 class CapstoneFilter(FilterBase):
     """VIO or joint SLAM whose mathematics are the functions passed in; the loop is provided.
 
-    Each ``step()`` (the library's) predicts with ``steps.predict``, then updates with the frame's
-    observations:
+    Each ``step()`` predicts with ``steps.predict``, then, with the frame's observations:
 
-    1. (SLAM) retire the landmarks whose track has ended: ``parts.marginalize`` keeps the rest;
-    2. gate the observations of placed landmarks (chi-square test of each innovation with its
-       covariance ``S_i``, computed here from the state);
-    3. update with those inside the gate: VIO ``parts.pose_update`` (landmarks fixed and taken as
-       exact), SLAM ``steps.slam_update`` (pose and every active landmark);
-    4. (SLAM) place again a landmark no update has used yet whose observation fell outside the gate
-       (``FilterConfig.reinit_gated_landmarks``);
-    5. place the new landmarks (first observation, enough disparity): VIO ``parts.init_landmark``,
-       SLAM ``steps.add_landmarks``, which appends them to the state with their cross-covariance;
-       the pixel part of their covariance, ``C_pixels``, is computed here.
+    1. (SLAM) retires the landmarks whose track has ended (``parts.marginalize``);
+    2. gates the observations of placed landmarks (chi-square test with ``S_i`` computed here from the state);
+    3. updates with those inside the gate: VIO ``parts.pose_update`` (landmarks taken as exact), SLAM
+       ``steps.slam_update`` (pose and every active landmark);
+    4. (SLAM) places again a never-used landmark whose observation was gated (``reinit_gated_landmarks``);
+    5. places new landmarks (enough disparity): VIO ``parts.init_landmark``, SLAM ``steps.add_landmarks``
+       (with their cross-covariance); ``C_pixels`` is computed here.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    config : visla_edu.filters.FilterConfig
-        Resolved (:func:`visla_edu.run.resolve_config`); ``slam_error`` is ignored (the skeleton is
-        the right-perturbation form).
-    parts : Parts
-    steps : Steps
-    joint : bool
-        True: joint SLAM; False: VIO.
-
-    Attributes
-    ----------
-    Sigma : ndarray, shape (6 + 3n, 6 + 3n)
-        The covariance (VIO: the pose's, 6 x 6).
-    slots : ndarray of int, shape (n,)
-        Landmark ids in the state, in slot order (SLAM).
+    ``config`` is resolved (:func:`visla_edu.run.resolve_config`); its ``slam_error`` is ignored (the skeleton
+    is the right-perturbation form). ``joint``: True for SLAM, False for VIO. ``Sigma``: shape (6 + 3n, 6 + 3n)
+    (VIO: 6 x 6); ``slots``: landmark ids in the state, shape (n,), in slot order.
     """
 
     def __init__(self, dataset, config, parts, steps, joint=True):
@@ -333,14 +295,8 @@ class CapstoneFilter(FilterBase):
 def run_capstone(dataset, config, parts, steps, joint=True):
     """Run :class:`CapstoneFilter` over the whole drive (one BLAS thread, as the library's driver).
 
-    Parameters as :class:`CapstoneFilter`.
-
-    Returns
-    -------
-    world_T_imu : ndarray, shape (T, 4, 4)
-    pose_cov : ndarray, shape (T, 6, 6)
-    landmarks : ndarray, shape (M, 3)
-        Final landmark means, NaN where never placed.
+    Parameters as :class:`CapstoneFilter`. Returns ``world_T_imu`` (T, 4, 4), ``pose_cov`` (T, 6, 6) and the
+    final landmark means (M, 3), NaN where never placed.
     """
     flt = CapstoneFilter(dataset, config, parts, steps, joint=joint)
     flt.record_landmarks = False  # a whole run keeps no per-frame landmarks

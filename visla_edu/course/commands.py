@@ -1,8 +1,6 @@
 """``visla-edu project show|grade``: the parser of the project's command; the work is :mod:`visla_edu.course.project`.
 
-Kept apart from the grader so that ``visla-edu`` builds its parser without importing it;
-:mod:`visla_edu.cli` calls :func:`add_parser` and, for ``project``, :func:`run` inside its
-error boundary.
+Apart from the grader so that :mod:`visla_edu.cli` builds its parser without importing it.
 """
 
 import argparse
@@ -37,14 +35,8 @@ def _gibibytes(text):
 def add_parser(sub, common, debug, path):
     """Add ``project`` (with ``show`` and ``grade``) to the ``visla-edu`` subcommands ``sub``.
 
-    Parameters
-    ----------
-    sub : argparse subparsers action
-    common, debug : argparse.ArgumentParser
-        The parents of the other commands (``--data-dir`` and ``--debug``; ``--debug``).
-    path : callable
-        The command line's ``type=`` for a path (:func:`visla_edu.cli.options.path`), so that
-        every command reads paths alike.
+    ``common`` and ``debug`` are the other commands' parent parsers (``--data-dir`` and ``--debug``;
+    ``--debug``); ``path`` is the ``type=`` for a path (:func:`visla_edu.cli.options.path`).
     """
     project = sub.add_parser("project", parents=[debug], help="the course project: print the assignment, grade "
                                                               "submissions (see PROJECT.md)")

@@ -1,17 +1,13 @@
-"""The linear Kalman filter of the primer notebook (00b): one scalar update, predict, update.
+"""The linear Kalman filter of the primer notebook (00b) and its checks' reference: update_1d, predict, update.
 
-The textbook version, on a plain vector, of the course's filters (:mod:`visla_edu.filters`,
-:mod:`visla_edu.ekf`, on SE(3) and a map of landmarks); ``solutions/00b_kalman_primer.ipynb``
-uses it after its exercises, and their checks as the reference. For ``x ~ N(mean, P)``:
+For ``x ~ N(mean, P)``:
 
 * prediction through ``x' = F x + w``, ``w ~ N(0, Q)``:  ``mean' = F mean``, ``P' = F P F^T + Q``;
 * update with ``z = H x + v``, ``v ~ N(0, R)``: innovation ``r = z - H mean``,
   ``S = H P H^T + R``, gain ``K = P H^T S^-1``, ``mean += K r``, ``P = (I - K H) P``.
 
-The EKF uses the same update with ``r = z - h(mean)`` and ``H`` the Jacobian of ``h`` at the
-mean, hence :func:`update` takes the innovation. Outside :mod:`visla_edu.course.checks` so that
-the function objects stay the same when a graded cell reloads the checks (as
-:mod:`visla_edu.course.numdiff`).
+:func:`update` takes the innovation, so the EKF's ``r = z - h(mean)`` fits too. Outside
+:mod:`visla_edu.course.checks` for the same reason as :mod:`visla_edu.course.numdiff`.
 """
 
 import numpy as np
@@ -23,18 +19,7 @@ __all__ = ["update_1d", "predict", "update"]
 def update_1d(mean, variance, z, noise_variance):
     """Kalman update of a scalar state measured directly: ``z = x + v``, ``v ~ N(0, noise_variance)``.
 
-    Parameters
-    ----------
-    mean, variance : float
-        Prior ``x ~ N(mean, variance)``.
-    z : float
-    noise_variance : float
-        ``r``.
-
-    Returns
-    -------
-    (float, float)
-        ``mean + K (z - mean)`` and ``(1 - K) variance``, with ``K = variance / (variance + r)``.
+    Returns ``(mean + K (z - mean), (1 - K) variance)`` (floats), ``K = variance / (variance + noise_variance)``.
     """
     variance, noise_variance = float(variance), float(noise_variance)
     if variance < 0 or noise_variance < 0 or variance + noise_variance <= 0:
@@ -54,11 +39,7 @@ def _square(M, n, what):
 def predict(mean, P, F, Q):
     """Prediction of a linear Gaussian state: ``(F mean, F P F^T + Q)``, shapes (n,) and (n, n).
 
-    Parameters
-    ----------
-    mean : array_like, shape (n,)
-    P, F, Q : array_like, shape (n, n)
-        Covariance of the state, transition matrix, covariance of the process noise.
+    ``mean`` has shape (n,); ``P, F, Q`` shape (n, n) (state covariance, transition, process noise).
     """
     mean = np.atleast_1d(np.asarray(mean, dtype=float))
     n = mean.shape[0]
@@ -69,16 +50,8 @@ def predict(mean, P, F, Q):
 def update(mean, P, innovation, H, R):
     """Kalman update given the innovation ``r = z - H mean`` (EKF: ``z - h(mean)``, ``H`` the Jacobian).
 
-    Returns the posterior mean (n,) and covariance (n, n) of the module docstring's update, ``K``
-    solved with a Cholesky factor of ``S`` (never inverted), the covariance symmetrised.
-
-    Parameters
-    ----------
-    mean : array_like, shape (n,)
-    P : array_like, shape (n, n)
-    innovation : array_like, shape (m,)
-    H : array_like, shape (m, n)
-    R : array_like, shape (m, m)
+    Shapes: ``mean`` (n,), ``P`` (n, n), ``innovation`` (m,), ``H`` (m, n), ``R`` (m, m); returns the
+    posterior mean (n,) and symmetrised covariance (n, n); ValueError if ``S`` is not positive definite.
     """
     mean = np.atleast_1d(np.asarray(mean, dtype=float))
     innovation = np.atleast_1d(np.asarray(innovation, dtype=float))

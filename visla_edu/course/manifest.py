@@ -1,15 +1,10 @@
 """What ``visla-edu release`` last wrote into a folder: ``.release.json``, one sha256 per file.
 
-Release (:func:`visla_edu.course.release.make_student_notebooks`) writes it beside the student
-notebooks, committed with them. Before replacing a notebook it compares the file's digest with
-the recorded one: the same, and the file is release's own output; another, or a file the
-manifest does not list, and someone made or edited it (a student answering in a clone, a teacher
-fixing a typo in the generated copy): release refuses, names it and writes nothing, unless forced.
-
-The file is the JSON object ``{"about": "...", "sha256": {file name: 64 hexadecimal digits}}``
-with sorted keys, two-space indentation and a final newline: the same bytes for the same
-notebooks, so the in-sync test checks it too. A digest is that of the file's bytes, the
-notebook's text in UTF-8 (:func:`visla_edu.course.release.notebook_text`).
+Written beside the student notebooks (:func:`visla_edu.course.release.make_student_notebooks`) and
+committed; release refuses (unless forced) to replace a file whose digest is not the recorded one.
+Format: ``{"about": "...", "sha256": {file name: 64 hexadecimal digits}}``, sorted keys, two-space
+indentation, final newline (same bytes for same notebooks: the in-sync test checks it); digests are of
+the UTF-8 bytes.
 """
 
 import hashlib
@@ -41,14 +36,7 @@ def manifest_text(texts):
 def read_manifest(folder):
     """The digests recorded in ``folder``'s manifest: file name -> sha256, ``{}`` without a manifest.
 
-    Parameters
-    ----------
-    folder : str or os.PathLike
-
-    Raises
-    ------
-    ValueError
-        The manifest is not valid JSON or lacks its ``sha256`` table (the message says what to do).
+    ValueError if the manifest is not valid JSON or lacks its ``sha256`` table.
     """
     path = Path(folder) / MANIFEST_NAME
     if not path.is_file():
@@ -66,15 +54,7 @@ def read_manifest(folder):
 
 
 def write_manifest(folder, texts):
-    """Write ``folder``'s manifest for files with contents ``texts``, atomically, if it changes; True if it did.
-
-    Parameters
-    ----------
-    folder : str or os.PathLike
-        Must exist.
-    texts : dict of str to str
-        File name -> the text release wrote there.
-    """
+    """Write ``folder``'s manifest for ``texts`` (file name -> text), atomically, if it changes; True if it did."""
     path = Path(folder) / MANIFEST_NAME
     text = manifest_text(texts)
     if path.is_file() and path.read_bytes() == text.encode("utf-8"):
@@ -87,14 +67,8 @@ def write_manifest(folder, texts):
 def edited_files(folder, names):
     """The files among ``names`` in ``folder`` that release did not write as they are now, in that order.
 
-    Those that exist but are not a regular file, or whose digest is not the manifest's (or that it
-    does not list); a missing file is never edited. ValueError for a damaged manifest.
-
-    Parameters
-    ----------
-    folder : str or os.PathLike
-    names : iterable of str
-        File names release is about to replace.
+    Existing non-regular files, or digests not the manifest's (or unlisted); a missing file is never edited.
+    ValueError for a damaged manifest.
     """
     folder = Path(folder)
     recorded = read_manifest(folder)

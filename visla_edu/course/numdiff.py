@@ -1,9 +1,7 @@
-"""Central-difference Jacobians: the reference a gradient checker is compared with.
+"""Central-difference Jacobians: the checks' reference (``checks.reference_numerical_jacobian``).
 
-Notebook 03 builds its own and compares; the exercise checks use this one (as
-``checks.reference_numerical_jacobian``). It lives outside :mod:`visla_edu.course.checks` so that
-the function object stays the same when a graded cell reloads the checks: a check can then hide
-it from the student's code, whatever name the student bound it to.
+Outside :mod:`visla_edu.course.checks` so the function object survives a reload of the checks, which
+can then hide it from the student's code whatever name the student bound it to.
 """
 
 import numpy as np
@@ -14,13 +12,7 @@ __all__ = ["central_jacobian"]
 def central_jacobian(f, x, eps=1e-6):
     """Central-difference Jacobian of ``f: R^n -> R^m`` at ``x``, error ``O(eps^2)`` plus ``1e-16 |f| / eps``.
 
-    Parameters
-    ----------
-    f : callable
-        Maps an array of shape (n,) to an array of shape (m,) (or any shape ``S``).
-    x : array_like, shape (n,)
-    eps : float
-        Step along each coordinate.
+    ``f`` maps shape (n,) to (m,) (or any shape ``S``); ``x`` has shape (n,); ``eps`` is the step per coordinate.
 
     Returns
     -------

@@ -1,12 +1,9 @@
 """The course project (summative): the assignment, the drive it is graded on, the measured rubric, the grader.
 
-The assignment is ``PROJECT.md`` beside this module (:func:`assignment_text`, ``visla-edu project
-show``); a submission is one Python file whose ``make_filter(dataset, config)`` returns a filter
-with the stepper's interface (:class:`visla_edu.stepper.SteppableFilter`; PROJECT.md, "The
-interface"). :func:`grade` (``visla-edu project grade``; TEACHING.md, section 7) runs each
-submission on what :func:`prepare_drive` makes, in a process of its own with the library hidden
-(:mod:`visla_edu.course._sandbox`) and its limits (:mod:`visla_edu.course._runner`), scores it
-(:func:`measure`, :func:`measured_points`) and writes the reports (``_report``).
+A submission is one Python file whose ``make_filter(dataset, config)`` returns a
+:class:`visla_edu.stepper.SteppableFilter` (PROJECT.md, :func:`assignment_text`). :func:`grade` (TEACHING.md,
+section 7) runs each on :func:`prepare_drive`'s view in its own process (:mod:`~visla_edu.course._sandbox`,
+:mod:`~visla_edu.course._runner`), scores it (:func:`measure`, :func:`measured_points`) and writes ``_report``'s files.
 """
 
 import dataclasses
@@ -48,19 +45,10 @@ def assignment_text():
 class Measures:
     """How a trajectory compares with the ground truth, and its consistency (:func:`measure`).
 
-    Attributes
-    ----------
-    seconds : float
-        Time of the run (s).
-    evaluation : visla_edu.metrics.TrajectoryEvaluation or None
-        ATE and drift; None without ground truth or for an incomplete run.
-    nees_per_dof, nis_per_dof : float
-        Mean pose NEES / 6 over the frames with ground truth; total NIS / total dof over the
-        updates. NaN without them.
-    position_error, nees : ndarray, shape (n,)
-        Per frame with ground truth (empty without): ``|p_est - p_true|`` (m, no alignment), and
-        the pose NEES (NaN where the covariance is singular).
-    nis, nis_dof : ndarray, shape (frames,)
+    ``seconds``: run time (s); ``evaluation``: :class:`visla_edu.metrics.TrajectoryEvaluation`, None without
+    ground truth or for an incomplete run; ``nees_per_dof``: mean pose NEES / 6, ``nis_per_dof``: total NIS /
+    total dof (NaN without them); ``position_error`` (m, no alignment) and ``nees`` (NaN where the covariance
+    is singular): shape (n,), per frame with ground truth; ``nis``, ``nis_dof``: shape (frames,).
     """
 
     frames: int
@@ -77,17 +65,8 @@ class Measures:
 def measure(world_T_imu, pose_cov, nis, nis_dof, truth, seconds, complete=True):
     """The :class:`Measures` of a run of ``k`` frames against ``truth``.
 
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (k, 4, 4)
-    pose_cov : ndarray, shape (k, 6, 6)
-        Of the right perturbation ``[v; w]`` (see :mod:`visla_edu.lie`).
-    nis, nis_dof : ndarray, shape (k,)
-        NIS and its dof (int) per frame.
-    truth : visla_edu.dataset.GroundTruth or None
-    seconds : float
-    complete : bool
-        False for a run that stopped early: the errors are kept for the figures, but no ATE.
+    Shapes: ``world_T_imu`` (k, 4, 4), ``pose_cov`` (k, 6, 6) of the right perturbation ``[v; w]``
+    (:mod:`visla_edu.lie`), ``nis`` and ``nis_dof`` (int) (k,). ``complete=False`` (stopped early): no ATE.
     """
     world_T_imu, nis, nis_dof = np.asarray(world_T_imu, float), np.asarray(nis, float), np.asarray(nis_dof)
     used = (nis_dof > 0) & np.isfinite(nis)
@@ -110,20 +89,10 @@ def measure(world_T_imu, pose_cov, nis, nis_dof, truth, seconds, complete=True):
 class GradingDrive:
     """The drive submissions are graded on, what they get of it, and the library's references.
 
-    Attributes
-    ----------
-    name : str
-        The drive's name, or its file's name when given as a path (a held-out file's stored name
-        may be ``sim-small``).
-    dataset : visla_edu.dataset.Dataset
-        As loaded, with its ground truth.
-    view, config : visla_edu.dataset.Dataset, visla_edu.filters.FilterConfig
-        What a submission gets (:func:`prepare_drive`).
-    truth : visla_edu.dataset.GroundTruth or None
-    references, reference_measures : dict of str to visla_edu.run.RunResult, Measures
-        The library's runs on ``view`` with ``config``, by mode (:data:`REFERENCE_MODES`), measured.
-    notes : list of str
-        The calibration's evidence (an extrinsic correction applied...).
+    ``name``: the drive's, or its file's when given as a path; ``dataset``: as loaded, with ground truth;
+    ``view``, ``config``: what a submission gets (:func:`prepare_drive`); ``references``,
+    ``reference_measures``: the library's runs on them by mode (:data:`REFERENCE_MODES`), RunResult and
+    :class:`Measures`; ``notes``: the calibration's evidence.
     """
 
     name: str
@@ -144,20 +113,10 @@ class GradingDrive:
 def prepare_drive(drive, data_dir=None, ground_truth=None, ground_truth_times=None):
     """Load ``drive``, make a submission's view of it and run the library's references: a :class:`GradingDrive`.
 
-    The view is a copy **without** ground truth, ``extra``, ``source`` or ``label`` (so neither the
-    truth nor a simulation's seed reaches a submission), its ``imu_T_cam`` corrected once by the
-    measured calibration (:func:`visla_edu.run.resolve_config`); the config is the resolved one with
-    ``extrinsic_correction="none"``. The library's ``slam``, ``vio`` and ``deadreckon`` run on
-    exactly these inputs.
-
-    Parameters
-    ----------
-    drive : str or os.PathLike
-        Anything :func:`visla_edu.data.load` understands: ``"sim-tiny"``, ``"0020"``, a path.
-    data_dir : str or os.PathLike, optional
-        Folder of the course files.
-    ground_truth, ground_truth_times : str or os.PathLike, optional
-        KITTI poses (and times) to attach (:func:`visla_edu.data.attach_ground_truth`).
+    The view is a copy **without** ground truth, ``extra``, ``source`` or ``label`` (no truth or seed reaches a
+    submission), ``imu_T_cam`` corrected once by the measured calibration; the config is
+    :func:`visla_edu.run.resolve_config`'s with ``extrinsic_correction="none"``. ``drive``, ``data_dir``: as
+    :func:`visla_edu.data.load`; ``ground_truth(_times)``: KITTI files (:func:`visla_edu.data.attach_ground_truth`).
     """
     dataset = data.load(drive, data_dir)
     if ground_truth:
@@ -182,18 +141,9 @@ def prepare_drive(drive, data_dir=None, ground_truth=None, ground_truth_times=No
 class Grade:
     """One submission's grade.
 
-    Attributes
-    ----------
-    name : str
-        Its name in the reports (the file's stem, made unique).
-    outcome : visla_edu.course._runner.ChildOutcome
-    measures : Measures or None
-        None when it ran no frame.
-    points : dict of str to int or None
-        :func:`measured_points`.
-    marks : list of str
-        What a human should look at (:func:`visla_edu.course._sandbox.scan_source`, a trajectory
-        that matches the library's).
+    ``name``: in the reports (the file's stem, made unique); ``outcome``: a
+    :class:`visla_edu.course._runner.ChildOutcome`; ``measures``: None when it ran no frame; ``points``:
+    :func:`measured_points`; ``marks``: for a human (:func:`visla_edu.course._sandbox.scan_source`, a library match).
     """
 
     name: str
@@ -293,25 +243,11 @@ def grade(submissions, drive, out_dir, ground_truth=None, ground_truth_times=Non
           memory_limit=DEFAULT_MEMORY_LIMIT, data_dir=None):
     """Grade each submission on ``drive``; write the reports in ``out_dir``; return the :class:`Grade` list.
 
-    Prints a line per submission, on stdout when it completed, on stderr when not; the next
-    submission is graded either way.
+    Prints a line per submission (stdout if it completed, else stderr). ``submissions``: the ``.py`` files;
+    ``out_dir``: new, empty, or an earlier grading's (replaced); the drive arguments as :func:`prepare_drive`;
+    the limits per submission as :func:`visla_edu.course._runner.run_submission`.
 
-    Parameters
-    ----------
-    submissions : list of str or os.PathLike
-        The students' ``.py`` files.
-    drive, data_dir, ground_truth, ground_truth_times
-        As :func:`prepare_drive`.
-    out_dir : str or os.PathLike
-        A new or empty folder, or an earlier grading's (its files are replaced).
-    time_limit, memory_limit
-        Per submission, as :func:`visla_edu.course._runner.run_submission`.
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        A missing or non-Python submission, a bad ``out_dir``, a drive or ground truth that does not
-        load; all checked before any submission runs.
+    FileNotFoundError or ValueError (bad submission, ``out_dir``, drive or ground truth) before any submission runs.
     """
     paths = _check_submissions(submissions)
     out = _check_out_dir(out_dir, paths)

@@ -1,26 +1,19 @@
-"""Generate the student notebooks from the solution notebooks (the single source).
+"""Generate the student notebooks (:data:`visla_edu.course.STUDENT_NOTEBOOKS`) from ``solutions/*.ipynb``.
 
-``solutions/*.ipynb`` hold the full course: derivations, exercises with their solutions between
-nbgrader's markers, and graded check cells. The student edition
-(:data:`visla_edu.course.STUDENT_NOTEBOOKS`) is made from them; a marker is a whole line,
-compared after stripping spaces:
+A marker is a whole line, compared after stripping spaces:
 
 * ``### BEGIN SOLUTION`` .. ``### END SOLUTION`` (any cell): replaced by a stub
   (``raise NotImplementedError(...)`` in code, ``YOUR ANSWER HERE`` in markdown) at the ``BEGIN``
   marker's indentation, so the signature and docstring above it stay;
 * ``### BEGIN HIDDEN TESTS`` .. ``### END HIDDEN TESTS``: removed with the markers;
-* ``<!-- BEGIN ANSWERS -->`` .. ``<!-- END ANSWERS -->`` (markdown cells without nbgrader
-  metadata, which nbgrader does not know): the answers to the ungraded questions, replaced by
-  ``YOUR ANSWER HERE``;
-* outputs, execution counts and per-run cell metadata are removed; notebook and nbgrader
-  metadata are kept, so nbgrader can grade the result.
+* ``<!-- BEGIN ANSWERS -->`` .. ``<!-- END ANSWERS -->`` (markdown cells, not nbgrader's): the
+  answers to the ungraded questions, replaced by ``YOUR ANSWER HERE``;
+* outputs, execution counts and per-run cell metadata are removed; notebook and nbgrader metadata stay.
 
-Release also writes the points per notebook (from the graded cells' nbgrader metadata) into
-``TEACHING.md`` between :data:`POINTS_BEGIN` and :data:`POINTS_END`. The output depends only on
-the input (no time stamps, no random cell ids), so the student notebooks are checked in and a
-test proves they are in sync; a notebook edited by hand is never replaced unless forced
-(:mod:`visla_edu.course.manifest`). Only :mod:`nbformat` is used, never nbgrader. Command line:
-:func:`main`.
+Release also writes the points per notebook into ``TEACHING.md`` between :data:`POINTS_BEGIN` and
+:data:`POINTS_END`. The output depends only on the input (checked in; a test proves it in sync); a
+hand-edited notebook is never replaced unless forced (:mod:`visla_edu.course.manifest`). Uses nbformat,
+never nbgrader. Command line: :func:`main`.
 """
 
 import argparse
@@ -108,16 +101,8 @@ def _marker_regions(lines, begin, end, where):
 def stub_source(source, cell_type="code", what="exercise", where="cell", markers=(BEGIN_SOLUTION, END_SOLUTION)):
     """A cell's ``source`` (str) with every solution region replaced by a stub (the module docstring).
 
-    Parameters
-    ----------
-    source : str
-    cell_type : {"code", "markdown"}
-    what : str
-        Named in the stub's message when no enclosing function is found (e.g. the grade id).
-    where : str
-        Named in the ValueError for unbalanced markers.
-    markers : (str, str)
-        The region's first and last line (default: nbgrader's solution markers).
+    ``cell_type``: ``"code"`` or ``"markdown"``; ``what``: named in the stub when no enclosing function is found;
+    ``where``: named in the ValueError for unbalanced markers; ``markers``: the region's first and last line.
     """
     lines = source.split("\n")
     regions = list(_marker_regions(lines, *markers, where))
@@ -148,15 +133,8 @@ def _enclosing_function(lines_before, indent):
 def strip_hidden_tests(source, where="cell"):
     """A cell's ``source`` (str) without its hidden-test regions, markers included.
 
-    When the last region ends the cell (only blank lines after it), the blank lines around it go
-    too; otherwise the cell's end is kept. Without a region ``source`` is returned unchanged.
-
-    Parameters
-    ----------
-    source : str
-    where : str
-        Named in the ValueError for a ``BEGIN`` inside an open region, an ``END`` without a
-        ``BEGIN``, or a region never closed.
+    When the last region ends the cell, the blank lines around it go too. ``where``: named in the ValueError
+    for unbalanced markers.
     """
     lines = source.split("\n")
     regions = list(_marker_regions(lines, BEGIN_HIDDEN, END_HIDDEN, where))
@@ -177,9 +155,7 @@ def strip_hidden_tests(source, where="cell"):
 def clean_notebook(nb):
     """A deep copy of the NotebookNode ``nb`` without outputs, execution counts and per-run cell metadata.
 
-    The cell metadata keys of ``_RUN_METADATA`` (``execution``, ``collapsed``, ``scrolled``,
-    ``ExecuteTime``) go; the other metadata (nbgrader's) and markdown attachments stay; ``nb`` is
-    not modified.
+    The keys of ``_RUN_METADATA`` go; other metadata (nbgrader's) and markdown attachments stay.
     """
     nb = copy.deepcopy(nb)
     for cell in nb.cells:
@@ -197,14 +173,7 @@ def _is_solution_cell(cell):
 
 
 def student_notebook(nb, name="notebook"):
-    """The student version (a new NotebookNode) of a solution notebook (the module docstring).
-
-    Parameters
-    ----------
-    nb : nbformat.NotebookNode
-    name : str
-        Used in the errors about unbalanced markers.
-    """
+    """The student version (a new NotebookNode) of a solution notebook (the module docstring); ``name`` for errors."""
     nb = clean_notebook(nb)
     for index, cell in enumerate(nb.cells):
         where = f"{name} cell {index}"
@@ -251,21 +220,9 @@ def _expected(src_dir):
 def make_student_notebooks(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST, force=False):
     """Write the student version of every ``src_dir/*.ipynb`` to ``dst_dir``, never over someone's edits.
 
-    Only changed files are rewritten, each atomically, then the manifest; returns the notebooks
-    written (:class:`pathlib.Path`). A notebook to replace that release did not write as it is stops
-    the release before anything is written, unless ``force``. Student notebooks without a solution
-    notebook are left alone (:func:`check_in_sync` lists them).
-
-    Parameters
-    ----------
-    src_dir, dst_dir : str or os.PathLike
-    force : bool
-        Replace edited notebooks (and a damaged manifest) too.
-
-    Raises
-    ------
-    ValueError
-        Without ``force``: an edited notebook (each named) or a damaged manifest; nothing written.
+    Only changed files are rewritten, each atomically, then the manifest; returns the paths written. Student
+    notebooks without a solution are left alone. Without ``force``, ValueError before anything is written for
+    an edited notebook or a damaged manifest.
     """
     dst_dir = Path(dst_dir)
     expected = _expected(src_dir)
@@ -299,13 +256,7 @@ def _write_text(path, text):
 def check_in_sync(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST):
     """The file names in ``dst_dir`` that differ from what :func:`make_student_notebooks` would write.
 
-    Missing or different ones, those without a solution notebook, and the manifest
-    (:data:`~visla_edu.course.manifest.MANIFEST_NAME`) if it is not the expected one; ``[]``
-    when in sync.
-
-    Parameters
-    ----------
-    src_dir, dst_dir : str or os.PathLike
+    Missing or different ones, those without a solution notebook, and the manifest if not the expected one.
     """
     dst_dir = Path(dst_dir)
     expected = _expected(src_dir)
@@ -331,8 +282,7 @@ def clean_sources(src_dir=SOLUTIONS):
 def is_reference_page(nb):
     """True for a NotebookNode marked ``{"visla_edu": {"reference_page": true}}`` (the notation page).
 
-    A reference page has no exercises or code: release handles it like any notebook, and the tests
-    exempt it from the per-lesson checks.
+    It has no exercises or code; the tests exempt it from the per-lesson checks.
     """
     return bool(nb.metadata.get("visla_edu", {}).get("reference_page", False))
 
@@ -376,11 +326,7 @@ def _with_points(text, table, where):
 def update_points_table(src_dir=SOLUTIONS, teaching="TEACHING.md", check=False):
     """Write the points table of ``src_dir`` into ``teaching`` if it changed; True if it was (would be) rewritten.
 
-    Parameters
-    ----------
-    src_dir, teaching : str or os.PathLike
-    check : bool
-        Write nothing; only say whether the table is out of date.
+    ``check``: write nothing, only say whether the table is out of date.
     """
     teaching = Path(teaching)
     text = teaching.read_text(encoding="utf-8")
@@ -399,23 +345,10 @@ def _teaching_next_to(src_dir):
 
 
 def main(argv=None):
-    """Command line: ``python -m visla_edu.course.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
+    """``python -m visla_edu.course.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
 
-    Writes the student notebooks, with ``--clean-sources`` strips the solutions, and updates the
-    points table of a ``TEACHING.md`` in the folder above ``--src``, printing each file written.
-    ``--check`` writes nothing and lists what is out of date (not with ``--clean-sources``).
-
-    Parameters
-    ----------
-    argv : list of str, optional
-        Default ``sys.argv[1:]``.
-
-    Returns
-    -------
-    int
-        0 done (or in sync), 1 out of date (``--check``), 2 on a ``FileNotFoundError`` or
-        ``ValueError`` (message on stderr): no notebooks, unbalanced markers, an edited notebook,
-        ``TEACHING.md`` without its markers... Argparse exits with 2 on bad arguments.
+    Also updates the points table of a ``TEACHING.md`` in the folder above ``--src``. Returns 0 done (or in
+    sync), 1 out of date (``--check``), 2 on a FileNotFoundError or ValueError (message on stderr).
     """
     parser = argparse.ArgumentParser(
         prog="python -m visla_edu.course.release",

@@ -1,12 +1,8 @@
 """A student's own working folder, ``visla-edu student DIR``: course files that are never overwritten.
 
-Students work in a folder of their own (TEACHING.md, section 1), not in a clone, where ``visla-edu
-release`` regenerates the notebooks beside the solutions. :func:`make_student_folder` copies into
-it the student edition the package carries and a short ``README.md``, keeping any file already
-there as it is (the student's answers, or an older edition): after an upgrade it only adds what
-is new. Each file is written atomically and only under a name nothing has
-(:func:`visla_edu._files.atomic_write` with ``replace=False``): an interruption leaves no half
-notebook, and a file that appears while copying is not replaced either.
+:func:`make_student_folder` copies the packaged student edition and a ``README.md`` into the folder
+(TEACHING.md, section 1), keeping any file already there, so an upgrade only adds what is new. Each file
+is written atomically under a free name (:func:`visla_edu._files.atomic_write`, ``replace=False``).
 
 >>> from visla_edu.course import student
 >>> print(student.make_student_folder("~/visla-course").report())    # doctest: +SKIP
@@ -33,13 +29,8 @@ _SKIPPED = {"__pycache__"}
 class FolderUpdate:
     """What :func:`make_student_folder` did to a student's folder (``folder``, absolute).
 
-    Attributes
-    ----------
-    added : tuple of str
-        Files copied now (paths relative to ``folder``, with ``/``), as the other two.
-    kept, kept_different : tuple of str
-        Files that were there already, with the same content as this edition's, or with another
-        (the student's work, or an older edition), left as they are.
+    ``added``, ``kept``, ``kept_different``: tuples of paths relative to ``folder`` (with ``/``): copied now,
+    already there with this edition's content, already there with other content (left as they are).
     """
 
     folder: Path
@@ -62,15 +53,9 @@ class FolderUpdate:
 def course_files(source=None):
     """The files a student's folder receives: relative name (with ``/``) -> the package file, sorted.
 
-    Every regular file of ``source`` and its subfolders, whatever its name, except hidden names
-    (``.release.json``, ``.ipynb_checkpoints/``...) and ``__pycache__``; ``README.md`` is
-    :data:`visla_edu.course.STUDENT_README` unless the edition has a file of that name.
-
-    Parameters
-    ----------
-    source : str or os.PathLike, optional
-        The student edition (default :data:`visla_edu.course.STUDENT_NOTEBOOKS`); a
-        FileNotFoundError if it holds no notebook (a broken installation).
+    Every regular file under ``source`` (default :data:`visla_edu.course.STUDENT_NOTEBOOKS`) but hidden names
+    and ``__pycache__``; ``README.md`` is :data:`visla_edu.course.STUDENT_README` unless the edition has one.
+    FileNotFoundError if ``source`` holds no notebook.
     """
     source = Path(STUDENT_NOTEBOOKS if source is None else source)
     found = {}
@@ -88,22 +73,11 @@ def course_files(source=None):
 def make_student_folder(folder, source=None):
     """Create or complete a student's folder: copy each course file that is not there yet.
 
-    A file already in ``folder`` (or anything else under its name: a folder, a link) is never
-    replaced; the :class:`FolderUpdate` returned says what was added and kept.
+    Anything already under a file's name (a file, folder or link) is never replaced. ``folder`` (``~``
+    expanded) is created with its parents; ``source`` as :func:`course_files`. Returns a :class:`FolderUpdate`.
 
-    Parameters
-    ----------
-    folder : str or os.PathLike
-        The student's folder (``~`` expanded); created, with its parents, if missing.
-    source : str or os.PathLike, optional
-        The student edition (:func:`course_files`).
-
-    Raises
-    ------
-    NotADirectoryError, PermissionError
-        ``folder``, or a folder on its path, is a file; ``folder`` cannot be created or written in.
-    ValueError, FileNotFoundError
-        ``folder`` is the student edition itself; the student edition is missing.
+    Raises NotADirectoryError (a file on ``folder``'s path), PermissionError (cannot create or write),
+    ValueError (``folder`` is the student edition itself), FileNotFoundError (the edition is missing).
     """
     files = course_files(source)
     target = _student_folder(folder, Path(STUDENT_NOTEBOOKS if source is None else source))
