@@ -1,20 +1,19 @@
 """EKF update steps for visual-inertial SLAM: mapping, visual-inertial odometry, joint SLAM.
 
-Every update here is the textbook EKF update written with a Cholesky factor
-``S = L L^T`` of the innovation covariance instead of an inverse::
+Every update is the textbook EKF update with a Cholesky factor ``S = L L^T`` of the innovation
+covariance instead of an inverse::
 
     S     = H Sigma H^T + R
     A     = L^{-1} H Sigma              (solve, never invert)
     delta = A^T L^{-1} r                (= K r with K = Sigma H^T S^{-1})
     Sigma = Sigma - A^T A               (= (I - K H) Sigma)
 
-Parameters shared by the functions below: ``world_T_imu`` (4, 4) is the pose mean ``mu`` (the
-IMU in the world); ``z`` (k, 4) the stereo pixels ``[uL, vL, uR, vR]`` of k observations,
-``z = Ks pi(cam_T_imu T^{-1} m)`` for landmark ``m``, predicted with their Jacobians by
-``camera``, a :class:`visla_edu.camera.StereoCamera`; ``noise_var`` the pixel noise variance
-(px^2), ``R = noise_var I4`` per observation; ``Sigma`` (D, D) a covariance overwritten with
-the posterior. Pose corrections are applied on the right, ``mu <- mu @ se3_exp(delta_pose)``
-(right perturbation, see :mod:`visla_edu.lie`); landmark corrections are added.
+Shared parameters: ``world_T_imu`` (4, 4) the pose mean ``mu``; ``z`` (k, 4) the stereo pixels
+``[uL, vL, uR, vR]``, ``z = Ks pi(cam_T_imu T^{-1} m)`` for landmark ``m``, predicted with their
+Jacobians by ``camera`` (:class:`visla_edu.camera.StereoCamera`); ``noise_var`` the pixel noise
+variance (px^2), ``R = noise_var I4`` per observation; ``Sigma`` (D, D) a covariance overwritten
+with the posterior. Pose corrections are applied on the right, ``mu <- mu @ se3_exp(delta_pose)``
+(right perturbation, :mod:`visla_edu.lie`); landmark corrections are added.
 """
 
 import numpy as np
@@ -45,13 +44,7 @@ POSE_DIM = 6
 def slot_columns(slots):
     """Columns ``6 + 3 s + [0, 1, 2]`` of landmark slots ``s`` in the joint state ``[pose (6); slot 0 (3); ...]``.
 
-    Parameters
-    ----------
-    slots : array_like of int, shape (k,)
-
-    Returns
-    -------
-    ndarray of int, shape (k, 3)
+    ``slots`` (k,) int; returns (k, 3) int.
     """
     return POSE_DIM + 3 * np.asarray(slots, dtype=np.int64)[:, None] + np.arange(3)
 
@@ -59,21 +52,9 @@ def slot_columns(slots):
 def cholesky_update(Sigma, H, cols, innovation, R):
     """One EKF update, in place, with an observation Jacobian ``H`` on the columns ``cols`` (zero elsewhere).
 
-    Parameters
-    ----------
-    Sigma : ndarray, shape (D, D)
-    H : ndarray, shape (m, c)
-    cols : ndarray of int, shape (c,)
-    innovation : ndarray, shape (m,)
-        ``z - h(mu)``.
-    R : ndarray, shape (m, m)
-
-    Returns
-    -------
-    delta : ndarray, shape (D,)
-    nis : float
-        As :func:`gain_update`, which raises ``numpy.linalg.LinAlgError`` if ``S`` is not
-        positive definite.
+    ``H`` (m, c), ``cols`` (c,) int, ``innovation`` (m,) ``z - h(mu)``, ``R`` (m, m). Returns
+    ``delta`` (D,) and ``nis`` as :func:`gain_update`, which raises ``numpy.linalg.LinAlgError`` if
+    ``S`` is not positive definite.
     """
     Sigma_Ht = Sigma[:, cols] @ H.T  # (D, m)
     return gain_update(Sigma, Sigma_Ht, H @ Sigma_Ht[cols] + R, innovation)
@@ -82,28 +63,10 @@ def cholesky_update(Sigma, H, cols, innovation, R):
 def gain_update(Sigma, Sigma_Ht, S, innovation):
     """The EKF gain step in place: ``Sigma -= A^T A``, ``delta = A^T L^{-1} r`` (module docstring).
 
+    ``Sigma_Ht`` (D, m) is ``Sigma H^T``, ``S`` (m, m) ``H Sigma H^T + R``, ``innovation`` (m,).
     ``A.T @ A`` is a symmetric rank-m product: a symmetric ``Sigma`` stays exactly symmetric.
-
-    Parameters
-    ----------
-    Sigma : ndarray, shape (D, D)
-    Sigma_Ht : ndarray, shape (D, m)
-        ``Sigma H^T``.
-    S : ndarray, shape (m, m)
-        ``H Sigma H^T + R``.
-    innovation : ndarray, shape (m,)
-
-    Returns
-    -------
-    delta : ndarray, shape (D,)
-        State correction ``K r``.
-    nis : float
-        ``r^T S^{-1} r`` (chi-square with m dof if consistent).
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        ``S`` is not positive definite.
+    Returns ``delta`` (D,), the correction ``K r``, and ``nis = r^T S^{-1} r`` (chi-square with m
+    dof if consistent). Raises ``numpy.linalg.LinAlgError`` if ``S`` is not positive definite.
     """
     L = linalg.cholesky(S, lower=True, check_finite=False)
     A = linalg.solve_triangular(L, Sigma_Ht.T, lower=True, check_finite=False)  # (m, D)
@@ -113,26 +76,15 @@ def gain_update(Sigma, Sigma_Ht, S, innovation):
 
 
 def innovation_covariances(J_pose, J_landmark, Sigma_pose, Sigma_pose_landmark, Sigma_landmark, noise_var):
-    """Per-observation innovation covariances ``S_i = H_i Sigma H_i^T + R`` (batched).
+    """Per-observation innovation covariances ``S_i = H_i Sigma H_i^T + R`` (batched), (k, 4, 4).
 
     ``H_i = [J_pose_i, J_landmark_i]`` acts on the pose and on landmark i only, so::
 
         S_i = Jp Spp Jp^T + Jp Spl_i Jl^T + Jl Spl_i^T Jp^T + Jl Sll_i Jl^T + noise_var I
 
-    Any of the Sigma terms may be None (treated as zero).
-
-    Parameters
-    ----------
-    J_pose : ndarray, shape (k, 4, 6) or None
-    J_landmark : ndarray, shape (k, 4, 3) or None
-    Sigma_pose : ndarray, shape (6, 6) or None
-    Sigma_pose_landmark : ndarray, shape (k, 6, 3) or None
-    Sigma_landmark : ndarray, shape (k, 3, 3) or None
-    noise_var : float
-
-    Returns
-    -------
-    ndarray, shape (k, 4, 4)
+    Shapes: ``J_pose`` (k, 4, 6), ``J_landmark`` (k, 4, 3), ``Sigma_pose`` (6, 6),
+    ``Sigma_pose_landmark`` (k, 6, 3), ``Sigma_landmark`` (k, 3, 3); any of them may be None (a None
+    Sigma term is zero).
     """
     k = len(J_pose) if J_pose is not None else len(J_landmark)
     S = np.broadcast_to(noise_var * np.eye(4), (k, 4, 4)).copy()
@@ -149,17 +101,8 @@ def innovation_covariances(J_pose, J_landmark, Sigma_pose, Sigma_pose_landmark, 
 def mahalanobis_squared(innovation, S):
     """``r_i^T S_i^{-1} r_i`` per observation, by a linear solve (never an inverse); empty for ``k = 0``.
 
-    Parameters
-    ----------
-    innovation : ndarray, shape (k, 4)
-        Residuals ``z_i - h_i(mu)`` (px).
-    S : ndarray, shape (k, 4, 4)
-        Innovation covariances (px^2), e.g. from :func:`innovation_covariances`.
-
-    Returns
-    -------
-    ndarray, shape (k,)
-        Chi-square with 4 dof if consistent.
+    ``innovation`` (k, 4) the residuals ``z_i - h_i(mu)`` (px), ``S`` (k, 4, 4) their covariances
+    (px^2, e.g. :func:`innovation_covariances`). Returns (k,), chi-square with 4 dof if consistent.
     """
     return np.einsum("ki,ki->k", innovation, np.linalg.solve(S, innovation[..., None])[..., 0])
 
@@ -173,23 +116,11 @@ def initialize_landmarks(world_T_imu, z, camera, noise_var):
         m ~ m0 + G_pose delta + G_z dz,   G_pose = R [I, -hat(p_imu)],   G_z = R R_ic J_tri
 
     with ``R``, ``R_ic`` the rotations of ``world_T_imu``, ``imu_T_cam`` and ``p_imu`` the point in
-    the IMU frame. In joint SLAM the new block is ``G_pose Sigma_pp G_pose^T + C_tri`` and its
-    correlation with every other state entry ``x`` is ``G_pose Sigma_px``; dropping it (the
-    textbook shortcut) makes the filter overconfident.
+    the IMU frame. Joint SLAM correlates the new landmark with the state through ``G_pose``
+    (:meth:`visla_edu.filters.ActiveSet.augment`); dropping that makes the filter overconfident.
 
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (4, 4)
-    z : ndarray, shape (k, 4)
-    camera : visla_edu.camera.StereoCamera
-    noise_var : float
-
-    Returns
-    -------
-    p_world : ndarray, shape (k, 3)
-    G_pose : ndarray, shape (k, 3, 6)
-    C_tri : ndarray, shape (k, 3, 3)
-        Triangulation covariance in the world frame, ``noise_var G_z G_z^T``.
+    Returns ``p_world`` (k, 3), ``G_pose`` (k, 3, 6) and ``C_tri`` (k, 3, 3), the triangulation
+    covariance in the world frame, ``noise_var G_z G_z^T``.
     """
     p_cam = camera.triangulate(z)
     p_imu = p_cam @ camera.imu_T_cam[:3, :3].T + camera.imu_T_cam[:3, 3]
@@ -208,21 +139,9 @@ def landmark_update(p_world, Sigma_landmark, z, world_T_imu, camera, noise_var, 
         K_i = Sigma_i H_i^T (H_i Sigma_i H_i^T + R)^{-1}
         m_i <- m_i + K_i (z_i - Ks pi(q_i)),   Sigma_i <- (I - K_i H_i) Sigma_i
 
-    Parameters
-    ----------
-    p_world : ndarray, shape (k, 3)
-    Sigma_landmark : ndarray, shape (k, 3, 3)
-    z : ndarray, shape (k, 4)
-    world_T_imu : ndarray, shape (4, 4)
-    camera : visla_edu.camera.StereoCamera
-    noise_var : float
-    extra_noise : ndarray, shape (k, 4, 4), optional
-        Added to each ``R`` (e.g. the pose's own uncertainty seen through ``J_pose``).
-
-    Returns
-    -------
-    p_new : ndarray, shape (k, 3)
-    Sigma_new : ndarray, shape (k, 3, 3)
+    ``p_world`` (k, 3), ``Sigma_landmark`` (k, 3, 3); ``extra_noise`` (k, 4, 4), optional, is added to
+    each ``R`` (e.g. the pose's own uncertainty seen through ``J_pose``). Returns ``p_new`` (k, 3) and
+    ``Sigma_new`` (k, 3, 3).
     """
     z_pred, J_landmark, _ = camera.predict_with_jacobians(world_T_imu, p_world)
     S = innovation_covariances(None, J_landmark, None, None, Sigma_landmark, noise_var)
@@ -241,22 +160,8 @@ def pose_update(world_T_imu, Sigma_pose, p_world, z, camera, noise_var, Sigma_la
     ``H_i = -Ks dpi/dq(q_i) cam_T_imu odot(T^{-1} m_i)`` stacked over the observations; with
     landmark covariances given, ``R_i = noise_var I + J_landmark_i Sigma_landmark_i J_landmark_i^T``.
 
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (4, 4)
-    Sigma_pose : ndarray, shape (6, 6)
-        Not modified.
-    p_world : ndarray, shape (k, 3)
-    z : ndarray, shape (k, 4)
-    camera : visla_edu.camera.StereoCamera
-    noise_var : float
-    Sigma_landmark : ndarray, shape (k, 3, 3), optional
-
-    Returns
-    -------
-    world_T_imu_new : ndarray, shape (4, 4)
-    Sigma_pose_new : ndarray, shape (6, 6)
-    nis : float
+    ``Sigma_pose`` (6, 6) is not modified; ``p_world`` (k, 3), ``Sigma_landmark`` (k, 3, 3), optional.
+    Returns ``world_T_imu_new`` (4, 4), ``Sigma_pose_new`` (6, 6) and ``nis``.
     """
     z_pred, J_landmark, J_pose = camera.predict_with_jacobians(world_T_imu, p_world)
     k = len(z)
@@ -284,27 +189,11 @@ def joint_update(Sigma, world_T_imu, p_active, obs_slots, z, camera, noise_var, 
     landmark in the state moves (unobserved ones through their correlation with the pose), so the
     whole ``p_active`` is corrected.
 
-    Parameters
-    ----------
-    Sigma : ndarray, shape (D, D), D = 6 + 3 n
-    world_T_imu : ndarray, shape (4, 4)
-    p_active : ndarray, shape (n, 3)
-        Means of all landmarks in the state, in slot order.
-    obs_slots : ndarray of int, shape (k,)
-        Slot of each observed landmark.
-    z : ndarray, shape (k, 4)
-    camera : visla_edu.camera.StereoCamera
-    noise_var : float
-    prediction : tuple of ndarray, optional
-        ``camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])`` if already computed
-        (the filter has it from gating).
-
-    Returns
-    -------
-    world_T_imu_new : ndarray, shape (4, 4)
-    p_active_new : ndarray, shape (n, 3)
-    nis : float
-        As :func:`joint_correction`.
+    ``Sigma`` (D, D), D = 6 + 3 n; ``p_active`` (n, 3) the means of all landmarks in the state, in
+    slot order; ``obs_slots`` (k,) int the slot of each observed landmark; ``prediction``, optional,
+    ``camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])`` if already computed (the
+    filter has it from gating). Returns ``world_T_imu_new`` (4, 4), ``p_active_new`` (n, 3) and
+    ``nis`` as :func:`joint_correction`.
     """
     if prediction is None:
         prediction = camera.predict_with_jacobians(world_T_imu, p_active[obs_slots])
@@ -318,26 +207,14 @@ def joint_correction(Sigma, obs_slots, z, noise_var, prediction, rows=STEREO_ROW
 
     Shared by both error forms of the joint filter (:mod:`visla_edu.filters._forms`): they differ
     only in the Jacobians in ``prediction`` and in how ``delta`` is applied (:func:`joint_update`,
-    :func:`invariant_retract`). Each observation's rows are reduced exactly from 4 to 3 by ``rows``.
+    :func:`invariant_retract`). Each observation's rows are reduced exactly from 4 to 3 by ``rows``
+    (3, 4), the rig's ``camera.stereo_rows`` (the default :data:`STEREO_ROWS` is that of a rig with
+    one intrinsics). ``obs_slots`` (k,) int; ``prediction`` is
+    ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``.
 
-    Parameters
-    ----------
-    Sigma : ndarray, shape (D, D)
-    obs_slots : ndarray of int, shape (k,)
-    z : ndarray, shape (k, 4)
-    noise_var : float
-    prediction : tuple of ndarray
-        ``(z_pred (k, 4), J_landmark (k, 4, 3), J_pose (k, 4, 6))``.
-    rows : ndarray, shape (3, 4)
-        The rig's exact reduction of the stereo rows (``camera.stereo_rows``); the default
-        :data:`STEREO_ROWS` is that of a rig with one intrinsics.
-
-    Returns
-    -------
-    delta : ndarray, shape (D,)
-    nis : float
-        ``r^T S^{-1} r`` of the full 4-row observations (``4 k`` degrees of freedom): the reduced
-        rows' part plus the dropped row's ``|r - rows^T rows r|^2 / noise_var``.
+    Returns ``delta`` (D,) and ``nis``, the ``r^T S^{-1} r`` of the full 4-row observations (``4 k``
+    degrees of freedom): the reduced rows' part plus the dropped row's
+    ``|r - rows^T rows r|^2 / noise_var``.
     """
     k = len(obs_slots)
     z_pred, J_landmark, J_pose = prediction
@@ -362,22 +239,14 @@ def joint_correction(Sigma, obs_slots, z, noise_var, prediction, rows=STEREO_ROW
 
 
 def invariant_pose_jacobian(J_landmark):
-    """Pose Jacobian of the invariant form (:mod:`visla_edu.filters._forms`), ``[-J_landmark, 0]``.
+    """Pose Jacobian of the invariant form (:mod:`visla_edu.filters._forms`), ``[-J_landmark, 0]``, (k, 4, 6).
 
     With ``T = exp(hat(xi)) mu``, ``xi = [p; theta]``, the point seen by the camera is
     ``inv(T) m_j ~ inv(mu) (mu_j + e_j - p)`` to first order: it depends on the pose error only
-    through ``p`` and not at all on ``theta``, so moving the whole world changes nothing, whatever
-    the estimate (what keeps the invariant filter consistent).
-
-    Parameters
-    ----------
-    J_landmark : ndarray, shape (k, 4, 3)
-        ``J_z_landmark`` of :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
-
-    Returns
-    -------
-    ndarray, shape (k, 4, 6)
-        Columns 0-2 for ``p``, columns 3-5 (zero) for ``theta``.
+    through ``p`` (columns 0-2) and not at all on ``theta`` (columns 3-5, zero), so moving the whole
+    world changes nothing, whatever the estimate (what keeps the invariant filter consistent).
+    ``J_landmark`` (k, 4, 3) is ``J_z_landmark`` of
+    :meth:`visla_edu.camera.StereoCamera.predict_with_jacobians`.
     """
     return np.concatenate([-J_landmark, np.zeros_like(J_landmark)], axis=-1)
 
@@ -386,18 +255,8 @@ def invariant_retract(world_T_imu, p_active, delta):
     """Apply an invariant correction: ``mu <- exp(hat(xi)) mu``, ``mu_j <- R_xi mu_j + J_l(theta) e_j``.
 
     ``R_xi`` is the rotation of ``exp(hat(xi))``, ``J_l`` :func:`visla_edu.lie.so3_left_jacobian`.
-
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (4, 4)
-    p_active : ndarray, shape (n, 3)
-    delta : ndarray, shape (6 + 3 n,)
-        ``[xi (6); e_0 (3); e_1 (3); ...]``.
-
-    Returns
-    -------
-    world_T_imu_new : ndarray, shape (4, 4)
-    p_active_new : ndarray, shape (n, 3)
+    ``p_active`` (n, 3), ``delta`` (6 + 3 n,) ``[xi (6); e_0 (3); e_1 (3); ...]``. Returns
+    ``world_T_imu_new`` (4, 4) and ``p_active_new`` (n, 3).
     """
     step = lie.se3_exp(delta[:POSE_DIM])
     J_l = lie.so3_left_jacobian(delta[3:POSE_DIM])

@@ -9,13 +9,12 @@ The right perturbation ``delta`` (:mod:`visla_edu.lie`) evolves as
 
     F_t = exp(-tau_t curly_hat(u_t)) = adjoint(exp(-tau_t twist_hat(u_t)))
 
-and ``n_t ~ N(0, W_t)``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` for white noise of
-standard deviation ``sigma_v`` (m/s) and ``sigma_w`` (rad/s) on each velocity sample (one value
-for all three axes, or one per axis).
+and ``n_t ~ N(0, W_t)``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` for white noise on each
+velocity sample (:func:`motion_noise`).
 
-Parameters shared below: ``u`` (6,) is the step's body twist ``[v; w]`` (m/s, rad/s), ``tau``
-the step's duration (s), ``world_T_imu`` (4, 4) the pose mean ``mu`` (the IMU in the world),
-``W`` (6, 6) the step's noise covariance (:func:`motion_noise`).
+Shared parameters: ``u`` (6,) the step's body twist ``[v; w]`` (m/s, rad/s), ``tau`` the step's
+duration (s), ``world_T_imu`` (4, 4) the pose mean ``mu``, ``W`` (6, 6) the step's noise covariance
+(:func:`motion_noise`), ``sigma_linear, sigma_angular`` as in :func:`motion_noise`.
 
 The invariant joint filter measures the pose error in the world frame instead,
 ``T = exp(hat(xi)) mu`` (:mod:`visla_edu.filters._forms`; :func:`predict_invariant_covariance`).
@@ -40,19 +39,10 @@ __all__ = [
 
 
 def select_twists(twists, lag=0):
-    """The twist used for the step ``t -> t+1``: ``u[t + lag]`` (clipped at the ends).
+    """The twist used for the step ``t -> t+1``: ``u[t + lag]`` (clipped at the ends), (T - 1, 6).
 
-    Parameters
-    ----------
-    twists : ndarray, shape (T, 6)
-        ``[v; w]`` samples, one per time stamp.
-    lag : int
-        0 uses the sample at the start of the interval (the course's convention),
-        1 the sample at its end.
-
-    Returns
-    -------
-    ndarray, shape (T - 1, 6)
+    ``twists`` (T, 6) holds one ``[v; w]`` sample per time stamp; ``lag`` 0 uses the sample at the
+    start of the interval (the course's convention), 1 the sample at its end.
     """
     twists = np.asarray(twists, dtype=float)
     if twists.ndim != 2 or twists.shape[1] != 6:
@@ -62,21 +52,11 @@ def select_twists(twists, lag=0):
 
 
 def dead_reckon(time_stamps, twists, world_T_imu0=None, lag=0):
-    """Integrate IMU twists into a trajectory (the prediction step's mean, nothing else).
+    """Integrate IMU twists into a trajectory (T, 4, 4): ``world_T_imu[t+1] = world_T_imu[t] @ se3_exp(tau_t u_t)``.
 
-    Parameters
-    ----------
-    time_stamps : array_like, shape (T,)
-    twists : array_like, shape (T, 6)
-    world_T_imu0 : array_like, shape (4, 4), optional
-        Initial pose; identity by default (world = IMU frame at the first time stamp).
-    lag : int
-        See :func:`select_twists`.
-
-    Returns
-    -------
-    ndarray, shape (T, 4, 4)
-        ``world_T_imu[t+1] = world_T_imu[t] @ se3_exp(tau_t u_t)``.
+    ``time_stamps`` (T,), ``twists`` (T, 6), ``lag`` as in :func:`select_twists`; ``world_T_imu0``
+    (4, 4) defaults to the identity (world = IMU frame at the first time stamp). The prediction
+    step's mean, nothing else.
     """
     time_stamps = np.asarray(time_stamps, dtype=float)
     steps = lie.se3_exp(np.diff(time_stamps)[:, None] * select_twists(twists, lag))
@@ -99,112 +79,50 @@ def _noise_sigmas(sigma_linear, sigma_angular):
 
 
 def motion_noise(tau, sigma_linear, sigma_angular):
-    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2, sigma_w^2)`` of a twist ``[v; w]``.
+    """Per-step motion noise covariance ``W = tau^2 diag(sigma_v^2, sigma_w^2)`` of a twist ``[v; w]``, (6, 6).
 
-    Parameters
-    ----------
-    tau : float
-    sigma_linear, sigma_angular : float or (float, float, float)
-        ``sigma_v`` (m/s) and ``sigma_w`` (rad/s): one number for every axis, or a triple
-        ``(x, y, z)`` in the body frame.
-
-    Returns
-    -------
-    ndarray, shape (6, 6)
-        Diagonal.
+    ``sigma_linear``, ``sigma_angular`` are ``sigma_v`` (m/s) and ``sigma_w`` (rad/s): one number
+    for every axis, or a triple ``(x, y, z)`` in the body frame. ``W`` is diagonal.
     """
     return np.diag((tau * _noise_sigmas(sigma_linear, sigma_angular)) ** 2)
 
 
 def pose_transition(u, tau):
-    """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6).
-
-    Parameters
-    ----------
-    u : array_like, shape (6,)
-    tau : float
-
-    Returns
-    -------
-    ndarray, shape (6, 6)
-    """
+    """Perturbation transition ``F = adjoint(se3_exp(-tau u))`` (= ``expm(-tau curly_hat(u))``), (6, 6)."""
     return lie.adjoint(lie.se3_exp(-tau * np.asarray(u, dtype=float)))
 
 
 def imu_step(u, tau, sigma_linear, sigma_angular):
     """Everything one prediction step needs, with a single exponential.
 
-    Parameters
-    ----------
-    u : array_like, shape (6,)
-    tau : float
-    sigma_linear, sigma_angular : float or (float, float, float)
-        As in :func:`motion_noise`.
-
-    Returns
-    -------
-    step : ndarray, shape (4, 4)
-        ``se3_exp(tau u)``; the mean moves as ``mu <- mu @ step``.
-    F : ndarray, shape (6, 6)
-        ``adjoint(inv(step))`` (the same as :func:`pose_transition`).
-    W : ndarray, shape (6, 6)
-        :func:`motion_noise`.
+    Returns ``step = se3_exp(tau u)`` (4, 4), the mean moving as ``mu <- mu @ step``;
+    ``F = adjoint(inv(step))`` (6, 6), the same as :func:`pose_transition`; and ``W`` (6, 6) of
+    :func:`motion_noise`.
     """
     step = lie.se3_exp(tau * np.asarray(u, dtype=float))
     return step, lie.adjoint(lie.se3_inv(step)), motion_noise(tau, sigma_linear, sigma_angular)
 
 
 def predict_pose(world_T_imu, u, tau):
-    """Mean prediction ``mu @ se3_exp(tau u)``: ``world_T_imu`` at the end of the step.
-
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (4, 4)
-        At the start of the step.
-    u : array_like, shape (6,)
-    tau : float
-
-    Returns
-    -------
-    ndarray, shape (4, 4)
-    """
+    """Mean prediction ``mu @ se3_exp(tau u)`` (4, 4): the pose after the step from ``world_T_imu`` before it."""
     return world_T_imu @ lie.se3_exp(tau * np.asarray(u, dtype=float))
 
 
 def predict_pose_covariance(Sigma_pose, F, W):
     """Covariance prediction ``F Sigma F^T + W`` for the pose alone, a new (6, 6) array (not symmetrised).
 
-    Parameters
-    ----------
-    Sigma_pose : ndarray, shape (6, 6)
-        Covariance of the pose's right perturbation; not modified.
-    F : ndarray, shape (6, 6)
-        :func:`pose_transition` (or the ``F`` of :func:`imu_step`).
-    W : ndarray, shape (6, 6)
-
-    Returns
-    -------
-    ndarray, shape (6, 6)
+    ``Sigma_pose`` (6, 6), the pose's right-perturbation covariance, is not modified; ``F`` is
+    :func:`pose_transition` (or the ``F`` of :func:`imu_step`).
     """
     return F @ Sigma_pose @ F.T + W
 
 
 def predict_joint_covariance(Sigma, F, W):
-    """Covariance prediction of the joint state ``[pose (6); landmarks]``, in place.
+    """Covariance prediction of the joint state ``[pose (6); landmarks]``, in place; returns ``Sigma`` itself.
 
-    Landmarks are static, so only the pose rows and columns change::
+    Landmarks are static, so only the pose rows and columns change (``F``, ``W`` (6, 6))::
 
         Sigma_pp <- F Sigma_pp F^T + W,   Sigma_pl <- F Sigma_pl,   Sigma_lp <- Sigma_lp F^T
-
-    Parameters
-    ----------
-    Sigma : ndarray, shape (D, D)
-    F, W : ndarray, shape (6, 6)
-
-    Returns
-    -------
-    ndarray
-        ``Sigma`` (the same object).
     """
     Sigma[:6, 6:] = F @ Sigma[:6, 6:]
     Sigma[6:, :6] = Sigma[:6, 6:].T
@@ -223,18 +141,9 @@ def invariant_noise_factor(world_T_imu, p_landmarks, W):
 
         B = [[Ad(mu) L]; [hat(mu_j) R L_w] for each landmark],   W = L L^T, L_w = L[3:]
 
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (4, 4)
-        The pose mean after the step.
-    p_landmarks : ndarray, shape (n, 3)
-        Landmark means in state order (non-finite rows, the dense filter's placeholders, get
-        zero rows: their covariance is written at their first observation).
-    W : ndarray, shape (6, 6)
-
-    Returns
-    -------
-    ndarray, shape (6 + 3 n, 6)
+    ``world_T_imu`` is the pose mean after the step; ``p_landmarks`` (n, 3) the landmark means in
+    state order (non-finite rows, the dense filter's placeholders, get zero rows: their covariance
+    is written at their first observation).
     """
     L = np.linalg.cholesky(W) if np.any(W != np.diag(np.diag(W))) else np.diag(np.sqrt(np.diag(W)))
     R = world_T_imu[:3, :3]
@@ -249,21 +158,10 @@ def predict_invariant_covariance(Sigma, world_T_imu, p_landmarks, W):
     """Invariant covariance prediction, in place: ``Sigma <- Sigma + B B^T`` (:func:`invariant_noise_factor`).
 
     The invariant errors do not change along a noise-free step (the transition is the identity),
-    so only the step's noise is added, through ``Ad(mu)``. The directions a filter can never
-    observe (moving the whole world: the same translation in ``p`` and every ``e_j``, and a
-    rotation ``theta``) do not depend on the estimate, unlike in the right-perturbation
-    prediction: that keeps the filter consistent.
-
-    Parameters
-    ----------
-    Sigma : ndarray, shape (6 + 3 n, 6 + 3 n)
-    world_T_imu, p_landmarks, W
-        As in :func:`invariant_noise_factor`.
-
-    Returns
-    -------
-    ndarray
-        ``Sigma`` (the same object).
+    so only the step's noise is added, through ``Ad(mu)``: the unobservable directions (the same
+    translation in ``p`` and every ``e_j``, and a rotation ``theta``) do not depend on the estimate
+    (:mod:`visla_edu.filters._forms`). ``Sigma`` (6 + 3 n, 6 + 3 n); the other arguments as
+    :func:`invariant_noise_factor`. Returns ``Sigma`` itself.
     """
     B = invariant_noise_factor(world_T_imu, p_landmarks, W)
     Sigma += B @ B.T

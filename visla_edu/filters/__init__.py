@@ -6,10 +6,9 @@ each mode in a line. Each ``step()`` returns a :class:`StepRecord`, its observat
 the status codes of :mod:`visla_edu.codes` (re-exported here). :class:`FilterConfig` holds the
 modes' settings; :func:`visla_edu.run.make_filter` builds a mode by name.
 
-Where each piece lives: ``_config`` the settings, ``_base`` the step loop and its declared
-hooks, the record and the divergence error, ``_state`` the joint state's covariance
-bookkeeping, ``_maps`` dead reckoning, mapping and VIO, ``_slam`` joint SLAM, ``_clones`` its
-clone window and ``_tracks`` the multi-frame track updates.
+Where each piece lives: ``_config`` the settings, ``_base`` the step loop, its hooks, the record and
+the divergence error, ``_state`` the joint covariance's bookkeeping, ``_maps`` dead reckoning,
+mapping and VIO, ``_slam`` joint SLAM, ``_clones`` its clone window, ``_tracks`` the track updates.
 """
 
 from visla_edu.codes import (

@@ -30,8 +30,7 @@ class FilterDivergedError(RuntimeError):
 
     Raised by ``step()`` when, after the frame, the pose or its covariance is not finite, a pose
     variance is negative or the pose is more than :data:`MAX_DISTANCE` m from the origin, and when
-    an update cannot factorise its innovation covariance (chained from the ``LinAlgError``). The
-    message names the dataset and the frame.
+    an update cannot factorise its innovation covariance (chained from the ``LinAlgError``).
     """
 
 
@@ -43,28 +42,20 @@ class StepRecord:
     ----------
     t : int
         Frame index.
-    world_T_imu : ndarray, shape (4, 4)
-        Pose mean after the update.
-    pose_cov : ndarray, shape (6, 6)
-        Pose covariance (right perturbation ``[v; w]``).
-    ids : ndarray of int, shape (k,)
-        Landmarks observed at this frame.
-    z : ndarray, shape (k, 4)
-        Their stereo pixels.
-    z_pred : ndarray, shape (k, 4)
-        Predicted pixels before the update (NaN where the landmark was not in the state).
-    status : ndarray of int, shape (k,)
+    world_T_imu, pose_cov : ndarray, shapes (4, 4) and (6, 6)
+        Pose mean and covariance (right perturbation ``[v; w]``) after the update.
+    ids, z : ndarray, shapes (k,) of int and (k, 4)
+        Landmarks observed at this frame and their stereo pixels.
+    z_pred, status : ndarray, shapes (k, 4) and (k,) of int
+        Predicted pixels before the update (NaN where the landmark was not in the state) and the
         ``OBS_*`` code of each observation (:mod:`visla_edu.codes`).
-    nis : float
-        Normalised innovation squared of the update (NaN without an update).
-    nis_dof : int
-        Its degrees of freedom: 4 per used observation, and ``4 n - 3`` per track of ``n``
-        observations used in a null-space update (joint SLAM with clones).
-    active_ids : ndarray of int, shape (n,)
-        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO).
-    active_means : ndarray, shape (n, 3)
-    active_covs : ndarray, shape (n, 3, 3)
-        Marginal covariance of each active landmark.
+    nis, nis_dof : float and int
+        Normalised innovation squared of the update (NaN without an update) and its degrees of
+        freedom: 4 per used observation, and ``4 n - 3`` per track of ``n`` observations used in a
+        null-space update (joint SLAM with clones).
+    active_ids, active_means, active_covs : ndarray, shapes (n,) of int, (n, 3), (n, 3, 3)
+        Landmarks currently in the state (the active set; mapped landmarks for mapping/VIO), their
+        means and marginal covariances.
     """
 
     t: int
@@ -84,35 +75,24 @@ class StepRecord:
 class FilterBase(abc.ABC):
     """Shared bookkeeping of every mode: time, twists, observations with their status, the landmark means.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-        The drive: time stamps, IMU twists and observations.
-    camera : visla_edu.camera.StereoCamera
-        With the calibration to use (after any extrinsic correction).
-    config : visla_edu.filters.FilterConfig
-        Resolved (no ``"auto"`` left, :meth:`~visla_edu.filters.FilterConfig.resolve`); each
-        setting's attribute there says which modes read it.
+    ``dataset`` (:class:`visla_edu.dataset.Dataset`) is the drive, ``camera``
+    (:class:`visla_edu.camera.StereoCamera`) the calibration to use (after any extrinsic correction),
+    ``config`` a resolved :class:`visla_edu.filters.FilterConfig` (no ``"auto"`` left, else
+    ``ValueError``).
 
     Attributes
     ----------
     t : int
         Last frame processed (-1 before the first step).
     world_T_imu : ndarray, shape (4, 4)
-        Pose mean (the IMU in the world).
-    landmarks : ndarray, shape (M, 3)
-        Landmark means in the world frame, NaN until a landmark is initialised.
-    landmark_cov : ndarray, shape (M, 3, 3)
-        Landmark covariances of the modes that keep them per landmark (in SLAM: of retired
-        landmarks only, see :meth:`landmark_estimates`).
+        Pose mean.
+    landmarks, landmark_cov : ndarray, shapes (M, 3) and (M, 3, 3)
+        Landmark means in the world frame, NaN until a landmark is initialised, and the covariances
+        of the modes that keep them per landmark (in SLAM: of retired landmarks only, see
+        :meth:`landmark_estimates`).
     record_landmarks : bool
-        Fill the active landmarks of each :class:`StepRecord` (the stepper draws them); the
-        whole-run driver, which keeps none of them, turns this off (they are then empty).
-
-    Raises
-    ------
-    ValueError
-        ``config`` still has an ``"auto"`` setting (:attr:`FilterConfig.resolved` is False).
+        Fill the active landmarks of each :class:`StepRecord` (else they are empty; the whole-run
+        driver turns this off).
     """
 
     def __init__(self, dataset, camera, config):
@@ -207,12 +187,11 @@ class FilterBase(abc.ABC):
         return usable & np.isfinite(self.landmarks[ids, 0])
 
     def _new_landmarks(self, ids, z, status, candidates):
-        """Triangulate never-seen landmarks among ``candidates`` (mask) at the current pose.
+        """Triangulate never-seen landmarks among ``candidates`` (mask) at the current pose, into :attr:`landmarks`.
 
-        Their first observation is consumed (``OBS_NEW``; ``OBS_FAR`` below ``min_init_disparity``)
-        and their means written to :attr:`landmarks`; the covariance is the caller's to store.
-        Returns ``new`` (k,) bool, ``G_pose`` (k_new, 3, 6) (sensitivity to the pose perturbation)
-        and ``C_new`` (k_new, 3, 3), the pixels' covariance ``inflation^2 C_tri + sigma^2 I``.
+        Their first observation is consumed (``OBS_NEW``; ``OBS_FAR`` below ``min_init_disparity``).
+        Returns ``new`` (k,) bool, ``G_pose`` (k_new, 3, 6) and ``C_new`` (k_new, 3, 3), the pixels'
+        covariance ``inflation^2 C_tri + sigma^2 I``, for the caller to store.
         """
         cfg = self.config
         disparity = self.camera.disparity(z)
@@ -224,12 +203,7 @@ class FilterBase(abc.ABC):
         return new, G_pose, cfg.landmark_prior_inflation**2 * C_tri + cfg.landmark_prior_sigma**2 * np.eye(3)
 
     def _gate(self, S, innovation, z_pred):
-        """Mask of observations inside the chi-square gate, and their squared distances.
-
-        A landmark whose estimate lies behind the camera or closer than ``MIN_DEPTH`` (its
-        predicted disparity ``fsu b / depth`` is not in ``(0, fsu b / MIN_DEPTH)``) has no
-        usable linearisation: its observation is rejected with distance ``inf``.
-        """
+        """Chi-square gate mask and squared distances (``inf``: estimate behind the camera or within ``MIN_DEPTH``)."""
         fsu_b = self.camera.fsu_b
         disparity = self.camera.disparity(z_pred)
         valid = (disparity > 0) & (disparity < fsu_b / MIN_DEPTH) & np.isfinite(S).all(axis=(1, 2))

@@ -89,11 +89,11 @@ class CloneWindow:
         return np.concatenate([np.arange(ekf.POSE_DIM), clones])
 
     def _tracks_of(self, lms):
-        """Pop the observations of ``lms``, keep the usable tracks (short ones only get a place on the map).
+        """Pop the observations of ``lms``; the usable tracks as ``(lms, clone_index, z, owner, p_world)``, or None.
 
-        Returns ``(lms, clone_index, z, owner, p_world)`` of the tracks with at least
-        :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations and a point in front
-        of every camera, observations sorted by track; None when there are none.
+        Usable: at least :data:`~visla_edu.filters._tracks.MIN_TRACK_OBSERVATIONS` observations and
+        a point in front of every camera (sorted by track); a shorter track with such a point is
+        only put on the map.
         """
         if len(lms) == 0:
             return None

@@ -34,11 +34,11 @@ MSCKF_WINDOW = 20
 
 
 def gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step):
-    """``r = (sigma_pixel / focal_length) / (sigma_w tau)``: the angle one observation resolves over the gyro's in one step.
+    """``r = (sigma_pixel / focal_length) / (sigma_w tau)``: an observation's angle over the gyro's in a step.
 
-    ``sigma_pixel`` is the pixel noise the camera is said to have (px), ``focal_length`` its ``fsu``
-    (px), ``sigma_angular`` the angular-velocity noise (rad/s; per-axis values (3,) are averaged)
-    and ``time_step`` a typical step ``tau`` (s). A float, ``inf`` for a noise-free gyro.
+    ``sigma_pixel`` (px), ``focal_length`` the camera's ``fsu`` (px), ``sigma_angular`` (rad/s;
+    per-axis values (3,) are averaged), ``time_step`` a typical ``tau`` (s). A float, ``inf`` for a
+    noise-free gyro.
     """
     gyro_angle = float(np.mean(sigma_angular)) * float(time_step)
     return float(sigma_pixel / focal_length / gyro_angle) if gyro_angle > 0 else np.inf
@@ -46,21 +46,16 @@ def gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step):
 
 def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, power=INFLATION_POWER,
                           track_correlation=0.0):
-    """How much less than ``sigma_pixel`` promises the camera is to be trusted on a drive.
+    """How much less than ``sigma_pixel`` promises the camera is to be trusted on a drive (a float).
 
-    ``max(1, r)^power`` with ``r`` of :func:`gyro_ratio`, and in the gyro regime (``r >=``
-    :data:`GYRO_REGIME_RATIO`) at least ``(1 + rho) / (1 - rho)``: track errors are correlated from
-    frame to frame (tracker drift, a feature sliding along an edge), so a track of ``L``
-    observations is worth about ``L (1 - rho) / (1 + rho)``. Where the gyro resolves angles better
-    than one observation (``r > 1``, the GPS-aided velocities of the 2019 release), a camera treated
-    as independent pixels would pull a good dead reckoning off by the sum of its correlated errors;
-    where one observation beats a gyro step (``r <= 1``, the 2020 release), the camera carries the
-    estimate and is not inflated.
-
-    The first four arguments are :func:`gyro_ratio`'s; ``rho`` (``track_correlation``, in
-    ``[-1, 1)``) is :func:`visla_edu.diagnostics.track_correlation` along the dead-reckoned poses
-    (which the gyro regime makes locally accurate). Returns the factor on ``sigma_pixel``, a float
-    from 1 to :data:`MAX_INFLATION`.
+    ``max(1, r)^power`` with ``r`` of :func:`gyro_ratio` (the first four arguments are its), and in
+    the gyro regime (``r >=`` :data:`GYRO_REGIME_RATIO`) at least ``(1 + rho) / (1 - rho)``: with
+    track errors correlated from frame to frame, a track of ``L`` observations is worth about
+    ``L (1 - rho) / (1 + rho)``, and where the gyro resolves angles better than one observation
+    (``r > 1``) a camera treated as independent pixels would pull a good dead reckoning off by the
+    sum of its correlated errors. ``rho`` (``track_correlation``, in ``[-1, 1)``) is
+    :func:`visla_edu.diagnostics.track_correlation` along the dead-reckoned poses. The factor lies
+    in ``[1, MAX_INFLATION]``.
     """
     ratio = gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step)
     if not np.isfinite(ratio):
@@ -75,10 +70,8 @@ def pixel_noise_inflation(sigma_pixel, focal_length, sigma_angular, time_step, p
 def msckf_window(sigma_pixel, focal_length, sigma_angular, time_step):
     """Clones kept on a drive (an int): 0 (the joint EKF without clones) in the gyro regime, else :data:`MSCKF_WINDOW`.
 
-    In the gyro regime (:func:`gyro_ratio`, whose arguments these are, at least
-    :data:`GYRO_REGIME_RATIO`) dead reckoning is locally accurate and the camera a weak corrector;
-    the clones' multi-frame updates of the short tracks then add the tracks' correlated errors more
-    than information.
+    The arguments are :func:`gyro_ratio`'s. In the gyro regime (:data:`GYRO_REGIME_RATIO`) the clones'
+    multi-frame updates of the short tracks add the tracks' correlated errors more than information.
     """
     return 0 if gyro_ratio(sigma_pixel, focal_length, sigma_angular, time_step) >= GYRO_REGIME_RATIO else MSCKF_WINDOW
 
@@ -90,16 +83,12 @@ class FilterConfig:
     Each field's declaration below is the one statement of its default, kind, unit, plausible range
     and why, and of the words it accepts such as ``"auto"`` (:mod:`visla_edu.settings`;
     ``visla-edu run --help`` lists them); the attributes say what each setting means and which modes
-    read it. How the driver runs (BLAS threads, progress bar) is not a setting but arguments of
-    :func:`visla_edu.run.run_filter`.
-
-    The defaults are one setting for every drive: what can be measured is measured from each drive's
-    own data (``"auto"``, :meth:`resolve`); the comments at the declarations give the evidence for
-    the rest, which notebooks 04, 10 and 11 and ``benchmarks/bench_accuracy.py`` recompute (they
-    print the figures; none is typed here). The switches ``landmark_cross_covariance``,
-    ``mapping_motion_noise`` and ``vio_refine_landmarks`` are teaching comparisons: the default is
-    the consistent filter, the other value the tempting shortcut the notebook named in its attribute
-    measures against it.
+    read it (how the driver runs is :func:`visla_edu.run.run_filter`'s arguments). ``"auto"`` is
+    measured from each drive's data (:meth:`resolve`); the comments at the declarations give the
+    evidence for the rest (notebooks 04, 10, 11 and ``benchmarks/bench_accuracy.py`` recompute it).
+    The switches ``landmark_cross_covariance``, ``mapping_motion_noise`` and
+    ``vio_refine_landmarks`` are teaching comparisons: the default is the consistent filter, the
+    other value the shortcut its notebook measures.
 
     Attributes
     ----------
@@ -109,12 +98,11 @@ class FilterConfig:
     pixel_noise_inflation : float or "auto"
         Modes: mapping, vio, slam. A factor on ``sigma_pixel`` (:func:`pixel_noise_inflation`).
     sigma_linear_velocity, sigma_angular_velocity : float, (float, float, float) or "auto"
-        Modes: all. Noise on each linear (angular) velocity sample, for all or per body axis; ``W``
-        scales it by the time step.
+        Modes: all. Noise on each linear (angular) velocity sample, for all or per body axis
+        (:func:`visla_edu.motion.motion_noise`).
     landmark_prior_inflation, landmark_prior_sigma : float
-        Modes: mapping, vio, slam. A new landmark's covariance from its pixels is ``inflation^2
-        C_tri + sigma^2 I`` (:func:`visla_edu.ekf.initialize_landmarks`): ``C_tri`` is long along
-        the viewing ray and grows with depth squared; the inflation allows for far points'
+        Modes: mapping, vio, slam. A new landmark's covariance is ``inflation^2 C_tri + sigma^2 I``
+        (:func:`visla_edu.ekf.initialize_landmarks`); the inflation allows for far points'
         linearisation error.
     initial_pose_sigma : float
         Modes: all. Standard deviation of the first pose.
@@ -138,7 +126,7 @@ class FilterConfig:
         Mode: vio (notebook 07). Also update the landmarks, which counts each observation twice.
     skip_repeated_frames : bool
         Modes: mapping, vio, slam. No update at frames repeating the previous one's observations
-        exactly (a duplicated camera frame while the IMU moved on; dataset 03 has one at 1008).
+        exactly (a duplicated camera frame while the IMU moved on).
     skip_stale_copies : bool
         Modes: mapping, vio, slam. Leave out the observations that repeat their landmark's pixels of
         the frame before bit for bit (:func:`visla_edu.dataset.stale_copies`: they claim the scene did
@@ -235,29 +223,16 @@ class FilterConfig:
     def resolve(self, calibration, focal_length=None, time_step=None):
         """A copy with every ``"auto"`` of :data:`AUTO_FIELDS` and :data:`DRIVE_FIELDS` replaced by the drive's value.
 
-        Parameters
-        ----------
-        calibration : object or None
-            Has the attributes of :data:`AUTO_FIELDS` (per-axis sigmas (3,), an int lag) and
-            ``track_correlation`` (float), e.g. a :class:`visla_edu.diagnostics.Calibration`; only
-            those an ``"auto"`` needs are read (None when none is needed).
-        focal_length, time_step : float, optional
-            The drive's ``fsu`` (px) and typical time step (s), for :data:`DRIVE_FIELDS`.
+        ``calibration`` (or None when no ``"auto"`` needs it) has the attributes of
+        :data:`AUTO_FIELDS` (per-axis sigmas (3,), an int lag) and ``track_correlation``, e.g. a
+        :class:`visla_edu.diagnostics.Calibration`; only those an ``"auto"`` needs are read.
+        ``focal_length`` (``fsu``, px) and ``time_step`` (a typical step, s) serve
+        :data:`DRIVE_FIELDS`. Returns a new config with :attr:`resolved` True (``self`` unchanged;
+        ``extrinsic_correction`` as it was).
 
-        Returns
-        -------
-        FilterConfig
-            A new config with :attr:`resolved` True (``self`` is unchanged);
-            ``extrinsic_correction`` stays as it was.
-
-        Raises
-        ------
-        ValueError
-            A calibration value outside the setting's declared range.
-        AttributeError
-            ``calibration`` lacks an attribute that is needed.
-        TypeError
-            A setting of :data:`DRIVE_FIELDS` is ``"auto"`` and ``focal_length`` or ``time_step`` is missing.
+        Raises ``ValueError`` for a calibration value outside the setting's declared range,
+        ``AttributeError`` if ``calibration`` lacks a needed attribute, ``TypeError`` if a
+        :data:`DRIVE_FIELDS` setting is ``"auto"`` and ``focal_length`` or ``time_step`` is missing.
         """
         values = {name: getattr(calibration, name) for name in AUTO_FIELDS if getattr(self, name) == AUTO}
         config = replace(self, **values)

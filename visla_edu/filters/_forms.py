@@ -1,14 +1,12 @@
 """The two error forms of the joint filter: the right perturbation and the invariant error.
 
 Both run the same EKF on the same state layout (:class:`~visla_edu.filters.ActiveSet`); they
-differ in what the state's error *means*, and so in four places: the covariance prediction, the
-pose Jacobian, how a correction is applied, and how a new landmark inherits the pose's
-uncertainty.
+differ in what the state's error *means*, and so in the covariance prediction, the pose
+Jacobian, how a correction is applied, and how a new landmark inherits the pose's uncertainty.
 
-* :class:`RightForm`, the form notebooks 06-08 derive (right perturbation, see
-  :mod:`visla_edu.lie`). Its unobservable directions (moving the whole world) depend on the
-  estimate, so each update, linearised at a slightly different estimate, gains information the
-  data never gave: the classic overconfidence of EKF-SLAM (Huang, Mourikis and Roumeliotis 2008).
+* :class:`RightForm`, the form notebooks 06-08 derive (:mod:`visla_edu.lie`): its unobservable
+  directions (moving the whole world) depend on the estimate, so each update gains information the
+  data never gave, the classic overconfidence of EKF-SLAM (Huang, Mourikis and Roumeliotis 2008).
 * :class:`InvariantForm`, the invariant EKF (Barrau and Bonnabel 2017): the unobservable
   directions are the same whatever the estimate, the transition is the identity, and the filter
   stays consistent (notebook 10 compares the NEES of both).
@@ -17,8 +15,7 @@ Each form is a namespace of static methods with the same signatures (the class i
 never an instance), documented once here; a method ignores the arguments its form does not need:
 
 * ``Sigma`` (D, D): the joint covariance, ``D = 6 + 3 n`` (then 6 per clone);
-* ``world_T_imu`` (4, 4): the pose mean ``mu``, the IMU in the world (in ``predict``: after the
-  step);
+* ``world_T_imu`` (4, 4): the pose mean ``mu`` (in ``predict``: after the step);
 * ``p_active`` (n, 3): the landmark means in slot order; ``p_world`` (k, 3): the world point of
   each observation;
 * ``F``, ``W`` (6, 6): the step's :func:`visla_edu.motion.pose_transition` and motion noise;
@@ -112,9 +109,8 @@ class InvariantForm:
     def predict(Sigma, world_T_imu, p_active, F, W):
         """``Sigma <- Sigma + B B^T`` in place (:func:`visla_edu.motion.predict_invariant_covariance`); F is I here.
 
-        Non-finite entries of ``p_active`` count as 0 (the dense filter's placeholders get no
-        noise). Clones (columns after the landmarks) get no noise: a clone's world-frame error does
-        not change when the current pose moves.
+        Clones (columns after the landmarks) get no noise: a clone's world-frame error does not change
+        when the current pose moves.
         """
         end = 6 + 3 * len(p_active)
         motion.predict_invariant_covariance(Sigma[:end, :end], world_T_imu, p_active, W)
@@ -161,10 +157,9 @@ class InvariantForm:
     def landmark_sensitivity(G_pose):
         """``[I, 0]`` for each new landmark, (k, 3, 6) (only ``len(G_pose)`` is used).
 
-        With ``T = exp(hat(xi)) mu`` a point placed at ``mu p_imu`` is ``exp(hat(theta)) mu p_imu +
-        p`` to first order, so its invariant error ``e = p + R dp_imu`` takes the pose's translation
-        error and nothing of ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance,
-        world frame).
+        A point placed at ``mu p_imu`` is ``exp(hat(theta)) mu p_imu + p`` to first order, so its
+        invariant error ``e = p + R dp_imu`` takes the pose's translation error and nothing of
+        ``theta``; the pixels add ``R dp_imu`` (the triangulation covariance, world frame).
         """
         G = np.zeros((len(G_pose), 3, 6))
         G[:, :, :3] = np.eye(3)
@@ -174,8 +169,7 @@ class InvariantForm:
     def pose_cov(Sigma_pose, world_T_imu):
         """``Ad(inv(mu)) Sigma_xi Ad(inv(mu))^T`` (6, 6): the right-perturbation covariance.
 
-        ``delta = Ad(inv(mu)) xi``; ``Sigma_pose`` is the covariance of ``xi``, ``world_T_imu`` is
-        ``mu``.
+        ``delta = Ad(inv(mu)) xi``; ``Sigma_pose`` is the covariance of ``xi``.
         """
         A = lie.adjoint(lie.se3_inv(world_T_imu))
         return A @ Sigma_pose @ A.T

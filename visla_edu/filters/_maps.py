@@ -18,17 +18,9 @@ __all__ = ["DeadReckoning", "LandmarkMapping", "VisualInertialOdometry"]
 class DeadReckoning(FilterBase):
     """IMU prediction only: ``mu <- mu exp(tau u)``, ``Sigma <- F Sigma F^T + W``.
 
-    Its pose, with a 6x6 covariance of its own, is also the pose of mapping and VIO.
-
-    Parameters
-    ----------
-    dataset, camera, config
-        As :class:`~visla_edu.filters.FilterBase` (also its attributes and ``ValueError``).
-
-    Attributes
-    ----------
-    pose_cov : ndarray, shape (6, 6)
-        Covariance of the right perturbation ``[v; w]``; ``initial_pose_sigma^2 I`` at the start.
+    Its pose, with a 6x6 covariance of its own (:attr:`pose_cov`, right perturbation ``[v; w]``,
+    ``initial_pose_sigma^2 I`` at the start), is also the pose of mapping and VIO. Arguments,
+    attributes and ``ValueError`` as :class:`~visla_edu.filters.FilterBase`.
     """
 
     def __init__(self, dataset, camera, config):
@@ -59,11 +51,7 @@ class DeadReckoning(FilterBase):
 
 
 class _LandmarkMap(DeadReckoning):
-    """The dead-reckoning pose and a map of independent landmarks (mean and 3x3 covariance each).
-
-    Hook for the modes: :meth:`_pose_noise`, the part of the pose's uncertainty the gate
-    adds to each observation's innovation covariance.
-    """
+    """The dead-reckoning pose and independent landmarks (mean, 3x3 covariance); modes fill :meth:`_pose_noise`."""
 
     def __init__(self, dataset, camera, config):
         super().__init__(dataset, camera, config)
@@ -80,9 +68,8 @@ class _LandmarkMap(DeadReckoning):
     def _gate_mapped(self, ids, z, status, z_pred, known):
         """Predict and gate the observations of mapped landmarks (``known`` mask); fills ``z_pred`` and ``status``.
 
-        Returns ``accepted`` (k,) bool, ``nis`` (the sum of their squared Mahalanobis distances),
-        ``dof`` (4 per accepted) and ``pose_noise`` (k_accepted, 4, 4); ``nis`` NaN and
-        ``pose_noise`` None when none was predicted.
+        Returns ``accepted`` (k,) bool, ``nis`` (sum of their squared Mahalanobis distances; NaN when
+        none was predicted), ``dof`` (4 per accepted) and ``pose_noise`` (k_accepted, 4, 4) or None.
         """
         accepted = np.zeros(len(ids), dtype=bool)
         if not np.any(known):
@@ -118,26 +105,17 @@ class LandmarkMapping(_LandmarkMap):
     The poses are held fixed, but they are not exact: between a landmark's first sighting at
     ``t0`` and frame ``t`` the dead-reckoned motion accumulates the process noise
     ``Q = Sigma_t - Phi Sigma_t0 Phi^T`` with ``Phi = Ad(inv(T_t) T_t0)`` (the part of the pose
-    covariance that is not shared with the pose the landmark was placed from). Each
-    observation's noise becomes ``R + J_pose Q J_pose^T``, in the gate and in the update, so
-    a drifting IMU widens the gate instead of rejecting the observations
+    covariance not shared with the pose the landmark was placed from). Each observation's noise
+    becomes ``R + J_pose Q J_pose^T``, in the gate and in the update
     (``FilterConfig.mapping_motion_noise``; off, the poses count as exact).
-
-    Parameters
-    ----------
-    dataset, camera, config
-        As :class:`~visla_edu.filters.FilterBase`.
 
     Attributes
     ----------
-    landmark_cov : ndarray, shape (M, 3, 3)
-        Covariances of :attr:`landmarks`, independent of each other and of the pose.
-    init_frame : ndarray of int, shape (M,)
-        Frame of each landmark's first sighting, -1 before it.
-    pose_history : ndarray, shape (T, 4, 4)
-    pose_cov_history : ndarray, shape (T, 6, 6)
-        Pose mean and covariance at every frame processed so far (rows of later frames are not
-        set), for the motion noise ``Q``.
+    landmark_cov, init_frame : ndarray, shapes (M, 3, 3) and (M,) of int
+        Covariances of :attr:`landmarks`, independent of each other and of the pose, and the frame of
+        each landmark's first sighting, -1 before it.
+    pose_history, pose_cov_history : ndarray, shapes (T, 4, 4) and (T, 6, 6)
+        Pose mean and covariance at every frame processed so far (later rows not set), for ``Q``.
     """
 
     def __init__(self, dataset, camera, config):
@@ -172,22 +150,10 @@ class VisualInertialOdometry(_LandmarkMap):
 
     A landmark is placed once, from its first observation and the pose then (its covariance includes
     that pose's uncertainty, ``G_pose Sigma_pose G_pose^T``); later observations update the pose
-    alone, with ``R_i = sigma^2 I + J_landmark Sigma_i J_landmark^T``. Updating the landmarks too
-    would count each observation twice and drag pose and map along together
-    (``FilterConfig.vio_refine_landmarks`` does it for comparison);
-    :class:`~visla_edu.filters.JointSlam` refines both consistently.
-
-    Parameters
-    ----------
-    dataset, camera, config
-        As :class:`~visla_edu.filters.FilterBase`.
-
-    Attributes
-    ----------
-    pose_cov : ndarray, shape (6, 6)
-        Covariance of the pose's right perturbation ``[v; w]``, updated by the observations.
-    landmark_cov, init_frame
-        As :class:`LandmarkMapping`'s; a covariance includes the pose's uncertainty when placed.
+    alone (:attr:`pose_cov`), with ``R_i = sigma^2 I + J_landmark Sigma_i J_landmark^T``. Updating the
+    landmarks too would count each observation twice (``FilterConfig.vio_refine_landmarks`` does it
+    for comparison); :class:`~visla_edu.filters.JointSlam` refines both consistently.
+    ``landmark_cov`` and ``init_frame`` as :class:`LandmarkMapping`'s.
     """
 
     def _update(self, ids, z, status, z_pred):

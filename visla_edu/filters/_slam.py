@@ -6,15 +6,14 @@ its first usable observation, which it consumes (covariance and cross-covariance
 With ``dense=True`` it is the textbook filter over all landmarks from the start. Both give the
 same trajectory: a landmark not yet observed is uncorrelated with everything (its rows are filled
 at its first observation exactly as the active set appends them), and marginalising a Gaussian in
-covariance form is deleting rows and columns. The maps differ in one way: in the dense filter a
-retired landmark keeps moving through its correlation with the pose, in the active set it keeps
-the estimate it had when it left.
+covariance form is deleting rows and columns. The maps differ: in the dense filter a retired
+landmark keeps moving through its correlation with the pose, in the active set it keeps the
+estimate it had when it left.
 
-:class:`JointSlam` decides when to gate, update, enter, place again
-(``FilterConfig.reinit_gated_landmarks``) and retire; the error form (``FilterConfig.slam_error``,
-:mod:`visla_edu.filters._forms`) says what the state's error means. With clones
-(``FilterConfig.msckf_window > 0``; not dense) a landmark enters the state only when its track
-outlives the window (:mod:`visla_edu.filters._clones`), so only the long tracks cost state.
+:class:`JointSlam` decides when to gate, update, enter, place again (``reinit_gated_landmarks``)
+and retire; the error form (``FilterConfig.slam_error``, :mod:`visla_edu.filters._forms`) says
+what the state's error means. With clones (``FilterConfig.msckf_window > 0``; not dense) a
+landmark enters the state only when its track outlives the window (:mod:`visla_edu.filters._clones`).
 """
 
 import numpy as np
@@ -40,12 +39,9 @@ MAX_DENSE_BYTES = 4 * 2**30
 class JointSlam(CloneWindow, FilterBase):
     """Joint EKF over ``[pose; landmarks]``, active set by default, textbook form if ``dense``.
 
-    Parameters
-    ----------
-    dataset, camera, config
-        As :class:`~visla_edu.filters.FilterBase`.
-    dense : bool
-        Keep every (strided) landmark in the state from the first frame.
+    ``dataset``, ``camera``, ``config`` as :class:`~visla_edu.filters.FilterBase`; ``dense`` keeps
+    every (strided) landmark in the state from the first frame (``ValueError`` if its covariance
+    would exceed :data:`MAX_DENSE_BYTES`).
 
     Attributes
     ----------

@@ -23,21 +23,16 @@ __all__ = ["ActiveSet"]
 class ActiveSet:
     """Covariance of ``[pose; landmarks in the state]`` and the landmark of each slot.
 
-    Parameters
-    ----------
-    num_landmarks : int
-        ``M``, the number of landmark ids of the dataset.
-    pose_cov : array_like, shape (6, 6)
-        Covariance of the first pose.
+    ``num_landmarks`` is ``M``, the dataset's number of landmark ids; ``pose_cov`` (6, 6) the first
+    pose's covariance (``ValueError`` for another shape).
 
     Attributes
     ----------
     Sigma : ndarray, shape (D, D), D = 6 + 3 n (+ 6 per clone)
         The joint covariance. Read it; only this class's methods change it.
-    active_ids : ndarray of int, shape (n,)
-        Landmark id in each slot, in slot order.
-    slot_of : ndarray of int, shape (M,)
-        Slot of each landmark id, -1 when it is not in the state.
+    active_ids, slot_of : ndarray of int, shapes (n,) and (M,)
+        Landmark id in each slot, in slot order, and the slot of each landmark id, -1 when it is not
+        in the state.
     clone_frames : list of int
         The frame of each clone, oldest first (empty unless the filter clones poses).
     """
@@ -96,41 +91,15 @@ class ActiveSet:
         return np.swapaxes(self.Sigma[:POSE_DIM][:, self.columns(ids)], 0, 1)
 
     def propagate(self, form, world_T_imu, p_active, F, W):
-        """The prediction step of the covariance: ``form.predict`` on :attr:`Sigma`, in place.
-
-        Parameters
-        ----------
-        form : class
-            The error form (:mod:`visla_edu.filters._forms`), whose ``predict`` holds the formula.
-        world_T_imu, p_active, F, W
-            As the error forms' ``predict``.
-        """
+        """The covariance prediction in place: ``form.predict`` (:mod:`visla_edu.filters._forms`) on :attr:`Sigma`."""
         form.predict(self.Sigma, world_T_imu, p_active, F, W)
 
     def update(self, Sigma_Ht, S, innovation):
-        """One EKF gain step on :attr:`Sigma` (:func:`visla_edu.ekf.gain_update`); ``(delta, nis)``.
-
-        Parameters
-        ----------
-        Sigma_Ht : ndarray, shape (D, m)
-            ``Sigma H^T`` of the rows.
-        S : ndarray, shape (m, m)
-            Their innovation covariance.
-        innovation : ndarray, shape (m,)
-
-        Returns
-        -------
-        delta : ndarray, shape (D,)
-        nis : float
-        """
+        """:func:`visla_edu.ekf.gain_update` on :attr:`Sigma` (one EKF gain step): ``(delta, nis)``."""
         return ekf.gain_update(self.Sigma, Sigma_Ht, S, innovation)
 
     def correct(self, ids, z, noise_var, prediction, rows):
-        """The joint update with stereo observations of landmarks ``ids`` in the state; ``(delta, nis)``.
-
-        :func:`visla_edu.ekf.joint_correction` on their slots (``z`` (k, 4), ``prediction``
-        ``(z_pred, J_landmark, J_pose)``, ``rows`` the rig's stereo rows).
-        """
+        """:func:`visla_edu.ekf.joint_correction` on the slots of landmarks ``ids``: ``(delta, nis)``."""
         return ekf.joint_correction(self.Sigma, self.slot_of[ids], z, noise_var, prediction, rows)
 
     def landmark_covs(self, form, ids, means):
@@ -151,15 +120,9 @@ class ActiveSet:
         """Fill the rows of new landmarks placed from the current pose (:func:`visla_edu.ekf.initialize_landmarks`).
 
         ``Sigma_new,x = G_pose Sigma_pose,x`` for every state entry ``x``, and
-        ``Sigma_new,new = G_pose Sigma_pp G_pose^T + C_new`` (``C_new`` block diagonal).
-
-        Parameters
-        ----------
-        ids : ndarray of int, shape (k,)
-            Landmarks already in the state (:meth:`enter`), never updated since.
-        G_pose : ndarray, shape (k, 3, 6)
-            Zero gives the uncorrelated textbook shortcut.
-        C_new : ndarray, shape (k, 3, 3)
+        ``Sigma_new,new = G_pose Sigma_pp G_pose^T + C_new`` (``C_new`` block diagonal). ``ids``
+        (k,) are already in the state (:meth:`enter`), never updated since; ``G_pose`` (k, 3, 6),
+        zero for the uncorrelated textbook shortcut; ``C_new`` (k, 3, 3).
         """
         k = len(ids)
         cols = self.columns(ids).ravel()
@@ -174,14 +137,8 @@ class ActiveSet:
     def augment_delayed(self, ids, cross, block):
         """Fill the rows of new landmarks whose covariance is already known (delayed initialisation).
 
-        Parameters
-        ----------
-        ids : ndarray of int, shape (k,)
-            As in :meth:`augment`.
-        cross : ndarray, shape (3k, D)
-            ``Sigma_new,x`` for every state entry ``x`` (the new rows' own columns are ignored).
-        block : ndarray, shape (3k, 3k)
-            ``Sigma_new,new``.
+        ``ids`` (k,) as in :meth:`augment`; ``cross`` (3k, D) is ``Sigma_new,x`` for every state
+        entry ``x`` (the new rows' own columns are ignored), ``block`` (3k, 3k) ``Sigma_new,new``.
         """
         cols = self.columns(ids).ravel()
         self.Sigma[cols] = cross
@@ -201,17 +158,9 @@ class ActiveSet:
         del self.clone_frames[k]
 
     def retire(self, ids):
-        """Marginalise landmarks ``ids`` out of the state: delete their rows and columns; later slots move down.
+        """Marginalise landmarks ``ids`` (k,) out of the state: delete their rows and columns; later slots move down.
 
-        Parameters
-        ----------
-        ids : ndarray of int, shape (k,)
-            Landmarks in the state.
-
-        Returns
-        -------
-        ndarray, shape (k, 3, 3)
-            Their marginal covariances at the moment they leave.
+        Returns their marginal covariances (k, 3, 3) at the moment they leave.
         """
         covs = self.marginals(ids)
         leaving = np.zeros(len(self.active_ids), dtype=bool)

@@ -1,27 +1,26 @@
 """Multi-frame track updates of the joint filter: the MSCKF null-space update and delayed entry.
 
-A landmark that is not in the joint state keeps its observations in a :class:`TrackBuffer`
-while the frames they were made from are *cloned* in the state (copies of past poses,
-:meth:`visla_edu.filters.ActiveSet.clone_pose`); when they are used is
-:mod:`visla_edu.filters._clones`'s. Then, all at once (Mourikis and Roumeliotis 2007; OpenVINS):
+A landmark not in the joint state keeps its observations in a :class:`TrackBuffer` while the
+frames they were made from are *cloned* in the state (:meth:`visla_edu.filters.ActiveSet.clone_pose`);
+:mod:`visla_edu.filters._clones` decides when they are used. Then, all at once (Mourikis and
+Roumeliotis 2007; OpenVINS):
 
-1. **Triangulation** from every observation and the clones' means (:func:`triangulate_tracks`):
-   Gauss-Newton on the inverse depth ``(x/z, y/z, 1/z)`` in the camera of the observation with
-   the largest disparity, robust (Huber) weights, so a far point (disparity below a pixel) is as
-   well posed as a near one.
+1. **Triangulation** (:func:`triangulate_tracks`): Gauss-Newton on the inverse depth
+   ``(x/z, y/z, 1/z)`` in the camera of the observation with the largest disparity, Huber
+   weights, so a far point (disparity below a pixel) is as well posed as a near one.
 2. **Linearisation** (:func:`track_systems`): the stacked residual ``r`` (4 rows per observation)
    of ``z = h(T_k, m)`` with Jacobians ``H_x`` on the clones (the error form's
    ``clone_jacobian``) and ``H_m`` on the point.
 3. **Null space** (:func:`project_out_point`): with ``H_m = [Q1 Q2] [R1; 0]`` (QR), ``Q2^T r =
    Q2^T H_x x + Q2^T n`` no longer involves the point: an EKF update of the clones (and so of
-   everything correlated with them) with ``4 n - 3`` rows and a whole-track chi-square gate (a
-   track that is wrong as a whole, a moving car or a mismatch, is refused as a whole).
+   everything correlated with them) with ``4 n - 3`` rows and a whole-track chi-square gate
+   (:func:`gate_tracks`: a moving car or a mismatch is refused as a whole).
 4. **Delayed entry** of a long track as a SLAM landmark: the ``Q1`` rows give its covariance and
    its correlation with the state (:func:`delayed_entry`), the ``Q2`` rows update the state as in 3.
 
-Everything is batched over the tracks of a frame, as arrays over their ``N`` observations:
-``world_T_imu`` (N, 4, 4) the clone mean each was made from, ``z`` (N, 4) its stereo pixels
-(disparity positive), ``owner`` (N,) its track, ``0 .. count - 1``, sorted.
+Shared arrays, over the ``N`` observations of a frame's tracks: ``world_T_imu`` (N, 4, 4) the clone
+mean each was made from, ``z`` (N, 4) its stereo pixels (disparity positive), ``owner`` (N,) its
+track, ``0 .. count - 1``, sorted.
 """
 
 import numpy as np
@@ -118,9 +117,9 @@ def _from_inverse_depth(world_T_cam, psi):
 def triangulate_tracks(camera, world_T_imu, z, owner, count, sigma_pixel):
     """Least-squares points ``p_world`` (count, 3) of ``count`` tracks, and ``ok`` (count,) bool.
 
-    From the observations ``world_T_imu``, ``z`` and ``owner`` (module docstring; every track at
-    least once); ``sigma_pixel`` scales the Huber weights (:data:`HUBER_SIGMAS`). ``ok``: finite,
-    and at least :data:`MIN_POINT_DEPTH` in front of every camera that saw it.
+    Every track is observed at least once; ``sigma_pixel`` scales the Huber weights
+    (:data:`HUBER_SIGMAS`). ``ok``: finite, and at least :data:`MIN_POINT_DEPTH` in front of every
+    camera that saw it.
     """
     disparity = camera.disparity(z)
     anchor = np.zeros(count, dtype=np.int64)
@@ -152,7 +151,7 @@ def triangulate_tracks(camera, world_T_imu, z, owner, count, sigma_pixel):
 
 
 def track_systems(camera, form, world_T_imu, z, owner, p_world):
-    """Residuals and Jacobians of every observation of the tracks: ``r`` (N, 4), ``H_clone`` (N, 4, 6), ``H_point`` (N, 4, 3).
+    """Residuals ``r`` (N, 4) and Jacobians ``H_clone`` (N, 4, 6), ``H_point`` (N, 4, 3) of every track observation.
 
     ``H_clone`` is with respect to the error of the clone the observation was made from (the
     error form's ``clone_jacobian``), ``H_point`` with respect to the world point ``m``.
