@@ -2,8 +2,7 @@
 
 Errors of a pose estimate ``mu`` against the truth ``T`` are right perturbations
 (:mod:`visla_edu.lie`): ``e = se3_log(inv(mu) @ T)``.
-:func:`evaluate` gathers what a run is judged by against ground truth (ATE raw and aligned,
-KITTI drift) in a :class:`TrajectoryEvaluation`.
+:func:`evaluate` gathers ATE (raw and aligned) and KITTI drift in a :class:`TrajectoryEvaluation`.
 
 Trajectories ``est_world_T_imu``, ``gt_world_T_imu`` (T, 4, 4), ``world`` the first IMU frame for
 both, need ``T >= 1`` and every pose finite and rigid to :data:`~visla_edu.validation.POSE_RIGID_TOL`,
@@ -44,13 +43,7 @@ def _check_poses(poses, name, caller):
 
 
 def align_se3(p_est, p_gt):
-    """Rigid transform ``gt_T_est`` that best maps estimated positions onto true ones.
-
-    Least squares (Kabsch/Umeyama without scale): minimises ``sum |p_gt - (R p_est + t)|^2``.
-
-    Parameters
-    ----------
-    p_est, p_gt : ndarray, shape (N, 3)
+    """Rigid ``gt_T_est`` minimising ``sum |p_gt - (R p_est + t)|^2`` over ``p_est, p_gt`` (N, 3) (Kabsch, no scale).
 
     Returns
     -------
@@ -71,10 +64,8 @@ def ate(est_world_T_imu, gt_world_T_imu, align=True):
 
     Parameters
     ----------
-    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
     align : bool
-        First apply the rigid transform of :func:`align_se3` (removes the arbitrary choice of
-        world frame); without it both trajectories must share the world frame.
+        First apply :func:`align_se3`; without it both trajectories must share the world frame.
 
     Returns
     -------
@@ -89,21 +80,16 @@ def ate(est_world_T_imu, gt_world_T_imu, align=True):
 
 
 def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
-    """Relative pose error over ``delta`` frames: RMS translation (m) and rotation (rad).
-
-    Compares ``inv(est[t]) est[t+delta]`` with ``inv(gt[t]) gt[t+delta]``; insensitive to the
-    world frame and to drift accumulated before ``t``.
+    """RMS translation (m) and rotation (rad) of ``inv(rel_est) rel_gt``, ``rel = inv(T[t]) T[t+delta]``.
 
     Parameters
     ----------
-    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
     delta : int
-        Frames between the two poses of each pair, ``1 <= delta < T`` (else a ``ValueError``).
+        ``1 <= delta < T``, else a ``ValueError``.
 
     Returns
     -------
     (float, float)
-        Translation RMS (m) and rotation RMS (rad) of ``inv(rel_est) rel_gt``.
     """
     est, gt = _check_trajectories(est_world_T_imu, gt_world_T_imu, "rpe")
     if isinstance(delta, bool) or not isinstance(delta, (int, np.integer)):
@@ -119,12 +105,7 @@ def rpe(est_world_T_imu, gt_world_T_imu, delta=10):
 
 
 def pose_errors(est_world_T_imu, gt_world_T_imu):
-    """Right-perturbation errors ``e_t = se3_log(inv(mu_t) T_t)`` (twist ``[v; w]``).
-
-    Parameters
-    ----------
-    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
-        The estimates ``mu_t`` and the true poses ``T_t``.
+    """Right-perturbation errors ``e_t = se3_log(inv(mu_t) T_t)`` (twist ``[v; w]``), ``mu_t`` estimated, ``T_t`` true.
 
     Returns
     -------
@@ -135,19 +116,17 @@ def pose_errors(est_world_T_imu, gt_world_T_imu):
 
 
 def nees(errors, covariances, skip_singular=True):
-    """Normalised estimation error squared ``e_t^T Sigma_t^{-1} e_t`` per time step.
+    """Normalised estimation error squared ``e_t^T Sigma_t^{-1} e_t`` per step: chi-square(n) when consistent.
 
     Parameters
     ----------
-    errors : ndarray, shape (T, n)
-    covariances : ndarray, shape (T, n, n)
+    errors, covariances : ndarray, shapes (T, n) and (T, n, n)
     skip_singular : bool
-        Return NaN where the covariance is singular (e.g. the exactly known first pose).
+        NaN where the covariance is singular (e.g. the exactly known first pose); else a ``ValueError``.
 
     Returns
     -------
     ndarray, shape (T,)
-        Chi-square with n dof per step when the filter is consistent.
     """
     errors = np.asarray(errors, dtype=float)
     covariances = np.asarray(covariances, dtype=float)
@@ -168,22 +147,18 @@ def nees(errors, covariances, skip_singular=True):
 
 
 def chi2_quantile(probability, dof):
-    """Quantile of the chi-square distribution: ``x`` with ``P(chi2_dof <= x) = probability``.
-
-    ``x = 2 gammaincinv(dof / 2, probability)``: the numbers of ``scipy.stats.chi2.ppf``, without
-    importing scipy.stats (that import alone takes longer than calibrating a course drive).
+    """Chi-square quantile ``x = 2 gammaincinv(dof / 2, probability)`` (``chi2.ppf`` without importing scipy.stats).
 
     Parameters
     ----------
     probability : float or array_like
         Lower-tail probability in [0, 1] (0 gives 0, 1 gives inf; outside is NaN).
     dof : int or array_like of int
-        Degrees of freedom; entries ``<= 0`` give NaN.
+        Entries ``<= 0`` give NaN.
 
     Returns
     -------
-    float or ndarray
-        Broadcast over ``probability`` and ``dof``.
+    float or ndarray (``probability`` and ``dof`` broadcast)
     """
     from scipy import special
 
@@ -193,16 +168,11 @@ def chi2_quantile(probability, dof):
 
 
 def chi2_bounds(dof, probability=0.95):
-    """Two-sided ``probability`` interval of a chi-square value with ``dof`` degrees of freedom.
-
-    ``[chi2.ppf(a, dof), chi2.ppf(1 - a, dof)]``, ``a = (1 - probability) / 2``: the package's one
-    chi-square band (NEES, NIS, the stepper's and the plots' bands all call it).
+    """Two-sided ``probability`` interval ``[chi2.ppf(a, dof), chi2.ppf(1 - a, dof)]``, ``a = (1 - probability) / 2``.
 
     Parameters
     ----------
     dof : int or array_like of int
-        Entries ``<= 0`` give NaN.
-    probability : float
 
     Returns
     -------
@@ -223,7 +193,6 @@ def nis_band(dof, probability=0.95):
     ----------
     dof : int or array_like of int
         Entries ``<= 0`` (no update) give NaN.
-    probability : float
 
     Returns
     -------
@@ -236,18 +205,13 @@ def nis_band(dof, probability=0.95):
 
 
 def average_nees_bounds(dof, runs, probability=0.95):
-    """Interval for the average of ``runs`` independent chi-square(dof) values.
-
-    Their sum is chi-square with ``runs * dof`` dof, so the average lies in
-    ``chi2_bounds(runs * dof, probability) / runs``.
+    """Interval ``chi2_bounds(runs * dof, probability) / runs`` of the average of ``runs`` chi-square(dof) values.
 
     Parameters
     ----------
-    dof : int
-        Of each value (6 for a pose NEES).
-    runs : int
-        How many values are averaged (e.g. Monte-Carlo runs, or time steps).
-    probability : float
+    dof, runs : int
+        Degrees of freedom of each value (6 for a pose NEES); how many independent values are averaged
+        (e.g. Monte-Carlo runs, or time steps).
 
     Returns
     -------
@@ -266,11 +230,7 @@ DRIFT_STEP = 10
 
 
 def path_distances(world_T_imu):
-    """Distance travelled along a trajectory up to each frame (m): ``d_0 = 0``, ``d_i = d_{i-1} + |p_i - p_{i-1}|``.
-
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (T, 4, 4)
+    """Distance (m) along ``world_T_imu`` (T, 4, 4) up to each frame: ``d_0 = 0``, ``d_i = d_{i-1} + |p_i - p_{i-1}|``.
 
     Returns
     -------
@@ -281,23 +241,12 @@ def path_distances(world_T_imu):
 
 
 def kitti_drift(est_world_T_imu, gt_world_T_imu, lengths=DRIFT_LENGTHS, step=DRIFT_STEP):
-    """KITTI-style drift: relative pose error over segments of 100, 200, ..., 800 m of path.
+    """KITTI-style drift: relative pose error over segments of ``lengths`` (m of ground-truth path).
 
-    For every start frame ``f = 0, step, 2 step, ...`` and segment length ``L``, the segment
-    ends at the first frame ``l`` whose ground-truth path distance exceeds ``d_f + L``
-    (:func:`path_distances`; no segment when the drive ends first). Its error is
-    ``E = inv(inv(est_f) est_l) (inv(gt_f) gt_l)``: the translation error ``|t(E)| / L`` and
-    the rotation error ``angle(E) / L``, averaged over all segments of all lengths (the
-    definition of the KITTI odometry devkit; the angle here is ``|so3_log|``, accurate for
-    small errors where ``acos`` of the trace is not).
-
-    Parameters
-    ----------
-    est_world_T_imu, gt_world_T_imu : ndarray, shape (T, 4, 4)
-    lengths : sequence of float
-        Segment lengths (m).
-    step : int
-        Frames between segment starts.
+    For every start frame ``f = 0, step, 2 step, ...`` and segment length ``L``, the segment ends at
+    the first frame ``l`` whose ground-truth path distance exceeds ``d_f + L`` (none when the drive
+    ends first); its error is ``E = inv(inv(est_f) est_l) (inv(gt_f) gt_l)``, averaged over all
+    segments (the KITTI devkit's definition, the angle ``|so3_log|``, not ``acos`` of the trace).
 
     Returns
     -------
@@ -331,23 +280,15 @@ class TrajectoryEvaluation:
 
     Attributes
     ----------
-    ate_raw : float
-        :func:`ate` (m) without alignment.
-    ate_aligned : float
-        :func:`ate` (m) after the best rigid alignment (:func:`align_se3`).
-    drift_translation : float or None
-        KITTI translation drift (% of segment length, :func:`kitti_drift`); None when unavailable.
-    drift_rotation : float or None
-        KITTI rotation drift (degrees per 100 m); None when unavailable.
-    drift_segments : int
-    drift_note : str
-        Why the drift is unavailable (``""`` when it is available).
+    ate_raw, ate_aligned : float
+        :func:`ate` (m) without alignment, and after the best rigid alignment (:func:`align_se3`).
+    drift_translation, drift_rotation : float or None
+        :func:`kitti_drift` (%, degrees per 100 m) over ``drift_segments`` segments; None when
+        unavailable, and ``drift_note`` says why (``""`` when available).
     path_length : float
         Ground-truth path length (m) over the compared frames.
-    frames : int
-        Frames compared: the first ``frames`` poses (those the ground truth covers).
-    total_frames : int
-        Frames of the estimate.
+    frames, total_frames : int
+        Frames compared (the first ``frames`` poses, those the ground truth covers), and of the estimate.
     """
 
     ate_raw: float
@@ -383,20 +324,13 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
 
     Parameters
     ----------
-    est_world_T_imu : ndarray, shape (T, 4, 4)
     gt_world_T_imu : ndarray, shape (n, 4, 4)
-        The ground truth of frames ``0 .. n - 1``, ``1 <= n <= T`` (a real drive's poses may
-        cover fewer frames than the dataset: the first ``n`` estimated poses are compared).
+        The ground truth of frames ``0 .. n - 1``, ``1 <= n <= T`` (else a ``ValueError``): a real
+        drive's may cover fewer frames; the first ``n`` estimated poses are compared.
 
     Returns
     -------
     TrajectoryEvaluation
-        Its :meth:`~TrajectoryEvaluation.summary` is one line for a report.
-
-    Raises
-    ------
-    ValueError
-        The ground truth has more frames than the estimate, or a check of the module docstring fails.
     """
     est = np.asarray(est_world_T_imu, dtype=float)
     gt = np.asarray(gt_world_T_imu, dtype=float)
@@ -417,23 +351,19 @@ def evaluate(est_world_T_imu, gt_world_T_imu):
 
 
 def gated_share(status_totals):
-    """The gated share of a run: the observations the gate rejected among those it tested.
+    """The gated share of a run, in [0, 1]: ``gated / (used + gated)``, 0 when the gate tested none.
 
-    ``gated / (used + gated)``: the one definition the course uses (:meth:`visla_edu.run.RunResult.summary`
-    and the notebooks). Observations the gate never saw (new landmarks, no depth, too far,
-    ignored) are left out, so the share compares directly with ``1 - gate_probability``, what a
-    consistent filter without outliers rejects.
+    Observations the gate never saw (new landmarks, no depth, too far, ignored) are left out: the
+    share compares with ``1 - gate_probability``, what a consistent filter without outliers rejects.
 
     Parameters
     ----------
     status_totals : dict
-        Observation counts by status name (:meth:`visla_edu.run.RunResult.status_totals`);
-        ``"used"`` and ``"gated"`` are read, missing ones count as 0.
+        Counts by status name (:meth:`visla_edu.run.RunResult.status_totals`); missing ones count as 0.
 
     Returns
     -------
     float
-        In ``[0, 1]``; 0 when the gate tested no observation.
     """
     used, gated = int(status_totals.get("used", 0)), int(status_totals.get("gated", 0))
     return gated / (used + gated) if used + gated else 0.0

@@ -8,14 +8,11 @@ TUM (``t x y z qx qy qz qw``)
     scalar last (scipy's order); lines starting with ``#`` are comments.
 
 visla-edu writes ``world_T_imu`` (the IMU pose, ``world`` = the IMU frame at the first time
-stamp) in both, with every float written exactly (shortest round-trip repr), so reading a
-written file gives back the same numbers. Note that KITTI's own ground truth holds poses of
-the left *camera* in the first camera frame; :func:`visla_edu.data.kitti_poses_from_imu`
-converts an IMU trajectory to that convention.
-
->>> from visla_edu import trajectory
->>> trajectory.write_trajectory("slam.tum", result.time_stamps, result.world_T_imu)  # doctest: +SKIP
->>> times, poses = trajectory.read_trajectory("slam.tum")                            # doctest: +SKIP
+stamp) with :func:`write_trajectory`: atomically (a temporary file in the same folder, then
+renamed; nothing for a non-finite pose), every float exactly (shortest round-trip repr), returning
+the absolute path; :func:`read_trajectory` reads it back. Every ``path`` is a str or os.PathLike.
+KITTI's own ground truth holds poses of the left *camera* in the first camera frame
+(:func:`~visla_edu.data.kitti_poses_from_imu` converts).
 
 Every problem with a file is a one-line error naming the file, the line and the value: a
 ``FileNotFoundError`` (no such file, or a folder), a ``PermissionError`` (not readable) or a
@@ -46,11 +43,7 @@ ORTHONORMAL_TOL = POSE_RIGID_TOL
 
 
 def trajectory_format(path):
-    """The format of a trajectory file from its suffix: ``.kitti``/``.txt`` KITTI, ``.tum`` TUM, else a ValueError.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
+    """The format of a trajectory file from its suffix (:data:`FORMATS`), else a ValueError.
 
     Returns
     -------
@@ -74,7 +67,6 @@ def read_table(path, allowed_columns, what):
 
     Parameters
     ----------
-    path : str or os.PathLike
     allowed_columns : tuple of int
     what : str
         What the file should hold, for the error messages (e.g. ``"KITTI times: one number per row"``).
@@ -83,7 +75,7 @@ def read_table(path, allowed_columns, what):
     -------
     table : ndarray, shape (n, c)
     line_numbers : ndarray of int, shape (n,)
-        The file line (from 1) of each row, for error messages.
+        The file line (from 1) of each row.
     """
     path = expand_user(path)
     _check_text_file(path, what)
@@ -174,15 +166,11 @@ def _poses(rotations, translations):
 def read_kitti(path):
     """Read a KITTI poses file (12 numbers per row, or 13 with the time first).
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-
     Returns
     -------
     poses : ndarray, shape (n, 4, 4)
     times : ndarray, shape (n,), or None
-        The first column of a 13-column file (strictly increasing), else None.
+        None for a 12-column file.
     """
     table, line_numbers = read_table(path, (12, 13), "KITTI poses: 12 numbers per row, row-major 3x4 [R | t]")
     times = table[:, 0].copy() if table.shape[1] == 13 else None
@@ -195,18 +183,12 @@ def read_kitti(path):
 
 
 def read_tum(path):
-    """Read a TUM trajectory file (``t x y z qx qy qz qw`` per row, ``#`` comments).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
+    """Read a TUM trajectory file (``t x y z qx qy qz qw`` per row, the quaternion normalised, ``#`` comments).
 
     Returns
     -------
     times : ndarray, shape (n,)
-        Strictly increasing.
     poses : ndarray, shape (n, 4, 4)
-        Rotation from the (normalised) quaternion, scalar last.
     """
     table, line_numbers = read_table(path, (8,), "TUM trajectory: t x y z qx qy qz qw")
     norms = np.linalg.norm(table[:, 4:], axis=1)
@@ -223,16 +205,11 @@ def read_tum(path):
 def read_trajectory(path):
     """Read a trajectory in its suffix's format (:func:`trajectory_format`): :func:`read_tum` or :func:`read_kitti`.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-
     Returns
     -------
     times : ndarray, shape (n,), or None
-        Seconds, strictly increasing; None for a 12-column KITTI file. Always first.
+        Seconds; None for a 12-column KITTI file. Always first.
     poses : ndarray, shape (n, 4, 4)
-        The poses as written, e.g. ``world_T_imu`` of a run.
     """
     if trajectory_format(path) == "tum":
         return read_tum(path)
@@ -269,34 +246,18 @@ def _write_rows(path, rows):
 
 
 def write_kitti(path, poses):
-    """Write poses as a KITTI poses file: 12 numbers per row, row-major 3x4 ``[R | t]``.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Written atomically (a temporary file in the same folder, then renamed).
-    poses : array_like, shape (T, 4, 4)
-        E.g. ``world_T_imu`` of a run; finite, else a ``ValueError`` and nothing is written.
+    """Write ``poses`` (T, 4, 4) as a KITTI poses file: 12 numbers per row, row-major 3x4 ``[R | t]``.
 
     Returns
     -------
     pathlib.Path
-        The absolute path written.
     """
     poses, _ = _check_poses(poses)
     return _write_rows(path, poses[:, :3, :].reshape(len(poses), 12))
 
 
 def write_tum(path, time_stamps, poses):
-    """Write poses as a TUM trajectory (``t x y z qx qy qz qw`` per row, scipy's quaternion, scalar last).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Written atomically, as in :func:`write_kitti`.
-    time_stamps : array_like, shape (T,)
-        Seconds.
-    poses : array_like, shape (T, 4, 4)
+    """Write ``time_stamps`` (T,) s and ``poses`` (T, 4, 4) as a TUM trajectory (scipy's quaternion, scalar last).
 
     Returns
     -------
@@ -310,14 +271,7 @@ def write_tum(path, time_stamps, poses):
 
 
 def write_trajectory(path, time_stamps, poses):
-    """Write a trajectory in the format of the file's suffix (:func:`trajectory_format`).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        ``.kitti`` or ``.txt``: KITTI (``time_stamps`` not written); ``.tum``: TUM.
-    time_stamps : array_like, shape (T,)
-    poses : array_like, shape (T, 4, 4)
+    """Write ``time_stamps`` (T,), ``poses`` (T, 4, 4) by the suffix (:func:`trajectory_format`; KITTI drops the times).
 
     Returns
     -------

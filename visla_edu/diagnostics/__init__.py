@@ -1,16 +1,10 @@
 """Calibrate a drive from its own data, without ground truth, and say why.
 
-Course files carry quirks a student cannot see by eye (flipped extrinsic axes, velocity samples
-a frame ahead of the motion, velocity noise from nearly none to 0.5 m/s, outlier tracks, stale
-frames). :func:`calibrate` (``_calibration``) measures them by track reprojection (``_tracks``,
-``_bootstrap``), residual correlation along tracks (``_correlation``), visual odometry against
-the IMU (:mod:`.odometry`, ``_vo``, ``_motion``) and the velocities' noise (``_noise``), and
-decides one :class:`Calibration`: what the filter's ``"auto"`` settings use, cached per dataset
-content, with a readable :meth:`Calibration.report` (``_report``, ``visla-edu info``). A 2025+
-file's four possible readings of its extrinsics are decided first (:func:`choose_reading`,
-``_readings``). The single checks: :func:`check_extrinsics`, :func:`outlier_indicators` and, in
-``_checks``, :func:`resolve_extrinsics`, :func:`check_time_alignment`,
-:func:`imu_noise_and_bias`, :func:`diagnose`.
+:func:`calibrate` (``_calibration``) decides the :class:`Calibration` the filter's ``"auto"``
+settings use, from track reprojection (``_tracks``, ``_bootstrap``), residual correlation along
+tracks (``_correlation``), visual odometry against the IMU (:mod:`.odometry`, ``_vo``, ``_motion``)
+and the velocities' noise (``_noise``), after a 2025+ file's reading of its extrinsics
+(:func:`choose_reading`, ``_readings``); ``_report`` prints it, ``_checks`` has the single checks.
 
 Parameters shared by the whole package: ``dataset`` is a :class:`visla_edu.dataset.Dataset`;
 ``imu_T_cam`` (4, 4) is the left camera (optical frame) in the IMU frame; with ``lag`` the step

@@ -1,12 +1,8 @@
 """Cluster bootstrap of medians: resample whole clusters, vectorised over the resamples.
 
-Values that share an error (the pairs of one landmark, or of landmarks anchored at the same
-frames) are not independent; their clusters are. Resampling clusters with replacement gives each
-cluster a multiplicity ``W[m, b]``; resample ``b``'s median weighs each value by its cluster's.
-Instead of ``B`` sorts, the values are binned once into ``_BINS`` equal-count bins between the 2%
-and 98% quantiles (plus one below, one above): a sparse (bins x clusters) count matrix times ``W``
-gives every resample's histogram, and the median is interpolated linearly in the bin where the
-cumulative weight reaches half (with 192 bins, far below the resampling spread).
+Clusters are the values that share an error (the pairs of one landmark, or of landmarks anchored
+at the same frames). Every resample's median comes from one histogram of ``_BINS`` equal-count
+bins: a sparse (bins x clusters) count matrix times the multiplicities ``W`` (M, B).
 """
 
 import numpy as np

@@ -6,12 +6,11 @@ The rules (one setting for every drive, never per-drive tuning):
   worse with 95% confidence, :class:`~._tracks.TrackScorer`) unless the visual odometry, with
   enough pairs, "disagrees" with it; otherwise the file's calibration (``"none"``).
 * **IMU lag**: the track evidence among the lags -2..+2 with that correction; otherwise 0
-  (:func:`_decide_lag`). The odometry's rotation residuals per lag are reported alongside.
+  (:func:`_decide_lag`).
 * **Velocity noise**: white + hold noise per axis, with floors (:mod:`._noise`).
 * **Gyro bias and velocity scale**: reported with a standard error and a verdict, not applied.
 
-The result is kept in ``dataset.extra["calibration"]`` and in the user cache folder
-(:mod:`visla_edu.cache`, :func:`cache_path`): a second run on the same data reuses it.
+The result is kept in ``dataset.extra["calibration"]`` and in the user cache (:func:`cache_path`).
 """
 
 import time
@@ -68,8 +67,7 @@ class VoEvidence:
     frame_pairs, pairs : int
         Consecutive frame pairs, and those usable (:func:`~._vo.vo_pairs`).
     stale_pairs, stale_points : int
-        Frame pairs holding stale copies (pixels repeating the previous frame's bit for bit), and
-        such points.
+        Frame pairs holding stale copies (:func:`visla_edu.dataset.stale_copies`), and such points.
     rotation_slope, translation_slope, extrinsic_verdict : dict
         Correction -> :class:`~._vo.ExtrinsicCheck`'s slope (at lag ``slope_lag``) and verdict.
     lag_residual, lag_best : list, int or None
@@ -100,30 +98,21 @@ class Calibration:
 
     Attributes
     ----------
-    extrinsic_correction : str
-        Key of :data:`CORRECTIONS` applied to the file's ``imu_T_cam`` (or the chosen reading's).
-    imu_T_cam : ndarray, shape (4, 4)
-        ``CORRECTIONS[extrinsic_correction] @`` the ``imu_T_cam`` it applies to.
-    imu_lag : int
-        The step ``t -> t+1`` uses ``u[t + imu_lag]``.
+    extrinsic_correction, imu_T_cam : str, ndarray (4, 4)
+        Key of :data:`CORRECTIONS`, and ``CORRECTIONS[extrinsic_correction] @`` the file's
+        ``imu_T_cam`` (or the chosen reading's).
     sigma_linear_velocity, sigma_angular_velocity : ndarray, shape (3,)
         Velocity noise per axis (m/s, rad/s): :func:`~._noise.imu_noise`'s ``sigma``.
     white_noise, hold_noise : ndarray, shape (6,)
         Its two parts, linear axes first.
     reasons : dict
         ``"extrinsic_correction"``, ``"imu_lag"``, ``"noise"`` -> one line of why.
-    repeated_frames : list of int
-        Frames repeating the previous frame exactly.
-    outliers : dict
-        :func:`outlier_indicators`.
+    repeated_frames, outliers : list of int, dict
+        Frames repeating the previous frame exactly; :func:`outlier_indicators`.
     track_correlation, correlated_tracks : float, int
-        :func:`~._correlation.track_correlation` along the dead-reckoned poses (chosen lag and
-        correction).
-    seconds : float
-        Time the computation took.
-    source : str
-        ``"computed"`` or ``"cache <path>"``.
-    version : int
+        :func:`~._correlation.track_correlation` along the dead-reckoned poses (chosen lag, correction).
+    seconds, source, version : float, str, int
+        Time the computation took; ``"computed"`` or ``"cache <path>"``; the
         :data:`CALIBRATION_VERSION` of the code that computed it.
     reading : ReadingEvidence or None
         The reading of a file whose extrinsics have several (:func:`~._readings.choose_reading`).
@@ -224,11 +213,6 @@ def outlier_indicators(dataset, epipolar_px=3.0):
     and ``vo_rejected`` (tracked points of the valid odometry pairs that are not inliers). With two
     intrinsics the right pixels are first mapped into the left camera's
     (:func:`visla_edu.camera.right_in_left_pixels`).
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    epipolar_px : float
     """
     z = right_in_left_pixels(dataset.obs_z, dataset.K, dataset.K_right)
     n = max(len(z), 1)
@@ -257,8 +241,7 @@ def _decide_correction(choice, check):
 def _decide_lag(choice):
     """The lag and why: one that beats every other with 95% confidence, else the best if it beats lag 0 so.
 
-    The lags it cannot be told from are then all better than 0 too (dataset 0022: +1 and +2 both
-    beat 0, not each other); otherwise the course's convention, 0.
+    The lags it cannot be told from then all beat 0 too; otherwise the course's convention, 0.
     """
     if choice.chosen is not None:
         return int(choice.chosen), "every other lag has a larger track-reprojection error with 95% confidence"
@@ -338,7 +321,7 @@ def _compute(dataset):
 def cache_path(dataset):
     """The cache file of ``dataset``'s calibration, a :class:`pathlib.Path` (nothing is created).
 
-    ``<cache dir>/calibration-<hash>.json`` in :func:`visla_edu.cache.cache_dir`, the 64-hex-digit
+    ``<cache dir>/calibration-<hash>.json`` in :func:`visla_edu.cache.cache_dir`, the
     :func:`visla_edu.cache.content_hash` of :data:`CACHED_ARRAYS` and :data:`CALIBRATION_VERSION`; a
     ValueError when the cache folder's name cannot be expanded.
     """
@@ -377,18 +360,14 @@ def calibrate(dataset, cache=True):
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
     cache : bool
         Reuse and store the result in the user cache folder (:func:`cache_path`); a corrupt cache
         file is recomputed, a folder that cannot be written is skipped.
 
     Raises
     ------
-    TypeError
-        ``dataset`` is not a :class:`~visla_edu.dataset.Dataset`.
     ValueError
-        A non-finite time stamp, velocity or pixel, time stamps that do not increase, or velocities
-        of the wrong shape (the message names the frame).
+        A non-finite time stamp, velocity or pixel, non-increasing time stamps or misshapen velocities.
     """
     _check_inputs(dataset)
     if "calibration" in dataset.extra:

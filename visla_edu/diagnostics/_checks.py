@@ -15,7 +15,6 @@ def resolve_extrinsics(dataset, correction="auto"):
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
     correction : str
         ``"auto"`` (what :func:`calibrate` decides), or a key of :data:`CORRECTIONS` applied to
         ``dataset.imu_T_cam`` (the loader's reading); ValueError otherwise.
@@ -24,9 +23,8 @@ def resolve_extrinsics(dataset, correction="auto"):
     -------
     imu_T_cam : ndarray, shape (4, 4)
     evidence : str
-        Why a correction was applied, or ``""``. With ``"auto"``, a 2025+ file's chosen reading,
-        why and any warning come first, and when the file's calibration is kept, a warning if the
-        odometry contradicts it and every correction of it (:data:`UNEXPLAINED_SLOPE`).
+        Why a correction was applied, or ``""``; with ``"auto"`` also a 2025+ file's chosen reading
+        and the warnings (:func:`_unexplained_extrinsic_warning`).
     """
     if correction == "auto":
         calibration = calibrate(dataset)
@@ -62,11 +60,7 @@ UNEXPLAINED_SLOPE = 0.15
 
 
 def _unexplained_extrinsic_warning(calibration):
-    """A warning when the odometry contradicts ``imu_T_cam`` and every axis correction of it.
-
-    An inverted extrinsic or one in another convention (never on the course files): the filters
-    then produce garbage, and the run says so.
-    """
+    """A warning (or ``""``) when the odometry contradicts ``imu_T_cam`` and every axis correction of it."""
     verdicts = calibration.vo.extrinsic_verdict if calibration.vo is not None else {}
     if not verdicts or any(v != DISAGREES for v in verdicts.values()):
         return ""
@@ -82,13 +76,7 @@ def _unexplained_extrinsic_warning(calibration):
 def check_time_alignment(dataset, imu_T_cam=None, lags=LAGS):
     """Which velocity sample best explains the odometry's rotation (a dict, :func:`~._vo.time_alignment`).
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    imu_T_cam : ndarray, shape (4, 4), optional
-        Default: :func:`calibrate`'s.
-    lags : sequence of int
-        Candidate lags.
+    ``imu_T_cam`` defaults to :func:`calibrate`'s; ``lags`` are the candidates.
     """
     if imu_T_cam is None:
         imu_T_cam = calibrate(dataset).imu_T_cam
@@ -98,13 +86,7 @@ def check_time_alignment(dataset, imu_T_cam=None, lags=LAGS):
 def imu_noise_and_bias(dataset, imu_T_cam=None, lag=0):
     """IMU noise levels from the velocities and the gyro bias seen by the visual odometry.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    imu_T_cam : ndarray, shape (4, 4), optional
-        Default: :func:`calibrate`'s.
-    lag : int
-        Of the gyro-bias comparison.
+    ``imu_T_cam`` defaults to :func:`calibrate`'s; ``lag`` is the gyro-bias comparison's.
 
     Returns
     -------

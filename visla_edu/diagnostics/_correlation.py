@@ -1,18 +1,15 @@
 """How long a track's pixel errors persist: the residual correlation along tracks.
 
-Every track of at least :data:`MIN_TRACK` observations is triangulated from a trajectory (linear
-least squares on all four pixel rows of all its observations); its left-image residuals
-``r_t = uL_t - u(p, t)``, less their mean, enter one pooled lag-1 autocorrelation over
-consecutive frames::
+Each track of at least :data:`MIN_TRACK` observations is triangulated from a trajectory; its
+left-image residuals ``r_t = uL_t - u(p, t)``, less their mean, enter one pooled lag-1
+autocorrelation over consecutive frames::
 
     rho = sum_tracks sum_t r_t r_(t+1) / sum_tracks sum_t r_t^2
 
-White pixel noise gives ``rho`` near 0 (slightly below); an error that persists from frame to
-frame (drift, a feature sliding along an edge, far features on a highway) near 1, and a track of
-``L`` observations is then worth about ``L (1 - rho) / (1 + rho)`` independent ones. Removing the
-mean biases ``rho`` down by about ``(1 + 4 rho) / L`` (0.81 reads as 0.5 on 10-frame tracks). The
-trajectory's own errors persist too, so ``rho`` describes the camera only where the trajectory is
-locally accurate (the gyro regime of :func:`visla_edu.filters.pixel_noise_inflation`).
+A track of ``L`` observations is then worth about ``L (1 - rho) / (1 + rho)`` independent ones;
+removing the mean biases ``rho`` down by about ``(1 + 4 rho) / L``. The trajectory's own errors
+persist too: ``rho`` describes the camera only where the trajectory is locally accurate (the gyro
+regime of :func:`visla_edu.filters.pixel_noise_inflation`).
 """
 
 import numpy as np
@@ -52,15 +49,12 @@ def _left_u_residuals(Ks, cam_T_world, z):
 
 
 def track_correlation(dataset, world_T_imu, imu_T_cam):
-    """Pooled lag-1 autocorrelation of the left-image residuals along the tracks (module docstring).
+    """Pooled lag-1 autocorrelation ``rho`` of the left-image residuals along the tracks (module docstring).
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
     world_T_imu : ndarray, shape (T, 4, 4)
         One IMU pose per frame (ValueError otherwise).
-    imu_T_cam : ndarray, shape (4, 4)
-        As the filter will use it.
 
     Returns
     -------

@@ -1,10 +1,8 @@
 """Visual-odometry evidence on the IMU's own errors: gyro bias and velocity scale.
 
 Both compare the odometry's motion in the IMU frame with the IMU's over the usable frame pairs
-(:func:`~visla_edu.diagnostics._vo.vo_pairs`) by :func:`robust_location` (exact for a normal
-core; a heavy tail does not move it). They are reported with a verdict, not applied: on a sparse
-drive the odometry's own biases are as large as the effects (``0020``'s gyro-bias estimate
-disagrees with its ground truth).
+(:func:`~visla_edu.diagnostics._vo.vo_pairs`) by :func:`robust_location`, and are reported with a
+verdict, not applied: on a sparse drive the odometry's own biases are as large as the effects.
 """
 
 import numpy as np
@@ -51,12 +49,6 @@ def _used_motion(dataset, imu_T_cam, lag):
 def gyro_bias(dataset, imu_T_cam, lag=0):
     """Gyro bias: the robust mean of ``w_imu[t + lag] - log(R_vo) / tau_t`` over the usable pairs.
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    imu_T_cam : ndarray, shape (4, 4)
-    lag : int
-
     Returns
     -------
     dict
@@ -82,8 +74,7 @@ def gyro_bias(dataset, imu_T_cam, lag=0):
 def velocity_scale(dataset, imu_T_cam, lag=0):
     """Velocity scale: the median of ``|t_vo| / |tau v_imu[t + lag]|`` over the usable pairs.
 
-    ``t_vo`` is the odometry's translation in the IMU frame; steps shorter than :data:`MIN_STEP`
-    by the IMU are left out (the ratio is noise there). Parameters as :func:`gyro_bias`.
+    Steps shorter than :data:`MIN_STEP` by the IMU are left out.
 
     Returns
     -------

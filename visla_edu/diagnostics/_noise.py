@@ -1,21 +1,15 @@
 """The IMU velocity noise the filter should assume, per axis, from the velocities alone.
 
-Two parts add up in variance, ``sigma = sqrt(white^2 + hold^2)``:
+``sigma = sqrt(white^2 + hold^2)``, floored at :data:`MIN_SIGMA_LINEAR`, :data:`MIN_SIGMA_ANGULAR`:
 
-* **white**, the sensor's own noise: for a smooth signal plus white noise ``s``,
-  ``var(x[t+1] - 2 x[t] + x[t-1]) = 6 s^2``, so
-  ``white = 1.4826 MAD(second differences) / sqrt(6)``.
-* **hold**, the motion model's error: the filter holds each sample over its step while the true
-  velocity changes by ``change``, with ``rms(x[t+1] - x[t])^2 = change^2 + 2 white^2``; holding a
-  linearly changing velocity is wrong by half the change on average, so
-  ``hold = sqrt(max(rms(diff)^2 - 2 white^2, 0)) / 2``, leaving out first differences beyond
-  :data:`GLITCH_MADS` robust sigmas (one glitched sample must not set the noise of a drive; the
-  filter's divergence check reports it at its frame).
+* **white**, the sensor's noise: ``white = 1.4826 MAD(second differences) / sqrt(6)``, as
+  ``var(x[t+1] - 2 x[t] + x[t-1]) = 6 s^2`` for a smooth signal plus white noise ``s``.
+* **hold**, the error of holding each sample over its step (half the change on average):
+  ``hold = sqrt(max(rms(diff)^2 - 2 white^2, 0)) / 2``, as ``rms(diff)^2 = change^2 + 2 white^2``,
+  leaving out first differences beyond :data:`GLITCH_MADS` robust sigmas.
 
-``sigma`` is floored at :data:`MIN_SIGMA_LINEAR`, :data:`MIN_SIGMA_ANGULAR`. Fewer than
-:data:`MIN_NOISE_SAMPLES` samples measure neither part (a median of one or two differences is
-0): the noise is then the course's :data:`UNMEASURED_SIGMA_LINEAR`,
-:data:`UNMEASURED_SIGMA_ANGULAR`, not the floors, which would trust a velocity nobody measured.
+Under :data:`MIN_NOISE_SAMPLES` samples neither part is measured: the noise is then
+:data:`UNMEASURED_SIGMA_LINEAR`, :data:`UNMEASURED_SIGMA_ANGULAR`, not the floors.
 """
 
 import numpy as np
@@ -40,18 +34,13 @@ GLITCH_MADS = 20.0
 
 
 def imu_noise(twists):
-    """White and hold noise of each velocity axis and the filter's noise from them.
-
-    Parameters
-    ----------
-    twists : array_like, shape (T, 6)
-        Velocity samples ``[v; w]`` (m/s, rad/s); ValueError for another shape.
+    """White and hold noise of each axis of ``twists`` (T, 6) and the filter's noise from them.
 
     Returns
     -------
     dict
-        ``white``, ``hold`` and ``sigma`` (6,), linear axes first, and ``measured`` (bool; False for
-        a drive too short, whose parts are then 0 and ``sigma`` the unmeasured values).
+        ``white``, ``hold``, ``sigma`` (6,), linear axes first; ``measured`` (False for a drive too
+        short: parts 0, ``sigma`` the unmeasured values).
     """
     twists = np.asarray(twists, dtype=float)
     floor = np.repeat([MIN_SIGMA_LINEAR, MIN_SIGMA_ANGULAR], 3)

@@ -1,18 +1,13 @@
 """Which way a 2025+ file's extrinsics point and which camera frame they use, decided from evidence.
 
 The file's ``extL_T_imu``, ``extR_T_imu`` may be read four ways
-(:func:`visla_edu.camera.extrinsic_readings`: camera->IMU or IMU->camera, optical or regular
-camera frame). :func:`choose_reading` takes the only reading under which the rig is rectified
-(``RigReading.problem``: the right camera is the left one moved along the left camera's x axis;
-a wrong camera frame, and usually a wrong direction, puts it on another axis); among several,
-the one the track reprojection chooses (:class:`~._tracks.TrackScorer`, the readings as the
-candidates); else the loader's (the first rectified one of :data:`visla_edu.data.READING_ORDER`),
-with a warning. Geometry comes first: it is exact when both extrinsics are written the same way,
-while a file's IMU axes may be flipped (dataset 03's are), which the motion would read as another
-reading; the flips are decided afterwards, on the chosen reading. The motion evidence (the tracks
-and :func:`~._vo.check_extrinsics`) checks the choice: a warning says when the tracks choose
-another reading, or the odometry disagrees with it and agrees with another, or disagrees with all
-four while the tracks do not confirm it.
+(:func:`visla_edu.camera.extrinsic_readings`). :func:`choose_reading` takes the only reading under
+which the rig is rectified (the right camera on the left camera's x axis); among several, the one
+the track reprojection chooses (:class:`~._tracks.TrackScorer`); else the loader's (the first
+rectified one of :data:`visla_edu.data.READING_ORDER`), with a warning. Geometry comes first, as
+a file's IMU axes may be flipped (dataset 03's are), which the motion would read as another
+reading; the flips are decided afterwards. The motion evidence only checks the choice
+(:func:`_motion_warning`).
 """
 
 from dataclasses import asdict, dataclass
@@ -39,12 +34,11 @@ class ReadingEvidence:
     loader, chosen : str
         The reading the loader started from, and the one used.
     track : TrackChoice
-        Track reprojection among the readings (each at its best lag).
+        Among the readings (each at its best lag).
     track_scores : dict
         Name -> median left-image error (px) per lag of :data:`~._vo.LAGS` (None without pairs).
     rotation_slope, translation_slope, vo_verdict : dict
-        Name -> :class:`~._vo.ExtrinsicCheck`'s slopes (at lag ``slope_lag``; None without pairs)
-        and verdict.
+        Name -> :class:`~._vo.ExtrinsicCheck`'s slopes at lag ``slope_lag`` (None without pairs), verdict.
     reason, warning : str
         Why, in one line; ``""`` or what the user should check.
     """

@@ -1,7 +1,6 @@
 """The readable report of a :class:`~._calibration.Calibration` (what ``visla-edu info`` prints).
 
-Nothing here computes: every number comes from the calibration's evidence, and a value that
-could not be measured is printed as "not enough evidence", never as NaN.
+Nothing here computes; a value that could not be measured is printed as "not enough evidence", never NaN.
 """
 
 import numpy as np
@@ -98,14 +97,7 @@ def _reading_lines(reading):
 
 
 def calibration_report(calibration, name=""):
-    """Readable lines (str) of a calibration's evidence, ending with "the filter will use: ...".
-
-    Parameters
-    ----------
-    calibration : visla_edu.diagnostics.Calibration
-    name : str
-        Dataset name for the first line.
-    """
+    """Readable report (str) of a :class:`Calibration` of dataset ``name``, ending "the filter will use: ..."."""
     c = calibration
     origin = ("computed" if c.source == "computed" else f"reused from the {c.source}")
     lines = [f"calibration from the data{' of ' + name if name else ''} ({origin}; "

@@ -1,22 +1,17 @@
 """Track-reprojection evidence for the extrinsic axes and the IMU lag (works on sparse drives).
 
-Each landmark's first observation with disparity above :data:`MIN_DISPARITY` (its anchor) is
-triangulated, ``p_a`` in the left camera at frame ``a``, and paired with its later observations
-1 to :data:`MAX_GAP` frames later, except stale copies (:func:`visla_edu.dataset.stale_copies`)
-and non-positive disparities. The IMU's dead-reckoned motion with a candidate lag, through a
+Each landmark's first observation with disparity above :data:`MIN_DISPARITY` (its anchor), ``p_a``
+in the left camera at frame ``a``, is paired with its observations 1 to :data:`MAX_GAP` frames
+later (:func:`track_pairs`). The IMU's dead-reckoned motion with a candidate lag, through a
 candidate ``imu_T_cam = C X``, predicts the point at frame ``b``::
 
     q = cam_T_imu  inv(S_a S_(a+1) ... S_(b-1))  imu_T_cam  p_a,    S_t = exp(tau_t u[t + lag]^)
 
-A candidate's score is the median over all pairs (robust to outlier tracks) of the left-image
-error ``|(u, v)(q) - (uL, vL)_b|``: wrong axes or a wrong lag move the prediction off the track.
-
-A seeded bootstrap (:mod:`._bootstrap`) of each candidate's median minus the best one's resamples
-groups of landmarks anchored in the same block of :data:`BLOCK` frames (they share the IMU's
-noise over the same steps: the groups are the independent units). A candidate is chosen only when
-every competitor is worse with :data:`CONFIDENCE` confidence (the lower ``1 - CONFIDENCE``
-quantile of its difference above zero); otherwise the verdict is "not enough evidence" and the
-caller keeps its default.
+A candidate's score is the median over all pairs of the left-image error ``|(u, v)(q) - (uL, vL)_b|``.
+It is chosen only when every competitor is worse with :data:`CONFIDENCE` confidence: the lower
+``1 - CONFIDENCE`` quantile of its median minus the best one's, in a seeded bootstrap
+(:mod:`._bootstrap`) over blocks of :data:`BLOCK` anchor frames, is above zero; otherwise the
+verdict is "not enough evidence" and the caller keeps its default.
 """
 
 from dataclasses import asdict, dataclass
@@ -112,14 +107,13 @@ class TrackEvidence:
 
 
 def track_pairs(dataset):
-    """Anchor and later observations of ``dataset``'s scored pairs (the pairing: the module docstring).
+    """Anchor and later observations of the scored pairs (stale copies and non-positive disparities left out).
 
     Returns
     -------
-    anchor, later : ndarray of int, shape (P,)
-        Indices into the dataset's observations (``obs_ids``, ``obs_z``).
-    gap : ndarray of int, shape (P,)
-        Frames from the anchor to the later observation, ``1..MAX_GAP``.
+    anchor, later, gap : ndarray of int, shape (P,)
+        Indices into the dataset's observations (``obs_ids``, ``obs_z``); frames from the anchor to
+        the later observation, ``1..MAX_GAP``.
     """
     frames = dataset.observation_frames()
     order = np.lexsort((frames, dataset.obs_ids))  # landmark by landmark, in time
@@ -189,7 +183,6 @@ class TrackScorer:
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
     candidates : dict of str to ndarray (4, 4), optional
         Name -> candidate ``imu_T_cam`` (e.g. the readings of a 2025+ file, :mod:`._readings`);
         default :func:`corrections_of` ``dataset.imu_T_cam``.
@@ -197,7 +190,6 @@ class TrackScorer:
     Attributes
     ----------
     names : list of str
-        The candidates, in order.
     errors, scores : ndarray, shapes (len(LAGS), len(names), P) and (len(LAGS), len(names))
         Each pair's error, and each candidate's median (NaN without pairs).
     group : ndarray of int, shape (P,)

@@ -1,11 +1,10 @@
 """Visual-odometry evidence: the extrinsic axes check and the time alignment.
 
-The robust stereo odometry (:func:`visla_edu.diagnostics.odometry.visual_odometry`) gives the left
-camera's motion ``cam_T_next`` between consecutive frames. Mapped into the IMU frame through a
-candidate ``imu_T_cam`` it must agree with the IMU's own motion ``exp(tau_t u[t + lag])``: axes
-that disagree turn the slope of one on the other negative, and the right lag has the smallest
-rotation disagreement. Only pairs with at least :data:`MIN_INLIERS` inliers are used: pairs of 3
-points (common on sparse drives) have heavy-tailed rotation errors.
+The left camera's motion ``cam_T_next`` (:func:`visla_edu.diagnostics.odometry.visual_odometry`),
+mapped into the IMU frame through a candidate ``imu_T_cam``, must agree with the IMU's own motion
+``exp(tau_t u[t + lag])``: axes that disagree turn the slope of one on the other negative, and the
+right lag has the smallest rotation disagreement. Only pairs with at least :data:`MIN_INLIERS`
+inliers are used: pairs of 3 points (common on sparse drives) have heavy-tailed rotation errors.
 """
 
 from dataclasses import dataclass, field
@@ -75,10 +74,7 @@ def vo_pairs(vo):
 
 
 def vo_motion_in_imu_frame(vo, imu_T_cam):
-    """The IMU at ``t + 1`` in the IMU at ``t``, (T-1, 4, 4): ``imu_T_cam cam_T_next inv(imu_T_cam)``.
-
-    Invalid pairs give the identity, as their ``cam_T_next`` is.
-    """
+    """``imu_T_cam cam_T_next inv(imu_T_cam)`` (T-1, 4, 4): IMU at ``t + 1`` in IMU at ``t``; identity if invalid."""
     return imu_T_cam @ vo.cam_T_next @ lie.se3_inv(imu_T_cam)
 
 
@@ -88,10 +84,7 @@ def vo_in_imu_frame(vo, imu_T_cam):
 
 
 def imu_step_twists(dataset, lag=0):
-    """IMU motion over each frame interval, ``tau_t u[t + lag]`` (T-1, 6), ``tau_t = t_{t+1} - t_t``.
-
-    The lag is clipped at the ends (:func:`select_twists`); ValueError for twists not (T, 6).
-    """
+    """IMU motion over each frame interval, ``tau_t u[t + lag]`` (T-1, 6), ``tau_t = t_{t+1} - t_t``; lag clipped."""
     return dataset.time_steps[:, None] * select_twists(dataset.twists, lag)
 
 
@@ -116,23 +109,20 @@ class ExtrinsicCheck:
     Attributes
     ----------
     rotation_slope, translation_slope : dict
-        Least-squares slope of the VO motion on the IMU motion (rotation vectors, translations):
-        near +1 when the axes agree, negative rotation slope for a flipped axis pair; NaN without
-        usable pairs.
+        Least-squares slope of the VO motion on the IMU's (rotation vectors, translations): near +1
+        when the axes agree, negative rotation slope for a flipped axis pair; NaN without pairs.
     rotation_rms : dict
         RMS of the per-frame rotation disagreement (rad).
     rotation_slope_error, translation_slope_error : float
         Standard errors of the slopes (of the best-fitting candidate; large for a drive with little
-        turning). Infinite without pairs.
+        turning), infinite without pairs.
     recommended : str
-        The candidate that agrees where the file's calibration disagrees (the best such), or
-        ``"none"``.
+        The candidate that agrees where the file's calibration disagrees (the best such), or ``"none"``.
     pairs : int
-        Frame pairs used (:func:`vo_pairs`).
     verdict : dict
         ``"agrees"`` (both slopes above :data:`MIN_SLOPE`), ``"disagrees"`` (a slope below it by
-        :data:`MIN_SIGNIFICANCE` standard errors) or ``"not enough evidence"`` (also with fewer than
-        :data:`MIN_VO_PAIRS` pairs).
+        :data:`MIN_SIGNIFICANCE` standard errors), else (or with fewer than :data:`MIN_VO_PAIRS`
+        pairs) ``"not enough evidence"``.
     """
 
     rotation_slope: dict
@@ -177,16 +167,12 @@ def _verdict(rotation, translation, rotation_error, translation_error, pairs):
 
 
 def check_extrinsics(dataset, lag=0, candidates=None):
-    """Score each axis-flip correction of ``imu_T_cam`` (or other candidates) against the IMU's motion.
+    """An :class:`ExtrinsicCheck` of each axis-flip correction of ``imu_T_cam`` (or other candidates).
 
-    For every usable frame pair the VO twist in the IMU frame is regressed on ``tau u[t + lag]``:
-    axes that disagree with the IMU's give a negative rotation slope (turns seen the wrong way
-    round) or translation slope. Returns an :class:`ExtrinsicCheck`.
+    For every usable frame pair the VO twist in the IMU frame is regressed on ``tau u[t + lag]``.
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    lag : int
     candidates : dict of str to ndarray (4, 4), optional
         Name -> candidate ``imu_T_cam``; default :func:`corrections_of` the dataset's.
     """
@@ -217,7 +203,7 @@ def time_alignment(dataset, imu_T_cam, lags=LAGS):
 
     ``residual``: lag -> median over the usable pairs of ``|log(R_vo) - tau w[t + lag]|`` (rad per
     frame; rotation changes faster than speed, so it carries the timing); ``best``: the lag with the
-    smallest, None with fewer than :data:`MIN_VO_PAIRS` pairs (residuals then NaN); ``pairs``.
+    smallest, None with fewer than :data:`MIN_VO_PAIRS` pairs; ``pairs``.
     """
     vo = odometry_of(dataset)
     used = vo_pairs(vo)

@@ -5,23 +5,19 @@ both are triangulated: ``p_prev`` in the camera at ``t``, ``p_next`` in the came
 the motion ``cam_T_next`` (camera at ``t + 1`` in the camera at ``t``) maps
 ``p_prev = cam_T_next p_next``. Vectorised over frame pairs and hypotheses:
 
-1. **Hypotheses** (RANSAC): rigid alignments of random triples of points in closed form
-   (:func:`align_triples`), each refined by 2 Gauss-Newton steps on its own reprojection.
-2. **Scoring by reprojection**: ``z_pred = Ks pi(cam_T_next p_next)`` (:func:`transfer_pixels`)
-   against the measured ``z_prev = [uL, vL, uR, vR]``. A residual carries the noise of both
-   frames, about ``sqrt(2) pixel_sigma`` per pixel, so a point is an inlier when
+1. **RANSAC** over closed-form alignments of random triples (:func:`align_triples`), each refined
+   by Gauss-Newton on its own reprojection; most inliers win (ties: the smaller sum of their errors).
+   A residual ``r = z_prev - Ks pi(cam_T_next p_next)`` (:func:`transfer_pixels`) of the measured
+   ``z_prev = [uL, vL, uR, vR]`` carries the noise of both frames, so a point is an inlier when
    ``|r|^2 / 2 < pixel_sigma^2 chi2_4(probability)`` (defaults 1 px and 99%: ``|r| < 5.15`` px).
-   Most inliers win (ties: the smaller sum of inlier errors).
-3. **Gauss-Newton on SE(3)** (right perturbation, see :mod:`visla_edu.lie`): on the RANSAC
-   inliers; then the inliers again with each residual's own covariance ``sigma^2 (I + A A^T)``
+2. **Gauss-Newton on SE(3)** (right perturbation, :mod:`visla_edu.lie`) on the RANSAC inliers;
+   the inliers again with each residual's covariance ``sigma^2 (I + A A^T)``
    (:func:`_transfer_information`, :func:`_inliers`), and Gauss-Newton weighted by
-   ``W = (I + A A^T)^-1``. The covariance of the motion is ``s^2 H^-1``, ``H = J^T W J``, with
-   ``s^2`` the pair's measured pixel variance shrunk toward the drive's (:func:`_pixel_variance`).
+   ``W = (I + A A^T)^-1``. The motion's covariance is ``s^2 H^-1``, ``H = J^T W J``, ``s^2`` the
+   pair's measured pixel variance shrunk toward the drive's (:func:`_pixel_variance`).
 
-Points whose pixels at ``t + 1`` repeat those at ``t`` bit for bit are stale copies (the course
-files have whole frame pairs of them while the vehicle turns), left out and counted. Pairs with
-fewer than ``min_inliers`` inliers are invalid: identity motion, infinite covariance, never
-NaN. The result is deterministic for a given ``seed``.
+Stale copies (:func:`visla_edu.dataset.stale_copies`) are left out and counted. Pairs with
+fewer than ``min_inliers`` inliers are invalid: identity motion, infinite covariance, never NaN.
 """
 
 from dataclasses import dataclass
@@ -63,20 +59,17 @@ class VisualOdometry:
 
     Attributes
     ----------
-    cam_T_next : ndarray, shape (T - 1, 4, 4)
-        The left camera at ``t + 1`` in the left camera at ``t`` (identity if invalid).
-    covariance : ndarray, shape (T - 1, 6, 6)
-        Of the right perturbation ``[v; w]`` of ``cam_T_next``; infinite diagonal if invalid.
+    cam_T_next, covariance : ndarray, shapes (T - 1, 4, 4) and (T - 1, 6, 6)
+        The motion (identity if invalid) and the covariance of its right perturbation ``[v; w]``
+        (infinite diagonal if invalid).
     valid : ndarray of bool, shape (T - 1,)
     inliers, tracked, stale : ndarray of int, shape (T - 1,)
         Points consistent with the motion; seen in both frames with positive disparity in both
         (stale copies excluded); stale copies (a pair of only those measures no motion: invalid).
-    rms_px : ndarray, shape (T - 1,)
-        RMS of the inliers' transfer residuals per pixel coordinate (0 if invalid).
-    pixel_variance : ndarray, shape (T - 1,)
-        The measured pixel variance (px^2) scaling the covariance (0 if invalid).
+    rms_px, pixel_variance : ndarray, shape (T - 1,)
+        RMS of the inliers' transfer residuals per pixel coordinate, and the measured pixel variance
+        (px^2) scaling the covariance (both 0 if invalid).
     settings : dict
-        The parameters the odometry ran with.
     """
 
     cam_T_next: np.ndarray
@@ -103,8 +96,7 @@ def align_triples(p_prev, p_next):
 
         R = F_prev Rz(angle) F_next^T,    t = mean(p_prev) - R mean(p_next)
 
-    This is Kabsch among motions that keep the triangle's orientation (a gross outlier can flip it;
-    such samples only lose), without an SVD: fast for many hypotheses.
+    Kabsch among motions that keep the triangle's orientation, without an SVD.
 
     Parameters
     ----------
@@ -113,8 +105,7 @@ def align_triples(p_prev, p_next):
 
     Returns
     -------
-    R : ndarray, shape (..., 3, 3)
-    t : ndarray, shape (..., 3)
+    R, t : ndarray, shapes (..., 3, 3) and (..., 3)
     ok : ndarray of bool, shape (...)
         False for (nearly) collinear or non-finite triples, whose ``R, t`` are meaningless.
     """
@@ -151,7 +142,7 @@ def _plane_frame(p):
 
 
 def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
-    """Stereo pixels in frame ``t`` of points triangulated in frame ``t + 1``, and their Jacobian.
+    """Stereo pixels ``z`` in frame ``t`` of points triangulated in frame ``t + 1``, and their Jacobian.
 
     ``z = Ks pi(cam_T_next p_next)``: :func:`visla_edu.camera.project_points` with the motion as
     the transform, so for ``cam_T_next = mu exp(hat(delta))`` (right perturbation, see
@@ -161,18 +152,13 @@ def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
 
     Parameters
     ----------
-    cam_T_next : ndarray, shape (..., 4, 4)
-        Motion ``mu`` (camera at ``t + 1`` in the camera at ``t``).
-    p_next : ndarray, shape (..., N, 3)
-        Points in the camera at ``t + 1``.
+    cam_T_next, p_next : ndarray, shapes (..., 4, 4) and (..., N, 3)
     Ks : ndarray, shape (4, 4)
         Stereo matrix (:func:`visla_edu.camera.stereo_matrix`).
-    jacobian : bool
 
     Returns
     -------
     z : ndarray, shape (..., N, 4)
-        Predicted ``[uL, vL, uR, vR]`` in frame ``t``.
     J_z_motion : ndarray, shape (..., N, 4, 6)
         Only when ``jacobian`` is true.
     """
@@ -185,10 +171,7 @@ def transfer_pixels(cam_T_next, p_next, Ks, jacobian=True):
 def camera_motion(world_T_imu, imu_T_cam):
     """Left-camera motion ``cam_T_next`` (T-1, 4, 4) between consecutive IMU poses: ``inv(W_t C) W_{t+1} C``.
 
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (T, 4, 4)
-    imu_T_cam : ndarray, shape (4, 4)
+    ``W = world_T_imu`` (T, 4, 4), ``C = imu_T_cam``.
     """
     world_T_cam = np.asarray(world_T_imu, dtype=float) @ np.asarray(imu_T_cam, dtype=float)
     return lie.se3_inv(world_T_cam[:-1]) @ world_T_cam[1:]
@@ -268,9 +251,8 @@ def _transfer_information(cam_T_next, z_next, p_next, rig):
     """Inverse (..., N, 4, 4) of the transfer residual's covariance ``sigma^2 (I + A A^T)``, over ``sigma^2``.
 
     ``A = Ks dpi/dq(q)[:, :3] R J_p_z(z_next)`` carries frame ``t + 1``'s pixel noise through the
-    triangulation and the transfer: near the identity on ``uL, vL, uR`` for small motions, while a
-    translation turns the depth error of far points into a pixel error. A point whose ``A`` is not
-    finite, or beyond ``_MAX_TRANSFER_GAIN``, gets no information (zeros).
+    triangulation and the transfer. A point whose ``A`` is not finite, or beyond
+    ``_MAX_TRANSFER_GAIN``, gets no information (zeros).
     """
     J_z_point = project_points(rig.Ks, cam_T_next, p_next)[2]  # Ks dpi/dq R, the derivative w.r.t. p_next
     A = J_z_point @ rig.triangulation_jacobian(z_next)
@@ -313,11 +295,7 @@ def _inliers(cam_T_next, batch, information, Ks, threshold):
 
 
 def _ransac(batch, Ks, settings, rng):
-    """Best 3-point hypothesis per pair: motions (P, 4, 4) and inlier masks (P, N).
-
-    Each is refined on its own reprojection: 3-D alignment lets the depth error of far points
-    (growing with depth squared) tilt the rotation; pixels do not.
-    """
+    """Best 3-point hypothesis per pair, each refined on its own reprojection: motions (P, 4, 4), inliers (P, N)."""
     z_prev, _, p_prev, p_next, mask = batch
     rows = np.arange(len(mask))[:, None, None]
     triples = _sample_triples(mask.sum(axis=1), settings.hypotheses, rng)
@@ -401,9 +379,7 @@ def _summary(cam_T_next, H, chi2, squared, inlier, settings):
 def _pixel_variance(chi2, dof, valid):
     """Residual variance per pair, ``(chi2 + n0 s0^2) / (dof + n0)``, shrunk toward the pooled ``s0^2``.
 
-    ``n0 = _PRIOR_DOF``: 3 points have 6 residual dof, so their own estimate scatters by +-58%.
-    Floored at ``_MIN_PIXEL_VARIANCE`` (noise-free pixels keep an invertible covariance); 0 if
-    invalid.
+    ``n0 = _PRIOR_DOF``; floored at ``_MIN_PIXEL_VARIANCE``; 0 if invalid.
     """
     if not np.any(valid):
         return np.zeros(len(valid))
@@ -479,18 +455,14 @@ def visual_odometry(dataset, pixel_sigma=1.0, probability=0.99, hypotheses=16, m
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    pixel_sigma : float
-        Pixel noise (px) of the inlier test (the covariance uses the measured residuals).
-    probability : float
-        Chi-square probability of the inlier test.
+    pixel_sigma, probability : float
+        Pixel noise (px) and chi-square probability of the inlier test (the covariance uses the
+        measured residuals).
     hypotheses : int
         3-point hypotheses per frame pair; 16 draw an all-inlier sample with probability
         ``1 - (1 - 0.7^3)^16 = 99.9%`` even with 30% outliers.
-    min_inliers : int
-        Fewer make a pair invalid.
-    seed : int
-        The same seed gives the same result.
+    min_inliers, seed : int
+        Fewer inliers make a pair invalid; the same seed gives the same result.
     """
     settings = _settings(pixel_sigma, probability, hypotheses, min_inliers, seed)
     _check_dataset(dataset)
