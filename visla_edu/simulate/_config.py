@@ -17,76 +17,54 @@ OUTLIER_KINDS = ("offset", "uniform")
 class SimulationConfig:
     """Every parameter of a simulated drive (defaults: the ``"course"`` preset).
 
-    Lengths in metres, times in seconds, angles in radians; a pair ``(lo, hi)`` is a range
-    sampled uniformly.
+    Lengths in metres, times in seconds, angles in radians; a pair ``(lo, hi)`` is a range sampled uniformly; a
+    ``*_timescale`` is the correlation time of its smooth noise.
 
     Attributes
     ----------
-    num_frames : int
-        T (ignored by the stand-in: the file decides).
-    time_step, time_step_jitter, start_time : float
-        Mean step between time stamps, the standard deviation of its jitter, the first stamp.
-    speed_range, speed_timescale : (float, float), float
-        Forward speed ``mid + half_width * tanh(smooth noise)`` in the band; the noise's
-        correlation time.
-    yaw_rate_sigma, yaw_timescale : float
-        Gentle curves: smooth yaw-rate noise, its standard deviation and correlation time.
-    turn_interval : float
-        One turn per this much drive time (a 100 s drive has 4 at 25 s).
-    turn_angle_range, turn_duration_range : (float, float)
-        Heading change of a turn (either direction) and its duration.
-    roll_pitch_amplitude, roll_pitch_timescale : float
-        Roll and pitch angles are smooth noise of this amplitude; their rates are tiny.
-    side_velocity_sigma : float
-        Smooth lateral and vertical body velocity (a car barely slips).
-    linear_velocity_sigma, angular_velocity_sigma : float
-        White noise added to the true velocities to give the measured IMU velocities.
-    gyro_bias : (float, float, float)
-        Constant bias added to the measured angular velocity.
-    imu_lag : int
-        ``measured[k] = true[k - imu_lag]`` (edge samples repeated) + noise: sample ``t + imu_lag``
-        moves frame ``t`` to ``t + 1``. 1 on the KITTI raw drives; 0 is the course's convention.
-    K, b, imu_T_cam : ndarray (3, 3), float, ndarray (4, 4), or None
-        Calibration; None means :func:`default_rig` (stand-in: the calibration file).
-    K_right : ndarray (3, 3) or None
-        The right camera's own intrinsics (a rig with two, as a 2025+ file describes:
-        :class:`visla_edu.camera.StereoCamera`); None: the same as ``K``.
-    reported_imu_T_cam : ndarray (4, 4) or None
-        The extrinsic the dataset *reports*, when it differs from the simulated ``imu_T_cam``
-        (e.g. flipped axes like dataset 3's); the true one is kept in
-        ``extra["simulated_imu_T_cam"]``. None: the true one.
-    image_size : (int, int)
-        Width and height.
+    num_frames, time_step, time_step_jitter, start_time
+        T (ignored by the stand-in: the file decides); the mean step between time stamps, the standard deviation of
+        its jitter, the first stamp.
+    speed_range, speed_timescale, yaw_rate_sigma, yaw_timescale, roll_pitch_amplitude, roll_pitch_timescale
+        Forward speed ``mid + half_width * tanh(smooth noise)`` in the band; gentle curves: smooth yaw-rate noise of
+        this standard deviation; roll and pitch angles: smooth noise of this amplitude (their rates are tiny).
+    turn_interval, turn_angle_range, turn_duration_range
+        One turn per ``turn_interval`` of drive time (a 100 s drive has 4 at 25 s); its heading change (either
+        direction) and duration.
+    side_velocity_sigma, linear_velocity_sigma, angular_velocity_sigma, gyro_bias, imu_lag
+        Smooth lateral and vertical body velocity (a car barely slips); the measured IMU velocities are
+        ``true[k - imu_lag]`` (edge samples repeated) + white noise of these sigmas (+ the bias (3,) on the angular
+        one), so sample ``t + imu_lag`` moves frame ``t`` to ``t + 1``. ``imu_lag`` is 1 on the KITTI raw drives; 0 is
+        the course's convention.
+    K, b, imu_T_cam, K_right, reported_imu_T_cam : ndarray (3, 3), float, ndarray (4, 4), (3, 3), (4, 4), or None
+        Calibration; None means :func:`default_rig` (stand-in: the calibration file). ``K_right``: the right camera's
+        own intrinsics (a rig with two: :class:`visla_edu.camera.StereoCamera`), None: the same as ``K``.
+        ``reported_imu_T_cam``: the extrinsic the dataset *reports*, when it differs from the simulated
+        ``imu_T_cam`` (e.g. flipped axes like dataset 3's; the true one is kept in ``extra["simulated_imu_T_cam"]``),
+        None: the true one.
+    image_size, pixel_sigma
+        Width and height; the standard deviation of the noise on each of ``[uL, vL, uR, vR]``.
     num_landmarks, candidate_factor : int, float
-        Target number of tracks M (the per-frame cap may remove a few); landmarks placed per
-        wanted track (some are never seen, or only once).
-    imu_height, ahead_range, lateral_range, height_range : float, (float, float) x 3
-        A roadside landmark sits this far along the road ahead of its anchor pose, to the left
-        or right of the path, and above the road (``imu_height`` below the IMU).
-    far_share : float
-        Share of far landmarks (buildings, trees, hills): tiny disparity.
-    far_range, far_height_range, far_bearing : (float, float), (float, float), float
-        Far landmarks: distance from the anchor pose, height above the road, largest bearing
-        left or right of straight ahead.
-    scene_speed_floor, depth_range, track_loss_probability : float, (float, float), float
-    min_track_length, max_start_delay, max_observations_per_frame : int
-        The track model's (:mod:`visla_edu.simulate`, steps 1-3); the lifetimes are exponential
-        in scene-change units, mean ``1 / track_loss_probability`` frames, plus
-        ``min_track_length`` guaranteed frames.
-    pixel_sigma : float
-        Standard deviation of the noise on each of ``[uL, vL, uR, vR]``.
-    outlier_share : float
-        Share of landmark tracks that are gross outliers.
-    outlier_kind : {"offset", "uniform"}
-        ``"offset"``: the true track shifted by a constant offset (``outlier_offset_range``).
-        ``"uniform"``: random pixels at every observation, ``uL > uR`` uniform in the width,
-        ``vL`` in the height, ``vR = vL`` + noise (a match that passes the rectified-stereo check).
-    outlier_offset_range : (float, float)
-        Size of the offset: in both images (wrong feature), or the right image's u only (wrong
-        stereo match), half of the outliers each.
+        Target number of tracks M (the per-frame cap may remove a few); landmarks placed per wanted track (some are
+        never seen, or only once).
+    imu_height, ahead_range, lateral_range, height_range, far_share, far_range, far_height_range, far_bearing
+        A roadside landmark sits this far along the road ahead of its anchor pose, to the left or right of the path,
+        and above the road (``imu_height`` below the IMU); a share ``far_share`` are far (buildings, trees, hills:
+        tiny disparity), ``far_range`` from the anchor pose, ``far_height_range`` above the road, at most
+        ``far_bearing`` left or right of straight ahead.
+    scene_speed_floor, depth_range, track_loss_probability, min_track_length, max_start_delay
+    max_observations_per_frame
+        The track model's (:mod:`visla_edu.simulate`, steps 1-3); the lifetimes are exponential in scene-change units,
+        mean ``1 / track_loss_probability`` frames, plus ``min_track_length`` guaranteed frames.
+    outlier_share, outlier_kind, outlier_offset_range
+        Share of landmark tracks that are gross outliers, and how they are made. ``"offset"``: the true track shifted
+        by a constant offset of a size in ``outlier_offset_range``, in both images (wrong feature) or the right image's
+        u only (wrong stereo match), half of the outliers each. ``"uniform"``: random pixels at every observation,
+        ``uL > uR`` uniform in the width, ``vL`` in the height, ``vR = vL`` + noise (a match that passes the
+        rectified-stereo check).
     nonpositive_disparity_share : float
-        Share of observations with ``uL - uR <= 0``: noise on far points, topped up by forcing
-        the farthest inlier observations to disparities in ``(-1, 0]``.
+        Share of observations with ``uL - uR <= 0``: noise on far points, topped up by forcing the farthest inlier
+        observations to disparities in ``(-1, 0]``.
     """
 
     num_frames: int = 1010
@@ -193,18 +171,9 @@ PRESET_NAMES = {"tiny": "sim-tiny", "small": "sim-small", "course": "sim"}
 
 
 def make_config(preset="course", **overrides):
-    """The configuration of a preset with some fields replaced, validated.
+    """:class:`SimulationConfig` of a preset (a key of :data:`PRESETS`) with some fields replaced, validated.
 
-    Parameters
-    ----------
-    preset : {"tiny", "small", "course"}
-        A key of :data:`PRESETS`: ``"tiny"`` for unit tests, ``"course"`` at dataset-3 scale.
-    **overrides
-        Any :class:`SimulationConfig` field.
-
-    Returns
-    -------
-    SimulationConfig
+    ``"tiny"`` is for unit tests, ``"course"`` at dataset-3 scale; an unknown preset or field is a ValueError.
     """
     if preset not in PRESETS:
         raise ValueError(f"make_config: unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
@@ -217,17 +186,11 @@ def make_config(preset="course", **overrides):
 
 
 def default_rig():
-    """A KITTI-like stereo rig (made up for visla-edu, not taken from any course file).
+    """A KITTI-like stereo rig ``(K (3, 3), b, imu_T_cam (4, 4))``, made up for visla-edu (not from any course file).
 
-    Left camera: ``fsu = fsv = 550`` px, principal point ``(680, 240)``, 1400x500 images,
-    baseline 0.6 m, 1.5 m ahead of and 0.6 m above the IMU, looking forward (camera x = -IMU y,
-    camera y = -IMU z, camera z = IMU x) with a ~1 degree misalignment.
-
-    Returns
-    -------
-    K : ndarray, shape (3, 3)
-    b : float
-    imu_T_cam : ndarray, shape (4, 4)
+    Left camera: ``fsu = fsv = 550`` px, principal point ``(680, 240)``, 1400x500 images, baseline 0.6 m, 1.5 m ahead
+    of and 0.6 m above the IMU, looking forward (camera x = -IMU y, camera y = -IMU z, camera z = IMU x) with a
+    ~1 degree misalignment.
     """
     K = np.array([[550.0, 0.0, 680.0], [0.0, 550.0, 240.0], [0.0, 0.0, 1.0]])
     imu_R_cam_nominal = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

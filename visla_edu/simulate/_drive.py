@@ -1,6 +1,4 @@
-"""Whole simulated drives with ground truth: :func:`simulate_drive` invents the motion,
-:func:`simulate_along_drive` takes a given one (the pipeline: :mod:`visla_edu.simulate`).
-"""
+"""Whole simulated drives with ground truth (the pipeline: :mod:`visla_edu.simulate`)."""
 
 import math
 
@@ -55,22 +53,11 @@ def _build(time_stamps, true_v, true_w, rig, config, rngs, **fields):
 
 
 def simulate_drive(preset="course", seed=0, **overrides):
-    """A seeded, deterministic simulated drive with ground truth.
+    """A seeded, deterministic simulated drive with ground truth, a :class:`~visla_edu.dataset.Dataset`.
 
-    Parameters
-    ----------
-    preset : {"tiny", "small", "course"}
-        Scale, see :func:`make_config` (``"course"``: ~65,000 observations, like dataset 3).
-    seed : int
-        Motion, landmarks, tracks and IMU noise draw from separate streams, so e.g. changing
-        ``pixel_sigma`` keeps the drive and the map.
-    **overrides
-        :class:`SimulationConfig` fields.
-
-    Returns
-    -------
-    Dataset
-        Named ``"sim"`` (``"sim-small"``, ``"sim-tiny"``); ``extra = {"preset", "seed", "config"}``.
+    ``preset``: the scale (:func:`make_config`); ``overrides``: :class:`SimulationConfig` fields. Motion, landmarks,
+    tracks and IMU noise draw from separate streams of ``seed``, so e.g. changing ``pixel_sigma`` keeps the drive and
+    the map. Named ``"sim"`` (``"sim-small"``, ``"sim-tiny"``); ``extra = {"preset", "seed", "config"}``.
     """
     config = make_config(preset, **overrides)
     time_stamps, true_v, true_w = simulate_motion(config, _streams(seed)[0])
@@ -87,27 +74,13 @@ def simulate_drive(preset="course", seed=0, **overrides):
 
 def simulate_along_drive(time_stamps, linear_velocity, angular_velocity, config, calibration, seed=0,
                          **fields):
-    """A drive with ground truth simulated along given true body velocities (dead-reckoned poses).
+    """A drive with ground truth (a Dataset) simulated along given true body velocities (dead-reckoned poses).
 
-    Parameters
-    ----------
-    time_stamps : array_like, shape (T,)
-        Strictly increasing, T >= 2.
-    linear_velocity, angular_velocity : array_like, shape (T, 3)
-        True body-frame velocities; the step ``t -> t+1`` uses sample ``t``.
-    config : SimulationConfig
-        Its motion fields and ``num_frames`` are unused.
-    calibration : tuple
-        ``(K (3, 3), b, imu_T_cam (4, 4))``, used where the config's is None.
-    seed : int
-        Landmarks, tracks and IMU noise draw from the streams of :func:`simulate_drive`'s seed.
-    **fields
-        :class:`~visla_edu.dataset.Dataset` fields: ``name``, ``source``, optionally ``label``, ``extra``.
-
-    Returns
-    -------
-    Dataset
-        With ``ground_truth``; ``time_stamps`` and the true velocities as given.
+    ``time_stamps`` (T,), strictly increasing, T >= 2, and ``linear_velocity``, ``angular_velocity`` (T, 3), finite
+    (else ValueError), are kept as given; the step ``t -> t+1`` uses sample ``t``. ``config``'s motion fields and
+    ``num_frames`` are unused; ``calibration = (K (3, 3), b, imu_T_cam (4, 4))`` is used where the config's is None.
+    Landmarks, tracks and IMU noise draw from the streams of :func:`simulate_drive`'s ``seed``; ``fields`` are Dataset
+    fields: ``name``, ``source``, optionally ``label``, ``extra``.
     """
     time_stamps, true_v, true_w = _check_drive(time_stamps, linear_velocity, angular_velocity)
     rig = _rig(config, calibration)

@@ -6,10 +6,8 @@ __all__ = ["place_landmarks", "scene_change", "default_time_stamps", "check_pose
 
 
 def scene_change(world_T_imu, time_stamps, config):
-    """Scene change per step over its mean, (T-1,), of poses (T, 4, 4) and stamps (T,).
-
-    ``|p_{t+1} - p_t| + scene_speed_floor (t_{t+1} - t_t)``; all ones when every change is 0 (a car
-    that never moves, ``scene_speed_floor = 0``).
+    """Scene change per step over its mean, (T-1,), of poses (T, 4, 4) and stamps (T,):
+    ``|p_{t+1} - p_t| + scene_speed_floor (t_{t+1} - t_t)``; all ones when every change is 0 (a car that never moves).
     """
     step_len = np.linalg.norm(np.diff(world_T_imu[:, :3, 3], axis=0), axis=1)
     change = step_len + config.scene_speed_floor * np.diff(time_stamps)
@@ -65,23 +63,10 @@ def _far_points(world_T_imu, anchor, config, rng):
 def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):
     """Place landmarks along a true trajectory, each anchored to a frame (the track model's step 1).
 
-    A share ``1 - far_share`` stands beside the road ahead of its anchor pose, the rest are far
-    points in front of it (the ranges of :class:`SimulationConfig`, in the anchor's body frame).
-
-    Parameters
-    ----------
-    world_T_imu : array_like, shape (T, 4, 4)
-    num_landmarks : int
-    config : SimulationConfig
-    rng : numpy.random.Generator
-    time_stamps : array_like, shape (T,), optional
-        Default: uniform steps of ``config.time_step``.
-
-    Returns
-    -------
-    landmarks : ndarray, shape (num_landmarks, 3)
-    appear : ndarray of int, shape (num_landmarks,)
-        Anchor frames: a landmark's track may start at this frame or a few later.
+    A share ``1 - far_share`` stands beside the road ahead of its anchor pose, the rest are far points in front of it
+    (the ranges of :class:`SimulationConfig`, in the anchor's body frame). ``world_T_imu`` (T, 4, 4); ``time_stamps``
+    (T,) default to uniform steps of ``config.time_step``. Returns ``landmarks`` (num_landmarks, 3) and ``appear``
+    (num_landmarks,) int, the anchor frames: a landmark's track may start at this frame or a few later.
     """
     world_T_imu = check_poses(world_T_imu, "place_landmarks")
     time_stamps = default_time_stamps(time_stamps, len(world_T_imu), config)

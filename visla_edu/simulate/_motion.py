@@ -47,18 +47,9 @@ def _time_stamps(config, rng):
 
 
 def simulate_motion(config, rng):
-    """True time stamps and body velocities (x forward, y left, z up) of a car-like drive.
+    """True time stamps (T,) and body velocities (x forward, y left, z up), (T, 3) each, of a car-like drive.
 
-    Parameters
-    ----------
-    config : SimulationConfig
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    time_stamps : ndarray, shape (T,)
-    linear_velocity, angular_velocity : ndarray, shape (T, 3)
-        Constant over each step ``[t_k, t_{k+1})``; the last row is unused by the poses.
+    The velocities are constant over each step ``[t_k, t_{k+1})``; the last row is unused by the poses.
     """
     n, step = config.num_frames, config.time_step
     t = _time_stamps(config, rng)
@@ -75,18 +66,9 @@ def simulate_motion(config, rng):
     return t, linear, angular
 
 def add_imu_noise(linear_velocity, angular_velocity, config, rng):
-    """Measured IMU velocities: ``lag_samples(true, imu_lag)`` + white noise (+ ``gyro_bias``).
+    """Measured IMU velocities, (T, 3) each: ``lag_samples(true, imu_lag)`` + white noise (+ ``gyro_bias``).
 
-    Parameters
-    ----------
-    linear_velocity, angular_velocity : ndarray, shape (T, 3)
-        True velocities; the step ``t -> t+1`` uses sample ``t``.
-    config : SimulationConfig
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    linear_velocity, angular_velocity : ndarray, shape (T, 3)
+    ``linear_velocity``, ``angular_velocity`` (T, 3): the true velocities; the step ``t -> t+1`` uses sample ``t``.
     """
     noise_v = config.linear_velocity_sigma * rng.standard_normal(np.shape(linear_velocity))
     noise_w = config.angular_velocity_sigma * rng.standard_normal(np.shape(angular_velocity))
@@ -96,18 +78,9 @@ def add_imu_noise(linear_velocity, angular_velocity, config, rng):
 
 
 def lag_samples(samples, lag):
-    """Samples recorded ``lag`` steps late (negative: early), ``out[k] = samples[clip(k - lag, 0, T - 1)]``.
+    """Samples (T, ...) recorded ``lag`` steps late (negative: early): ``out[k] = samples[clip(k - lag, 0, T - 1)]``.
 
     The inverse of :func:`visla_edu.motion.select_twists` with the same ``lag``, away from the ends.
-
-    Parameters
-    ----------
-    samples : array_like, shape (T, ...)
-    lag : int
-
-    Returns
-    -------
-    ndarray, shape (T, ...)
     """
     samples = np.asarray(samples)
     index = np.clip(np.arange(len(samples)) - int(lag), 0, len(samples) - 1)

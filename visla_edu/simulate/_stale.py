@@ -10,22 +10,10 @@ __all__ = ["with_stale_copies"]
 def with_stale_copies(dataset, share, seed=0):
     """``dataset`` with stale frames: at each, every continuing track repeats its pixels of the frame before.
 
-    As the course files have them (one frame in seven to twelve on ``0020``, ``0022`` and ``03``):
-    at a stale frame ``t`` each landmark also seen at ``t - 1`` gets frame ``t - 1``'s pixels, bit for
-    bit; new tracks and the ground truth stay as they are.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    share : float
-        Probability that a frame ``t >= 1`` is stale, in ``[0, 1]``.
-    seed : int
-        Seeds the choice of frames.
-
-    Returns
-    -------
-    Dataset
-        A new dataset, named ``"<name>-stale"``, with ``extra`` empty.
+    As the course files have them (one frame in seven to twelve on ``0020``, ``0022`` and ``03``): at a stale frame
+    ``t`` each landmark also seen at ``t - 1`` gets frame ``t - 1``'s pixels, bit for bit; new tracks and the ground
+    truth stay as they are. ``share``: probability that a frame ``t >= 1`` is stale, in ``[0, 1]`` (else ValueError);
+    ``seed`` seeds the choice of frames. Returns a new Dataset named ``"<name>-stale"``, with ``extra`` empty.
     """
     if not 0.0 <= share <= 1.0:
         raise ValueError(f"with_stale_copies: share must be in [0, 1], got {share!r}")

@@ -14,16 +14,13 @@ __all__ = ["SimulatedTracks", "simulate_tracks"]
 
 @dataclass
 class SimulatedTracks:
-    """Stereo tracks in the sparse layout of :class:`~visla_edu.dataset.Dataset`.
+    """Stereo tracks in the sparse layout (``frame_ptr``, ``obs_ids``) of :class:`~visla_edu.dataset.Dataset`.
 
     Attributes
     ----------
-    landmarks : ndarray, shape (M, 3)
-        True positions of the tracked landmarks, in id order (by first observation frame).
-    source_index : ndarray of int, shape (M,)
-        Row of each landmark in the ``landmarks`` given to :func:`simulate_tracks`.
-    frame_ptr : ndarray of int, shape (T + 1,)
-    obs_ids : ndarray of int, shape (N,)
+    landmarks, source_index : ndarray, shape (M, 3), (M,)
+        True positions of the tracked landmarks, in id order (by first observation frame); the row of each in the
+        ``landmarks`` given to :func:`simulate_tracks`.
     obs_z : ndarray, shape (N, 4)
         Measured pixels, frame-major, ids increasing within a frame.
     outlier : ndarray of bool, shape (M,)
@@ -57,10 +54,9 @@ def _visible(q, Ks, config):
 
 
 def _march(cam_T_world, landmarks, appear, clock, budget, Ks, config):
-    """Follow every landmark from its appearance frame until its track ends (not visible, or the
-    detector ``clock`` (T,) advanced by its ``budget`` (n,) after ``min_track_length`` frames).
-
-    Returns the observations ``(landmark row, frame, q)``, shapes (N,), (N,), (N, 3).
+    """Follow every landmark from its appearance frame until its track ends (not visible, or the detector
+    ``clock`` (T,) advanced by its ``budget`` (n,) after ``min_track_length`` frames): the observations
+    ``(landmark row, frame, q)``, shapes (N,), (N,), (N, 3).
     """
     T = len(cam_T_world)
     start = np.full(len(landmarks), -1)
@@ -151,10 +147,8 @@ def _outlier_offsets(num_landmarks, config, rng):
 
 
 def _force_nonpositive_disparity(z, true_disparity, inlier, camera, config, rng):
-    """Top up non-positive disparities (``camera.disparity``) to the configured share on the farthest inliers.
-
-    In place; a forced one sets ``uR`` to ``uL + U(0, 1)`` px in the left camera's pixels (then mapped into the
-    right camera's).
+    """In place, top up non-positive disparities (``camera.disparity``) to the configured share on the farthest
+    inliers: ``uR = uL + U(0, 1)`` px in the left camera's pixels (then mapped into the right camera's).
     """
     target = int(round(config.nonpositive_disparity_share * len(z)))
     disparity = camera.disparity(z)
@@ -168,10 +162,8 @@ def _force_nonpositive_disparity(z, true_disparity, inlier, camera, config, rng)
 
 
 def _uniform_pixels(count, camera, config, rng):
-    """Random stereo pixels ``[uL, vL, uR, vR]`` in the image, ``uL > uR``, ``vR = vL`` + noise, (count, 4).
-
-    For a rig with two intrinsics ``uR`` and ``vR`` are drawn in the left camera's pixels and
-    mapped into the right camera's (a match that still passes the rectified-stereo check).
+    """Random stereo pixels ``[uL, vL, uR, vR]`` in the image, ``uL > uR``, ``vR = vL`` + noise, (count, 4); two
+    intrinsics: ``uR``, ``vR`` drawn in the left camera's pixels, then mapped into the right camera's.
     """
     width, height = config.image_size
     u = np.sort(rng.uniform(0.0, width, (count, 2)), axis=1)
@@ -210,28 +202,13 @@ def _renumber(rows, frames, n_candidates):
 
 def simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng, appear=None,
                     max_landmarks=None, time_stamps=None):
-    """Simulated stereo feature tracks of known landmarks seen from known poses (the track model).
+    """Stereo feature tracks of known landmarks seen from known poses, by the track model: :class:`SimulatedTracks`.
 
-    Parameters
-    ----------
-    world_T_imu : array_like, shape (T, 4, 4)
-    landmarks : array_like, shape (n, 3)
-        Candidate world positions; those never tracked are left out.
-    K, b, imu_T_cam : array_like (3, 3), float, array_like (4, 4)
-        The rig (:class:`visla_edu.camera.StereoCamera`, with ``config.K_right``).
-    config : SimulationConfig
-    rng : numpy.random.Generator
-    appear : array_like of int, shape (n,), optional
-        Frame from which each landmark may be detected (default 0).
-    max_landmarks : int, optional
-        Keep a random subset of at most this many tracks.
-    time_stamps : array_like, shape (T,), optional
-        Default: uniform steps of ``config.time_step``.
-
-    Returns
-    -------
-    SimulatedTracks
-        M <= n tracks, N observations.
+    ``world_T_imu`` (T, 4, 4); ``landmarks`` (n, 3): candidate world positions (M <= n are tracked, N observations); the
+    rig ``K`` (3, 3), ``b``, ``imu_T_cam`` (4, 4) as in :class:`visla_edu.camera.StereoCamera`, with ``config.K_right``;
+    ``appear`` (n,) int: the frame from which each landmark may be detected (default 0; another shape: ValueError);
+    ``max_landmarks``: keep a random subset of at most this many tracks; ``time_stamps`` (T,) default to uniform steps
+    of ``config.time_step``.
     """
     world_T_imu = check_poses(world_T_imu, "simulate_tracks")
     landmarks = np.asarray(landmarks, dtype=float).reshape(-1, 3)

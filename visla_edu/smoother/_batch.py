@@ -1,19 +1,13 @@
 """The batch smoother: Levenberg-Marquardt over all poses and landmarks, with outlier rounds.
 
-One round is Levenberg-Marquardt on the robust cost (IRLS weights refreshed at every
-accepted step, damping ``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's rule). A
-landmark that a step would bring behind a camera observing it is dropped on the spot: kept,
-it would force the damping up and shrink every step. After a round, outliers are rejected
-(:func:`reject_outliers`), landmarks dropped (:func:`drop_landmarks`), and the next round
-starts from the current estimate. Rounds followed by a rejection are rough (:data:`ROUGH`,
-:data:`ROUGH_ITERATIONS`): they only have to separate outliers from inliers.
+One round is Levenberg-Marquardt on the robust cost (IRLS weights refreshed at every accepted step, damping
+``H + lambda diag(H)`` adapted by the gain ratio, Nielsen's rule). A landmark that a step would bring behind a
+camera observing it is dropped on the spot: kept, it would force the damping up and shrink every step. After a
+round, outliers are rejected (:func:`reject_outliers`), landmarks dropped (:func:`drop_landmarks`), and the next
+round starts from the current estimate; rounds followed by a rejection are rough (:data:`ROUGH`).
 
-The helpers take a :class:`~._problem.Problem`, ``world_T_imu`` (T, 4, 4) by dataset frame
-and ``landmarks`` (L, 3), the problem's, in its local order.
-
-Measured on simulated drives (preset "small", 5% outlier tracks, seeds 0-4, from the EKF):
-one rejection round gives the ATE of two with fewer iterations; halving the rough round's
-iterations costs only seed 4 (0.17 -> 0.25 m) and saves a quarter of dataset 03's time.
+The helpers take a :class:`~._problem.Problem`, ``world_T_imu`` (T, 4, 4) by dataset frame and ``landmarks``
+(L, 3), the problem's, in its local order.
 """
 
 import time
@@ -60,11 +54,10 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
                         function_tolerance=None, final_linearization=True, stops=None):
     """One round: minimise the robust cost of ``problem`` from the given state.
 
-    Appends one record per iteration to ``history`` (:data:`~._result.HISTORY_FIELDS`) and why it
-    stopped to ``stops`` (:data:`~._result.STOP_REASONS`); ``max_iterations``, ``function_tolerance``
-    default to the config's. Returns ``(world_T_imu, landmarks, lin, factor)``: the estimate, its
-    :class:`~._normal.Linearization` (without ``final_linearization``, maybe from before a step
-    accepted in the last iteration), the :class:`~._envelope.EnvelopeFactor` of the last step or None.
+    Appends a record per iteration to ``history`` (:data:`~._result.HISTORY_FIELDS`) and why it stopped to ``stops``
+    (:data:`~._result.STOP_REASONS`); ``max_iterations``, ``function_tolerance`` default to the config's. Returns
+    ``(world_T_imu, landmarks, lin, factor)``: the estimate, its :class:`~._normal.Linearization` (without
+    ``final_linearization``, maybe from before a step accepted in the last iteration), the last step's factor or None.
     """
     lin = _normal.linearize(problem, world_T_imu, landmarks)
     damping, nu = config.initial_damping, 2.0
@@ -129,10 +122,9 @@ def reject_outliers(problem, world_T_imu, landmarks, probability):
 def drop_landmarks(problem, world_T_imu, landmarks, min_observations):
     """Drop active landmarks behind a camera, too far, or with too few active observations, in place.
 
-    Checked in that order, each landmark counted once: an active observation with a depth below
-    ``problem.min_depth`` (or not finite); a largest predicted disparity ``fsu b / depth`` below
-    ``problem.min_disparity / 2``; fewer than ``min_observations``. Clears
-    ``problem.landmark_active`` and ``problem.active``; returns the counts
+    Checked in that order, each landmark counted once: an active observation with a depth below ``problem.min_depth``
+    (or not finite); a largest predicted disparity ``fsu b / depth`` below ``problem.min_disparity / 2``; fewer than
+    ``min_observations``. Clears ``problem.landmark_active`` and ``problem.active``; returns the counts
     ``landmarks_behind_camera``, ``landmarks_too_far``, ``landmarks_too_few``.
     """
     if problem.num_landmarks == 0:
@@ -175,25 +167,20 @@ def _setup(dataset, world_T_imu, landmarks, camera, config):
 def smooth(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None, blas_threads=1):
     """Batch smoother: the course objective (:mod:`visla_edu.smoother`) over all poses and landmarks.
 
-    ``config.rejection_rounds + 1`` rounds of Levenberg-Marquardt on SE(3) with the landmark
-    Schur complement, outlier rejection in between (module docstring), then the marginals.
+    ``config.rejection_rounds + 1`` rounds of Levenberg-Marquardt, outlier rejection in between, then the marginals.
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
     world_T_imu : array_like, shape (T, 4, 4)
         Initial trajectory, e.g. ``RunResult.world_T_imu`` or dead reckoning; the first pose is held.
     landmarks : array_like, shape (M, 3), optional
-        Initial map (e.g. ``RunResult.landmarks``); NaN rows or None: :func:`triangulate_landmarks`;
-        an infinite entry is a ValueError.
+        Initial map (e.g. ``RunResult.landmarks``); NaN rows or None: :func:`triangulate_landmarks`; inf: ValueError.
     imu_T_cam : array_like, shape (4, 4), optional
         Calibration (e.g. ``RunResult.imu_T_cam``, extrinsic corrected); default the dataset's.
     config : SmootherConfig, optional
         Anything else (e.g. a ``FilterConfig``) is a TypeError.
     blas_threads : int or None
-        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`; None: numpy's
-        setting). One, as its dense blocks are small: on the 60-frame drive, 0.46 s with one
-        thread, 12 s with two on a busy 2-core machine.
+        BLAS threads while it runs (:func:`visla_edu._blas.limit_blas_threads`, None: numpy's); 1: the blocks are small.
 
     Returns
     -------
@@ -244,23 +231,16 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
 
 @dataclass
 class NormalEquations:
-    """The batch smoother's Gauss-Newton system ``H [dp; dm] = -g`` at one state.
+    """The batch smoother's Gauss-Newton system ``H [dp; dm] = -g`` at one state, whose robust cost is ``cost``.
 
     Attributes
     ----------
-    H : scipy.sparse.csr_matrix, shape (6 n + 3 L, 6 n + 3 L)
-        ``J^T W J``: the pose variables (frames ``1 .. n``, 6 columns each, right perturbations;
-        frame 0 is held), then the landmarks (3 columns each, in :attr:`landmark_ids` order). A
+    H, g : scipy.sparse.csr_matrix, shape (6 n + 3 L, 6 n + 3 L); ndarray, shape (6 n + 3 L,)
+        ``J^T W J`` and ``J^T W r``: the pose variables (frames ``1 .. n``, ``n = num_poses = T - 1``, 6 columns each,
+        right perturbations; frame 0 is held), then the landmarks (3 columns each, in :attr:`landmark_ids` order). A
         landmark left out (:attr:`landmark_active` False) has an identity block and no coupling.
-    g : ndarray, shape (6 n + 3 L,)
-        ``J^T W r``.
-    num_poses : int
-        ``n = T - 1``.
-    landmark_ids : ndarray of int, shape (L,)
-        Dataset id of each landmark block.
-    landmark_active : ndarray of bool, shape (L,)
-    cost : float
-        The robust cost at the state.
+    landmark_ids, landmark_active : ndarray of int, bool, shape (L,)
+        Dataset id of each landmark block; whether it is in the problem.
     """
 
     H: sparse.csr_matrix
@@ -272,19 +252,10 @@ class NormalEquations:
 
 
 def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
-    """The full sparse normal equations of the batch problem at a state, for teaching and checks.
+    """The full sparse normal equations (:class:`NormalEquations`) of the batch problem at a state, for teaching.
 
-    The problem :func:`smooth` builds, linearised at the state with the IRLS weights there;
-    :func:`smooth` itself never forms it (it eliminates the landmarks: Schur complement).
-
-    Parameters
-    ----------
-    dataset, world_T_imu, landmarks, imu_T_cam, config
-        As in :func:`smooth` (and refused as there); ``world_T_imu`` is the state's poses.
-
-    Returns
-    -------
-    NormalEquations
+    The problem :func:`smooth` builds, linearised at the state (poses ``world_T_imu``) with the IRLS weights there.
+    Arguments as in :func:`smooth` (and refused as there).
     """
     config = as_smoother_config(config, "normal_equations")
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)
@@ -298,22 +269,12 @@ def normal_equations(dataset, world_T_imu, landmarks=None, imu_T_cam=None, confi
 
 
 def start_cost(dataset, world_T_imu, landmarks=None, imu_T_cam=None, config=None):
-    """The batch objective at a candidate start, what the start cannot explain counted as outliers.
+    """The batch objective (float) at a candidate start, what the start cannot explain counted as outliers.
 
-    The problem is the one :func:`smooth` would build from this start, with its drops. Starts
-    drop different landmarks, so each observation a start leaves out is charged an outlier's
-    cost at the rejection threshold, ``rho(chi2_4(rejection_probability))``: the costs of
-    different starts compare the same observations.
-
-    Parameters
-    ----------
-    dataset, world_T_imu, landmarks, imu_T_cam, config
-        As in :func:`smooth`.
-
-    Returns
-    -------
-    float
-        ``inf`` when the start puts an observation behind a camera.
+    The problem is the one :func:`smooth` would build from this start (arguments as there), with its drops. Starts
+    drop different landmarks, so each observation a start leaves out is charged an outlier's cost at the rejection
+    threshold, ``rho(chi2_4(rejection_probability))``: the costs of different starts compare the same observations.
+    ``inf`` when the start puts an observation behind a camera.
     """
     config = as_smoother_config(config, "start_cost")
     world_T_imu = check_trajectory(world_T_imu, dataset.num_frames, dataset.name)

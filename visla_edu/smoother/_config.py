@@ -1,6 +1,4 @@
-"""Settings of the smoothers, :class:`SmootherConfig`: declared with :func:`visla_edu.settings.setting`
-like the filters', so one spec checks a Python value and parses ``visla-edu run --smoother-set``.
-"""
+"""Settings of the smoothers, :class:`SmootherConfig`, declared like the filters' (:mod:`visla_edu.settings`)."""
 
 from dataclasses import asdict, dataclass, fields
 
@@ -37,58 +35,41 @@ WINDOW_ONLY = ("window_size", "window_iterations", "window_mode")
 class SmootherConfig:
     """Noise model, robust loss, stopping rules and window settings of the smoothers.
 
-    The noise settings mean what they mean in :class:`visla_edu.filters.FilterConfig`, but
-    default to the course's fixed 0.5 m/s, 0.05 rad/s and lag 0 (the filters' are ``"auto"``,
-    measured); :meth:`from_filter_config` takes a filter's resolved settings, which is how
-    ``visla-edu run --mode smooth`` gives both the same model. Defaults, units and ranges: the
-    field declarations (and ``visla-edu run --help``).
+    The noise settings mean what they mean in :class:`visla_edu.filters.FilterConfig`; :meth:`from_filter_config`
+    takes a filter's resolved model (:data:`FROM_FILTER`), as ``visla-edu run --mode smooth`` does. Defaults, units
+    and ranges: the field declarations (and ``visla-edu run --help``).
 
     Attributes
     ----------
     sigma_pixel, sigma_linear_velocity, sigma_angular_velocity, imu_lag, skip_repeated_frames, skip_stale_copies
-        As the filters': ``V = sigma_pixel^2 I4``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)``
-        (a velocity sigma may be per axis), the step ``t -> t+1`` uses ``u[t + imu_lag]``.
-    loss : {"cauchy", "huber", "none"}
-        Robust loss of the squared whitened reprojection error, :func:`robust_loss`.
-    loss_scale : float
-        Its ``k``, in whitened error norms (4 dof: inliers are below 3.1 with 95% probability).
-    max_iterations : int
-        Levenberg-Marquardt iterations of the final round (accepted or not); a rough round
-        before a rejection gets half. Where the data hardly constrain the estimate (``0020``:
-        few landmarks, short tracks) the objective's own minimum lies away from the truth and
-        the cap keeps the result near its start; ``python benchmarks/bench_smoother.py --cases
-        objective`` prints the ATE per iteration budget.
-    function_tolerance : float
-        Stop when an accepted step lowers the cost by less than this fraction.
-    step_tolerance : float
-        Stop when the step norm is below ``step_tolerance * (1 + |state|)`` (poses' and landmarks' positions, m).
-    initial_damping : float
-        First damping ``lambda`` of ``H + lambda diag(H)``.
-    rejection_probability : float
-        Observations beyond its chi-square (4 dof) quantile are dropped after each round (1.0: none).
-    rejection_rounds : int
-        Rounds of "solve roughly, reject" before the final solve.
-    min_observations : int
-        Landmarks with fewer usable observations are dropped from the problem.
-    min_depth : float
-        Landmarks predicted closer than this (camera z) in any observation are dropped.
-    min_disparity : float
-        Landmarks never seen with at least this disparity ``uL - uR`` are left out, and one whose
-        largest predicted disparity falls below ``min_disparity / 2`` is dropped after a round:
-        beyond ``fsu b / min_disparity`` Gauss-Newton sends xyz landmarks off along their viewing
-        rays (on 03, to minus a million metres in six iterations), which stalls
-        Levenberg-Marquardt. :meth:`from_filter_config` takes the filters' ``min_init_disparity``.
-    pose_covariance, landmark_covariance : bool
-        Compute the marginal covariances at the solution.
-    window_size, window_iterations : int
-        Frames N in the sliding window; Gauss-Newton iterations per new frame (the measurements
-        behind both defaults: :mod:`visla_edu.smoother._window`).
-    window_mode : {"fix", "marginalize"}
-        What happens to a pose leaving the window, see :mod:`visla_edu.smoother._window`.
+        As the filters': ``V = sigma_pixel^2 I4``, ``W_t = tau_t^2 diag(sigma_v^2, sigma_w^2)`` (a velocity sigma may
+        be per axis), the step ``t -> t+1`` uses ``u[t + imu_lag]``.
+    loss, loss_scale
+        :func:`robust_loss` of the squared whitened reprojection error, and its ``k`` in whitened error norms (4 dof:
+        inliers are below 3.1 with 95% probability).
+    max_iterations
+        Levenberg-Marquardt iterations of the final round (accepted or not); a rough round before a rejection gets
+        half. Where the data hardly constrain the estimate the objective's own minimum lies away from the truth and
+        the cap keeps the result near its start (``python benchmarks/bench_smoother.py --cases objective``).
+    function_tolerance, step_tolerance, initial_damping
+        Stop when an accepted step lowers the cost by less than this fraction, or when the step norm is below
+        ``step_tolerance * (1 + |state|)`` (poses' and landmarks' positions, m); the first ``lambda`` of
+        ``H + lambda diag(H)``.
+    rejection_probability, rejection_rounds
+        Rounds of "solve roughly, reject" before the final solve; each drops the observations beyond the
+        chi-square (4 dof) quantile of ``rejection_probability`` (1.0: none).
+    min_observations, min_depth, min_disparity
+        Landmarks with fewer usable observations, or predicted closer than ``min_depth`` (camera z) in any
+        observation, are dropped. Landmarks never seen with a disparity ``uL - uR`` of at least ``min_disparity`` are
+        left out, and one whose largest predicted disparity falls below ``min_disparity / 2`` is dropped after a round:
+        beyond ``fsu b / min_disparity`` Gauss-Newton sends xyz landmarks off along their viewing rays, which stalls
+        Levenberg-Marquardt.
+    window_size, window_iterations, window_mode
+        Frames N in the sliding window, Gauss-Newton iterations per new frame, what happens to a pose leaving the
+        window (the modes and the evidence behind the defaults: :mod:`visla_edu.smoother._window`).
     start : {"slam", "best"}
-        Where the batch smoother starts (:func:`visla_edu.run.run_smoother`): the joint EKF's
-        estimate, or the lowest objective (:func:`start_cost`) of dead reckoning, VIO and the
-        joint EKF. Either way the costs of all three are reported.
+        Where the batch smoother starts (:func:`visla_edu.run.run_smoother`): the joint EKF's estimate, or the lowest
+        objective (:func:`start_cost`) of dead reckoning, VIO and the joint EKF; all three costs are reported.
     """
 
     sigma_pixel: float = setting(1.5, float, 0.0, low_open=True, unit="px",
@@ -130,19 +111,7 @@ class SmootherConfig:
 
     @classmethod
     def from_filter_config(cls, filter_config, **overrides):
-        """The smoother's model from a filter's resolved settings (:data:`FROM_FILTER`: noise, lag, far points).
-
-        Parameters
-        ----------
-        filter_config : visla_edu.filters.FilterConfig
-            Resolved (:func:`visla_edu.run.resolve_config`); ``"auto"`` settings are a ValueError.
-        **overrides
-            :class:`SmootherConfig` fields.
-
-        Returns
-        -------
-        SmootherConfig
-        """
+        """A filter's resolved model (:data:`FROM_FILTER`) with ``overrides``; unresolved settings are a ValueError."""
         if not filter_config.resolved:
             raise ValueError("SmootherConfig.from_filter_config needs resolved settings "
                              "(visla_edu.run.resolve_config(dataset, config))")
@@ -172,14 +141,8 @@ OWN_SETTINGS = tuple(f.name for f in fields(SmootherConfig) if f.name not in FRO
 
 
 def check_own_settings(mode, names):
-    """Refuse (ValueError) names that are not the smoother's :data:`OWN_SETTINGS`, or that ``mode`` ignores.
-
-    Parameters
-    ----------
-    mode : {"smooth", "window"}
-        :data:`visla_edu.codes.SMOOTHER_MODES`; ``"smooth"`` ignores :data:`WINDOW_ONLY`,
-        ``"window"`` :data:`BATCH_ONLY`.
-    names : iterable of str
+    """Refuse (ValueError) names not in :data:`OWN_SETTINGS` or that ``mode`` ignores (:data:`WINDOW_ONLY` in
+    ``"smooth"``, :data:`BATCH_ONLY` in ``"window"``).
     """
     names = list(names)
     unknown = sorted(set(names) - set(OWN_SETTINGS))

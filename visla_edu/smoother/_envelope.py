@@ -1,24 +1,20 @@
 """Symmetric positive-definite block systems with an envelope (variable band) structure.
 
-The smoother's reduced pose system is block tridiagonal (observations' pose information,
-motion factors) minus one dense rank-3 term per landmark over the consecutive frames that
-see it (its Schur complement term). Frame ``l`` is thus coupled only with frames back to the
-first frame of the oldest track seen at ``l``: an *envelope*. A Cholesky factor has no fill
-outside it, so the factorisation is a loop over block columns on a dense *front* (the frames
-``i .. reach[i]`` still coupled to column ``i``)::
+The smoother's reduced pose system is block tridiagonal (observations' pose information, motion factors) minus one dense
+rank-3 term per landmark over the consecutive frames that see it (its Schur complement term): frame ``l`` is coupled
+only with frames back to the first frame of the oldest track seen at ``l``, an *envelope*. A Cholesky factor has no fill
+outside it; the factorisation loops over block columns on a dense *front* (the frames ``i .. reach[i]`` still coupled to
+column ``i``), ``J = i+1 .. reach[i]``, in about ``sum_i 6^3 (reach[i] - i)^2`` flops instead of ``(6T)^3 / 3``::
 
     L_ii = chol(A_ii),   L_Ji = A_Ji L_ii^{-T},   A_JJ <- A_JJ - L_Ji L_Ji^T
 
-with ``J = i+1 .. reach[i]``: about ``sum_i 6^3 (reach[i] - i)^2`` flops instead of
-``(6T)^3 / 3``. The Schur complement is never stored: each landmark's term enters the front
-with its last frame, before any of its block columns is eliminated.
-
-The diagonal blocks of ``Sigma = A^{-1}`` (the marginal covariances) come from the same
-factor by the backward recursion of Takahashi et al. (from ``Sigma L = L^{-T}``)::
+Each landmark's term enters the front with its last frame, before any of its block columns is eliminated (the
+Schur complement is never stored). The marginals, diagonal blocks of ``Sigma = A^{-1}``, come from the same factor
+by the backward recursion of Takahashi et al. (from ``Sigma L = L^{-T}``, ``i = n-1 .. 0``; it needs ``Sigma``
+only inside the envelope)::
 
     Sigma_Ji = -Sigma_JJ L_Ji L_ii^{-1},   Sigma_ii = L_ii^{-T} L_ii^{-1} - Sigma_Ji^T L_Ji L_ii^{-1}
 
-for ``i = n-1 .. 0``, which only needs ``Sigma`` inside the envelope (a front again).
 Block rows are processed in groups of :data:`GROUP` (supernodes).
 """
 
@@ -34,20 +30,15 @@ __all__ = ["EnvelopeSystem", "EnvelopeFactor", "envelope_reach", "cholesky", "so
 class EnvelopeSystem:
     """``A = tridiag(sub, diag, sub^T) - sum_k P_k V_k V_k^T P_k^T``, a symmetric block matrix.
 
-    Correction ``k`` covers the block rows ``lo[k] .. hi[k]`` (``P_k`` places it there); in the
-    smoother it is landmark ``k``'s Schur complement term (:mod:`~visla_edu.smoother._normal`).
+    Correction ``k`` covers the block rows ``lo[k] .. hi[k]`` (``P_k`` places it there).
 
     Attributes
     ----------
-    diag : ndarray, shape (n, b, b)
-        Symmetric diagonal blocks ``A[l, l]`` (before corrections).
-    sub : ndarray, shape (n - 1, b, b)
-        ``A[l + 1, l]`` (before corrections).
-    lo, hi : ndarray of int, shape (K,)
-    start : ndarray of int, shape (K,)
-        Correction ``k`` is ``rows[start[k] : start[k] + hi[k] - lo[k] + 1]``.
-    rows : ndarray, shape (S, b, r)
-        The ``V_k``, one ``(b, r)`` slice per block row (zero slices are allowed).
+    diag, sub : ndarray, shape (n, b, b), (n - 1, b, b)
+        Symmetric diagonal blocks ``A[l, l]`` and ``A[l + 1, l]``, before corrections.
+    lo, hi, start, rows : ndarray of int, shape (K,) each; ndarray, shape (S, b, r)
+        Correction ``k`` is ``rows[start[k] : start[k] + hi[k] - lo[k] + 1]``; ``rows`` holds the ``V_k``, one
+        ``(b, r)`` slice per block row (zero slices are allowed).
     """
 
     diag: np.ndarray
@@ -74,15 +65,10 @@ class EnvelopeFactor:
 
     Attributes
     ----------
-    lo, hi : ndarray of int, shape (G,)
-        First and last block row of each group.
-    reach : ndarray of int, shape (G,)
-        Last block row coupled to the group (``>= hi``).
-    diag_inv : list of ndarray
-        ``L_gg^{-1}``, shape ``(b n_g, b n_g)``.
-    below : list of ndarray
-        ``L_Jg`` for ``J = hi + 1 .. reach``, shape ``(b (reach - hi), b n_g)``.
-    block_size : int
+    lo, hi, reach : ndarray of int, shape (G,)
+        First and last block row of each group, and the last block row coupled to it (``>= hi``).
+    diag_inv, below : list of ndarray
+        ``L_gg^{-1}``, shape ``(b n_g, b n_g)``; ``L_Jg`` for ``J = hi + 1 .. reach``, ``(b (reach - hi), b n_g)``.
     """
 
     lo: np.ndarray
@@ -204,9 +190,7 @@ def _load_rows(front, system, top, first_row, last_row):
 
 
 def cholesky(system, group=GROUP):
-    """:class:`EnvelopeFactor` of a positive-definite :class:`EnvelopeSystem`, ``group`` block rows at a
-    time (the module's loop); raises ``numpy.linalg.LinAlgError`` when it is not positive definite.
-    """
+    """:class:`EnvelopeFactor` of ``system``, ``group`` block rows at a time; LinAlgError if not positive definite."""
     n, b = system.num_blocks, system.diag.shape[1]
     lo = np.arange(0, n, group)
     hi = np.minimum(lo + group, n) - 1

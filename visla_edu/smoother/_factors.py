@@ -1,12 +1,11 @@
 """The smoother's motion residual and its analytic Jacobians, vectorised over factors; robust losses.
 
-The reprojection residual ``r = h(T, m) - z`` and its Jacobians are the camera's
-(:func:`visla_edu.camera.stereo_projection`). Motion, one per step ``t -> t+1``::
+Reprojection residual and Jacobians: :func:`visla_edu.camera.stereo_projection`. Motion, one per step ``t -> t+1``::
 
     E_t = exp(-tau_t u_t^) T_t^{-1} T_{t+1},      e_t = log(E_t)
 
-Perturbing ``T_t`` by ``a`` and ``T_{t+1}`` by ``b`` (right perturbation, see
-:mod:`visla_edu.lie`) gives ``E_t <- E_t exp((b - Ad(T_{t+1}^{-1} T_t) a)^)`` to first order::
+Right-perturbing ``T_t`` by ``a`` and ``T_{t+1}`` by ``b`` (:mod:`visla_edu.lie`) gives, to first order,
+``E_t <- E_t exp((b - Ad(T_{t+1}^{-1} T_t) a)^)``, so::
 
     J_e_next = J_r(e_t)^{-1},      J_e_prev = -J_r(e_t)^{-1} Ad(T_{t+1}^{-1} T_t)
 """
@@ -27,21 +26,10 @@ def motion_steps(time_stamps, twists, lag):
 
 
 def motion_residuals(world_T_imu, step_inv, jacobians=True):
-    """Motion residuals ``e_t = log(exp(-tau u^) T_t^{-1} T_{t+1})`` and their Jacobians.
+    """Motion residuals ``e_t = log(exp(-tau u^) T_t^{-1} T_{t+1})``, (K, 6), and their Jacobians.
 
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (K + 1, 4, 4)
-        Consecutive poses ``T_0 .. T_K``.
-    step_inv : ndarray, shape (K, 4, 4)
-        ``exp(-tau_t u_t^)`` of each step (:func:`motion_steps`).
-    jacobians : bool
-
-    Returns
-    -------
-    e : ndarray, shape (K, 6)
-    J_e_prev, J_e_next : ndarray, shape (K, 6, 6)
-        Only if ``jacobians``.
+    ``world_T_imu`` (K + 1, 4, 4): consecutive poses ``T_0 .. T_K``; ``step_inv`` (K, 4, 4): ``exp(-tau_t u_t^)`` of
+    each step (:func:`motion_steps`). Returns ``e``, or ``(e, J_e_prev, J_e_next)``, (K, 6, 6) each, if ``jacobians``.
     """
     next_T_prev = lie.se3_inv(world_T_imu[1:]) @ world_T_imu[:-1]
     E = step_inv @ lie.se3_inv(next_T_prev)
@@ -54,23 +42,12 @@ def motion_residuals(world_T_imu, step_inv, jacobians=True):
 
 
 def robust_loss(s, loss, scale):
-    """Robust loss ``rho(s)`` of squared whitened errors and its IRLS weight ``rho'(s)``.
+    """Robust loss ``rho(s)`` of squared whitened errors ``s = |r|^2 / sigma^2`` (N,) and its IRLS weight ``rho'(s)``.
 
     Cauchy: ``rho = k^2 log(1 + s / k^2)``, ``rho' = 1 / (1 + s / k^2)``.
     Huber: ``rho = s`` for ``s <= k^2``, else ``2 k sqrt(s) - k^2``; ``rho' = min(1, k / sqrt(s))``.
-    None: ``rho = s``, ``rho' = 1``.
-
-    Parameters
-    ----------
-    s : ndarray, shape (N,)
-        ``|r|^2 / sigma^2``.
-    loss : {"cauchy", "huber", "none"}
-    scale : float
-        ``k``, in units of ``sqrt(s)``.
-
-    Returns
-    -------
-    rho, weight : ndarray, shape (N,)
+    None: ``rho = s``, ``rho' = 1``. ``loss`` is "cauchy", "huber" or "none" (else ValueError); ``scale`` is ``k``, in
+    units of ``sqrt(s)``. Returns ``rho, weight``, (N,) each.
     """
     k2 = scale**2
     if loss == "cauchy":

@@ -1,26 +1,20 @@
 """Cost, linearisation and the Schur-complement step of a :class:`~._problem.Problem`.
 
-With the whitened residuals stacked in ``r`` and the Jacobian ``J`` (right perturbations of
-the pose variables, then the landmark positions), the robust cost is
-``C = sum_obs rho(s_i) + sum_t |W_t^{-1/2} e_t|^2 (+ priors)`` and Gauss-Newton with IRLS
-weights ``w_i = rho'(s_i) / sigma^2`` solves::
+With the whitened residuals ``r`` and Jacobian ``J`` (right perturbations of the pose variables, then the landmark
+positions), the robust cost ``C = sum_obs rho(s_i) + sum_t |W_t^{-1/2} e_t|^2 (+ priors)`` and IRLS weights
+``w_i = rho'(s_i) / sigma^2``, Gauss-Newton solves::
 
     [[H_pp, H_pm], [H_mp, H_mm]] [dp; dm] = -[g_p; g_m],     H = J^T W J,  g = J^T W r
 
-``H_mm`` is block diagonal (one 3x3 block per landmark), so the landmarks are eliminated
-first (Schur complement)::
+``H_mm`` is block diagonal (one 3x3 block per landmark), so the landmarks are eliminated first (Schur complement)::
 
     S = H_pp - H_pm H_mm^{-1} H_mp,   S dp = -g_p + H_pm H_mm^{-1} g_m,
     dm = -H_mm^{-1} (g_m + H_mp dp)
 
-``S`` is the block-tridiagonal pose information minus one rank-3 term ``V_j V_j^T`` per
-landmark (``V_j = H_pj L_j^{-T}``, ``H_mm,j = L_j L_j^T``) over the frames that see it: an
-:class:`~._envelope.EnvelopeSystem`, factorised without ever forming a ``(6T + 3M)^2``
-(or even a ``(6T)^2``) matrix. Levenberg-Marquardt damping adds ``lambda diag(H)``.
-
-The functions take the ``problem``, ``world_T_imu`` (T, 4, 4) by dataset frame and
-``landmarks`` (L, 3), the problem's (world frame, local order); ``n`` is the number of pose
-variables and ``N`` of observations (landmark-major, active or not).
+``S`` is an :class:`~._envelope.EnvelopeSystem` with ``V_j = H_pj L_j^{-T}`` (``H_mm,j = L_j L_j^T``), never formed
+densely; Levenberg-Marquardt damping adds ``lambda diag(H)``. The functions take the ``problem``, ``world_T_imu``
+(T, 4, 4) by dataset frame and ``landmarks`` (L, 3), the problem's (world frame, local order); ``n`` is the number
+of pose variables, ``N`` of observations (landmark-major, active or not).
 """
 
 from dataclasses import dataclass
@@ -43,20 +37,14 @@ _UPPER = np.triu_indices(6)
 
 @dataclass
 class Linearization:
-    """Gauss-Newton blocks at one state (IRLS weights from the same state).
+    """Gauss-Newton blocks at one state (IRLS weights from the same state) and its ``cost``.
 
     Attributes
     ----------
-    cost : float
-    Hpp : ndarray, shape (n, 6, 6)
-        Diagonal pose blocks.
-    sub : ndarray, shape (n - 1, 6, 6)
-        ``H[l + 1, l]`` from the motion factors.
-    g_p : ndarray, shape (n, 6)
-    Hpm : ndarray, shape (6, 3, N)
-        Per observation, observation index last (zero at held frames and when inactive).
-    Hmm : ndarray, shape (L, 3, 3)
-    g_m : ndarray, shape (L, 3)
+    Hpp, sub, g_p : ndarray, shape (n, 6, 6), (n - 1, 6, 6), (n, 6)
+        Diagonal pose blocks; ``H[l + 1, l]`` from the motion factors; the pose gradient.
+    Hpm, Hmm, g_m : ndarray, shape (6, 3, N), (L, 3, 3), (L, 3)
+        ``Hpm`` per observation, observation index last (zero at held frames and when inactive).
     """
 
     cost: float
@@ -74,16 +62,13 @@ class Step:
 
     Attributes
     ----------
-    d_pose : ndarray, shape (n, 6)
-        Right perturbations ``[v; w]`` of the pose variables: ``T <- T exp(d_pose^)``.
-    d_landmark : ndarray, shape (L, 3)
-        World-frame increments (m), ``m <- m + d_landmark``; zero for inactive landmarks.
+    d_pose, d_landmark : ndarray, shape (n, 6), (L, 3)
+        Right perturbations ``[v; w]`` of the pose variables, ``T <- T exp(d_pose^)``; world-frame landmark increments
+        (m), ``m <- m + d_landmark``, zero for inactive landmarks.
     predicted : float
-        The decrease the damped linear model predicts, ``-g^T d + lambda d^T diag(H) d`` (the
-        denominator of the gain ratio).
+        The decrease the damped linear model predicts, ``-g^T d + lambda d^T diag(H) d`` (the gain ratio's denominator).
     factor : EnvelopeFactor or None
-        Of the damped reduced system ``S`` it solved (its inverse approximates the pose
-        covariance at the state the step started from).
+        Of the damped reduced system ``S`` it solved (its inverse approximates the pose covariance at the step's start).
     """
 
     d_pose: np.ndarray
@@ -93,9 +78,7 @@ class Step:
 
 
 def _camera_points(problem, world_T_imu, landmarks):
-    """``R = world_R_imu`` (3, 3, N) of each observation's frame, ``p_imu = R^T (m - t)`` (3, N) and
-    ``q = R_c p_imu + t_c`` (3, N): component-first, which makes numpy's small products faster.
-    """
+    """Per observation ``R = world_R_imu`` (3, 3, N), ``p_imu = R^T (m - t)``, ``q = R_c p_imu + t_c`` (3, N)."""
     poses = world_T_imu[problem.obs_frame]
     d = landmarks[problem.obs_landmark] - poses[:, :3, 3]
     p_imu = (poses[:, :3, :3] * d[:, :, None]).sum(axis=1).T  # R^T d
@@ -230,15 +213,14 @@ def _hat_times(p, X):
 def _observation_blocks(problem, world_T_imu, landmarks):
     """Per-observation weighted blocks (component-first) and the robust cost.
 
-    With ``J_q = A R_c``, the Jacobians of :func:`visla_edu.camera.stereo_projection` are
-    ``J_m = J_q R^T`` and ``J_p = [-J_q, J_q P]``, ``P = hat(p_imu)``; so with
-    ``K = J_q^T w J_q`` and ``h = J_q^T w r``::
+    With ``J_q = A R_c``, the Jacobians of :func:`visla_edu.camera.stereo_projection` are ``J_m = J_q R^T`` and
+    ``J_p = [-J_q, J_q P]``, ``P = hat(p_imu)``; so with ``K = J_q^T w J_q`` and ``h = J_q^T w r``::
 
         J_p^T w J_p = [[K, -K P], [P K, -P K P]]     J_p^T w r = [-h; -P h]
         J_p^T w J_m = -[K R^T; P K R^T]              J_m^T w J_m = R K R^T,   J_m^T w r = R h
 
-    Blocks: ``Hpp`` (21, N) (upper triangle, :data:`_UPPER`), ``g_p`` (6, N), ``Hpm`` (6, 3, N),
-    ``Hmm`` (3, 3, N), ``g_m`` (3, N).
+    Blocks: ``Hpp`` (21, N) (upper triangle, :data:`_UPPER`), ``g_p`` (6, N), ``Hpm`` (6, 3, N), ``Hmm`` (3, 3, N),
+    ``g_m`` (3, N).
     """
     R, p_imu, q = _camera_points(problem, world_T_imu, landmarks)
     r = _pixels(problem, q) - problem.obs_z
@@ -371,10 +353,9 @@ def solve_step(problem, lin, damping):
 def apply_step(problem, world_T_imu, landmarks, step):
     """``T <- T exp(dp^)`` on the pose variables, ``m <- m + dm``, in new arrays.
 
-    Returns ``(world_T_imu, landmarks, too_close, errors)``: ``too_close`` (L,) marks the active
-    landmarks the step brings closer than ``min_depth`` to (or behind) a camera observing them
-    (no finite cost: the smoothers drop them rather than let one shrink every step); ``errors``
-    is :func:`observation_errors` at the new state.
+    Returns ``(world_T_imu, landmarks, too_close, errors)``: ``too_close`` (L,) marks the active landmarks the step
+    brings closer than ``min_depth`` to (or behind) a camera observing them; ``errors`` is :func:`observation_errors`
+    at the new state.
     """
     out = world_T_imu.copy()
     frames = slice(problem.first_var, problem.last_frame + 1)
@@ -390,10 +371,9 @@ def marginals(problem, lin, landmark_covariance=True):
     """Marginal covariances at the solution: the inverse of the undamped Gauss-Newton Hessian.
 
     Pose blocks are the diagonal blocks of ``S^{-1}`` (Takahashi recursion); a landmark's is
-    ``H_mm^{-1} + Y^T S^{-1}[span, span] Y``, ``Y = H_pm H_mm^{-1}`` over the frames that see
-    it. Returns the pose variables' right-perturbation covariances (n, 6, 6) and the landmarks'
-    (L, 3, 3), NaN when inactive (None without ``landmark_covariance``). Raises
-    ``numpy.linalg.LinAlgError`` when the reduced system is not positive definite.
+    ``H_mm^{-1} + Y^T S^{-1}[span, span] Y``, ``Y = H_pm H_mm^{-1}`` over the frames that see it. Returns the pose
+    variables' right-perturbation covariances (n, 6, 6) and the landmarks' (L, 3, 3), NaN when inactive (None without
+    ``landmark_covariance``); LinAlgError when the reduced system is not positive definite.
     """
     L_inv = _landmark_factors(problem, lin, 0.0)
     system, _, _ = _reduced_system(problem, lin, 0.0, L_inv)

@@ -1,15 +1,12 @@
 """The least-squares problem a smoother solves: observations, landmarks, pose variables, priors.
 
-A :class:`Problem` covers the frames ``first_frame .. last_frame``; the poses of
-``first_var .. last_frame`` are variables (block rows ``0 .. n - 1`` of the reduced system),
-the earlier ones are held. The batch smoother has ``first_frame = 0, first_var = 1`` (the
-first pose defines the world frame); the sliding window has its window as variables and, in
-``"fix"`` mode, older frames held.
-
-Observations are stored landmark-major (by landmark, then frame), so each landmark's variable
-frames form one run of block rows ``span_lo .. span_hi``; ``slot`` places each observation in
-that run (frames of the run without an observation get zero slots). Observations and
-landmarks leave the problem by clearing ``active`` / ``landmark_active``; the structure stays.
+A :class:`Problem` covers the frames ``first_frame .. last_frame``; the poses of ``first_var .. last_frame`` are
+variables (block rows ``0 .. n - 1`` of the reduced system), the earlier ones are held. The batch smoother has
+``first_frame = 0, first_var = 1`` (the first pose defines the world frame); the sliding window has its window as
+variables and, in ``"fix"`` mode, older frames held. Observations are stored landmark-major (by landmark, then
+frame), so each landmark's variable frames form one run of block rows ``span_lo .. span_hi``; ``slot`` places each
+observation in that run (frames of the run without an observation get zero slots). Observations and landmarks
+leave the problem by clearing ``active`` / ``landmark_active``; the structure stays.
 """
 
 from dataclasses import dataclass
@@ -35,43 +32,32 @@ class PosePrior:
 
 @dataclass
 class Problem:
-    """Data and structure of one least-squares problem (see the module docstring).
+    """Data and structure of one least-squares problem (module docstring): N observations, L local landmarks.
 
     Attributes
     ----------
-    Ks, cam_T_imu : ndarray, shape (4, 4)
-        Stereo matrix and ``inv(imu_T_cam)``.
-    sigma_pixel, loss, loss_scale, min_depth, min_disparity
-        From :class:`~visla_edu.smoother.SmootherConfig`.
-    first_frame, first_var, last_frame : int
+    Ks, cam_T_imu, sigma_pixel, loss, loss_scale, min_depth, min_disparity
+        Stereo matrix (4, 4) and ``inv(imu_T_cam)`` (4, 4); the rest from :class:`~visla_edu.smoother.SmootherConfig`.
     motion_from, step_inv, motion_sqrt_information : int, ndarray (K, 4, 4), ndarray (K, 6)
-        The motion factors: the steps ``motion_from .. last_frame - 1``, their
-        ``exp(-tau_t u_t^)`` and the diagonals of ``W_t^{-1/2}``.
-    obs_frame, obs_landmark, obs_source : ndarray of int, shape (N,)
-        Each observation's frame, local landmark (``0 .. L-1``) and index in the dataset's arrays.
-    obs_z : ndarray, shape (N, 4)
-    landmark_ids : ndarray of int, shape (L,)
-        Dataset id of each local landmark.
-    landmark_start : ndarray of int, shape (L + 1,)
-        Landmark ``j`` owns observations ``landmark_start[j] : landmark_start[j + 1]``.
-    active : ndarray of bool, shape (N,)
-    landmark_active : ndarray of bool, shape (L,)
-    prior : PosePrior or None
+        The motion factors: the steps ``motion_from .. last_frame - 1``, their ``exp(-tau_t u_t^)`` and the diagonals
+        of ``W_t^{-1/2}``.
+    obs_frame, obs_landmark, obs_source, active : ndarray, shape (N,)
+        Each observation's frame, local landmark (``0 .. L-1``), index in the dataset's arrays, whether used (bool);
+        its pixels ``obs_z`` (N, 4).
+    landmark_ids, landmark_active, landmark_start : ndarray, shape (L,), (L,), (L + 1,)
+        Dataset id of each local landmark; whether it is in the problem; landmark ``j`` owns observations
+        ``landmark_start[j] : landmark_start[j + 1]``.
     landmark_prior : (ndarray, ndarray, ndarray) or None
-        Per landmark ``m^T Lambda m - 2 m^T eta + c``: ``Lambda`` (L, 3, 3), ``eta`` (L, 3), ``c``
-        (L,); observations from held poses folded in (their weighted squared errors, linearised,
-        so the prior's cost is never negative).
-    slot : ndarray of int, shape (N,)
-        Row of each observation in the Schur correction rows (-1 at held frames).
-    span_lo, span_hi, span_start : ndarray of int, shape (L,)
-        Each landmark's run of block rows and its first slot (``span_hi < span_lo``: none).
-    num_slots : int
+        Per landmark ``m^T Lambda m - 2 m^T eta + c``: ``Lambda`` (L, 3, 3), ``eta`` (L, 3), ``c`` (L,); observations
+        from held poses folded in (their weighted squared errors, linearised, so the prior's cost is never negative).
+    slot, span_lo, span_hi, span_start : ndarray of int, shape (N,), (L,), (L,), (L,)
+        Row of each observation in the Schur correction rows (-1 at held frames); each landmark's run of block rows
+        and its first slot (``span_hi < span_lo``: none).
     frame_sum : scipy.sparse.csr_matrix, shape (n, N)
         Sums per-observation pose terms into their block rows.
-    dropped_in_steps : int
-        Landmarks the solver dropped because a step would bring them behind a camera.
-    fsu_b : float
-        A landmark at depth ``d`` has disparity ``fsu b / d`` (left pixels).
+    dropped_in_steps, fsu_b : int, float
+        Landmarks the solver dropped because a step would bring them behind a camera; a landmark at depth ``d`` has
+        disparity ``fsu b / d`` (left pixels).
     """
 
     Ks: np.ndarray
@@ -126,10 +112,9 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
                   prior=None, landmark_prior=None):
     """Assemble a :class:`Problem` and its structure from observations in any order.
 
-    ``obs_frame``, ``obs_landmark_ids`` (dataset ids, each pair once), ``obs_z`` (N, 4) and
-    ``obs_source`` per observation; ``frames = (first_frame, first_var, last_frame)``, ``motion =
-    (motion_from, step_inv, motion_sqrt_information)``; ``landmark_prior`` indexed by dataset id
-    (``Lambda`` (M, 3, 3), ``eta`` (M, 3), ``c`` (M,)).
+    Per observation: ``obs_frame``, ``obs_landmark_ids`` (dataset ids, each pair once), ``obs_z`` (4,), ``obs_source``;
+    ``frames = (first_frame, first_var, last_frame)``, ``motion = (motion_from, step_inv, motion_sqrt_information)``;
+    ``landmark_prior`` indexed by dataset id (``Lambda`` (M, 3, 3), ``eta`` (M, 3), ``c`` (M,)).
     """
     obs_frame, obs_landmark_ids = np.asarray(obs_frame, np.int64), np.asarray(obs_landmark_ids, np.int64)
     order = np.lexsort((obs_frame, obs_landmark_ids))
@@ -175,9 +160,8 @@ def _build_structure(problem):
 def observation_status(dataset, config, frames=None):
     """Which dataset observations a smoother may use: an ``OBS_*`` code each (:mod:`visla_edu.codes`), (N,) int8.
 
-    ``OBS_NO_DEPTH`` for a non-positive disparity, ``OBS_IGNORED`` in a repeated frame
-    (``config.skip_repeated_frames``) and for a stale copy (``config.skip_stale_copies``,
-    :func:`visla_edu.dataset.stale_copies`), else ``OBS_USED``. ``frames``: ``dataset.observation_frames()``.
+    ``OBS_NO_DEPTH`` for a non-positive disparity, ``OBS_IGNORED`` in a repeated frame (``config.skip_repeated_frames``)
+    and for a stale copy (``config.skip_stale_copies``, :func:`visla_edu.dataset.stale_copies`), else ``OBS_USED``.
     """
     frames = dataset.observation_frames() if frames is None else frames
     status = np.full(dataset.num_observations, OBS_USED, dtype=np.int8)
@@ -198,25 +182,11 @@ def far_landmarks(dataset, usable, min_disparity):
 
 
 def triangulate_landmarks(dataset, camera, world_T_imu, usable, landmarks=None):
-    """Initial landmark positions: the given ones where finite, else from the best observation.
+    """Initial landmark positions (M, 3): the given ones where finite, else from the best observation.
 
-    The best observation of a landmark is its usable one with the largest disparity (the
-    best-conditioned depth), triangulated at that frame's pose.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    camera : StereoCamera
-    world_T_imu : ndarray, shape (T, 4, 4)
-    usable : ndarray of bool, shape (N,)
-        Observations that may be used (positive disparity).
-    landmarks : ndarray, shape (M, 3), optional
-        E.g. the EKF's map, NaN where it never initialised a landmark.
-
-    Returns
-    -------
-    ndarray, shape (M, 3)
-        NaN for landmarks with neither a given position nor a usable observation.
+    ``landmarks`` (M, 3), optional: e.g. the EKF's map, NaN where it never initialised one (another shape: ValueError).
+    The best observation is a landmark's ``usable`` (N,) one with the largest disparity (the best-conditioned depth),
+    triangulated at that frame's pose ``world_T_imu`` (T, 4, 4). NaN where neither exists.
     """
     M = dataset.num_landmarks
     out = np.full((M, 3), np.nan) if landmarks is None else np.array(landmarks, dtype=float, copy=True)

@@ -17,48 +17,37 @@ CONVERGED, ITERATION_CAP, NO_DESCENT = STOP_REASONS = ("converged", "iteration c
 
 @dataclass
 class SmootherResult:
-    """Everything a smoother run produced.
+    """Everything a smoother run produced (``mode`` "smooth" or "window").
 
     Attributes
     ----------
-    name : str
-    mode : {"smooth", "window"}
     time_stamps : ndarray, shape (T,)
-    world_T_imu : ndarray, shape (T, 4, 4)
-        ``world`` is the IMU frame at the first time stamp.
+    world_T_imu, online_world_T_imu : ndarray, shape (T, 4, 4)
+        ``world`` is the IMU frame at the first time stamp. ``online_world_T_imu``, window only: each pose when its
+        frame was the newest (the real-time estimate).
     landmarks : ndarray, shape (M, 3)
         NaN where a landmark was not estimated (dropped, or never usable).
-    pose_cov : ndarray, shape (T, 6, 6)
-        Marginal covariance of each pose's right perturbation (zeros for a held pose, NaN when
-        not computed).
-    landmark_cov : ndarray, shape (M, 3, 3)
-        NaN where not estimated or not computed.
+    pose_cov, landmark_cov : ndarray, shape (T, 6, 6), (M, 3, 3)
+        Marginal covariances (of each pose's right perturbation; zeros for a held pose), NaN where not computed or
+        (landmarks) not estimated.
     history : dict of ndarray
-        Per iteration, each of :data:`HISTORY_FIELDS`: the rejection round (batch) or the new
-        frame ``k`` (window: the cost is that frame's window problem's), the cost after the
-        iteration (a rejected step leaves it, unless it dropped landmarks it sent behind a
-        camera: then the cost without them), the step norm, whether accepted, the damping.
+        Per iteration, each of :data:`HISTORY_FIELDS`: the rejection round (batch) or new frame ``k`` (window: the cost
+        is that frame's window problem's); the cost after the iteration (a rejected step leaves it, unless it dropped
+        landmarks it sent behind a camera: then the cost without them); the step norm; accepted; the damping.
     rejected : dict of int
-        ``outliers`` (rejected by the chi-square test), ``nonpositive_disparity`` and
-        ``ignored`` (observations never used: repeated frames, stale copies), ``landmarks_no_position``,
-        ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far`` (landmarks
-        dropped, see :class:`~visla_edu.smoother.SmootherConfig`).
+        ``outliers`` (rejected by the chi-square test), ``nonpositive_disparity`` and ``ignored`` (observations never
+        used: repeated frames, stale copies); landmarks dropped (:class:`~visla_edu.smoother.SmootherConfig`):
+        ``landmarks_no_position``, ``landmarks_too_few``, ``landmarks_behind_camera``, ``landmarks_too_far``.
     obs_status : ndarray of int8, shape (N,)
-        Each dataset observation's ``OBS_*`` code (:mod:`visla_edu.codes`): ``OBS_USED``,
-        ``OBS_GATED`` (an outlier), ``OBS_NO_DEPTH``, ``OBS_IGNORED`` (a repeated frame) or
-        ``OBS_DROPPED`` (its landmark was left out).
+        Each dataset observation's ``OBS_*`` code (:mod:`visla_edu.codes`): ``OBS_USED``, ``OBS_GATED`` (an outlier),
+        ``OBS_NO_DEPTH``, ``OBS_IGNORED`` (a repeated frame, a stale copy) or ``OBS_DROPPED`` (its landmark left out).
     timing : dict of float
-        Seconds: ``setup``, ``solve``, ``covariance``, ``total``.
-    config : dict
+        Seconds: ``setup``, ``solve``, ``covariance``, ``total`` (the window: ``total`` only).
     imu_T_cam : ndarray, shape (4, 4)
-        The calibration used.
     frame_seconds : ndarray, shape (T,)
         Window only (the batch's is empty): time per new frame, 0 for the held frame 0.
-    online_world_T_imu : ndarray, shape (T, 4, 4)
-        Window only: each pose when its frame was the newest (the real-time estimate).
     stop_reasons : list of str
-        Batch only: why each round's Levenberg-Marquardt stopped (:data:`STOP_REASONS`), the
-        final round last.
+        Batch only: why each round's Levenberg-Marquardt stopped (:data:`STOP_REASONS`), the final round last.
     """
 
     name: str
@@ -129,10 +118,7 @@ def check_trajectory(world_T_imu, num_frames, name):
 
 
 def check_landmarks(landmarks, num_landmarks, name):
-    """``landmarks`` as floats (``num_landmarks``, 3), NaN rows (unknown) allowed, None kept.
-
-    An infinite entry or another shape is a ValueError naming ``name`` (and the first infinite landmark).
-    """
+    """``landmarks`` as floats (``num_landmarks``, 3), NaN rows allowed, None kept; inf or another shape: ValueError."""
     if landmarks is None:
         return None
     landmarks = np.asarray(landmarks, dtype=float)

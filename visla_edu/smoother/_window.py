@@ -1,30 +1,23 @@
 """The fixed-lag sliding-window smoother: the batch objective over the last N frames, online.
 
-At each new frame ``k`` the pose is predicted from the previous estimate and the IMU step,
-landmarks seen for the first time are triangulated there, and a few Levenberg-Marquardt
-iterations (:func:`~._batch.levenberg_marquardt`) optimise the poses of the window
-``max(1, k - N + 1) .. k`` and the landmarks they observe. Observations whose squared
-whitened error then exceeds the chi-square threshold are rejected for good.
-
-What happens to the states that leave the window (``SmootherConfig.window_mode``):
+At each new frame ``k`` the pose is predicted from the previous estimate and the IMU step, landmarks seen for the
+first time are triangulated there, and a few Levenberg-Marquardt iterations (:func:`~._batch.levenberg_marquardt`)
+optimise the poses of the window ``max(1, k - N + 1) .. k`` and the landmarks they observe. Observations whose
+squared whitened error then exceeds the chi-square threshold are rejected for good. States leaving the window
+(``SmootherConfig.window_mode``):
 
 ``"fix"`` (default)
-    Older poses are held, so their observations are factors on the landmarks alone: those of
-    a leaving frame are folded into Gaussian landmark priors (:meth:`_WindowState.hold`), so
-    landmarks keep what old frames saw while the problem stays small. The motion factor from
-    the last held pose anchors the window.
+    Older poses are held, so their observations are factors on the landmarks alone: a leaving frame's are folded
+    into Gaussian landmark priors (:meth:`_WindowState.hold`), so landmarks keep what old frames saw while the
+    problem stays small. The motion factor from the last held pose anchors the window.
 ``"marginalize"``
-    Only observations inside the window are used. A leaving pose ``v``'s window marginal is
-    propagated through the motion step into a prior on the new oldest pose, information
-    ``(F Sigma_v F^T + W)^{-1}``, mean ``T_v exp(tau u^)``: a pose-only prior, which counts
-    the observations still in the window twice and loses the old ones of remaining landmarks.
+    Only observations inside the window are used; a leaving pose ``v``'s window marginal, propagated through the motion
+    step, becomes a prior on the new oldest pose (information ``(F Sigma_v F^T + W)^{-1}``, mean ``T_v exp(tau u^)``),
+    which counts the observations still in the window twice and loses the old ones of remaining landmarks.
 
-``python benchmarks/bench_smoother.py --cases sim`` (preset "small", 5% outlier tracks, seeds
-0-4, ATE in m): ``"fix"`` 0.11, 0.13, 0.14, 0.55, 0.14; ``"marginalize"`` 0.34, 0.45, 0.48,
-2.56, 2.78 at the same time per frame, hence the default. Window length on the same drives
-(seeds 0-2): 10 frames 0.31/0.23/0.23 m at 11 ms per frame (two iterations 0.32/0.23/0.18 m
-at 19 ms), 20 frames 0.11/0.13/0.14 m at 14 ms, 30 frames 0.10/0.11/0.10 m at 19 ms: the
-default is 20 frames, one iteration (dataset 03: 15 ms per frame, median).
+The defaults are measured on simulated drives: ``"fix"`` had a lower ATE than ``"marginalize"`` on every seed at
+the same time per frame (``python benchmarks/bench_smoother.py --cases sim``); 20 frames, one iteration, came close
+to 30 frames' ATE at less time per frame (10 frames were worse, even with two iterations).
 """
 
 import time
@@ -154,9 +147,7 @@ class _WindowState:
 
 
 def _drop_close(state, problem, m):
-    """Drop, for good, landmarks predicted closer than ``min_depth``: their usable observations
-    become ``OBS_DROPPED``, the others keep their codes (the counts stay the batch's).
-    """
+    """Drop for good the landmarks predicted closer than ``min_depth``; their usable observations: ``OBS_DROPPED``."""
     _, depth = _normal.observation_errors(problem, state.world_T_imu, m)
     close = np.zeros(problem.num_landmarks, dtype=bool)
     np.logical_or.at(close, problem.obs_landmark, ~(depth >= problem.min_depth))
@@ -219,22 +210,16 @@ def _process_frame(state, k, history):
 def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_threads=1):
     """Fixed-lag sliding-window smoother over the whole drive, frame by frame (module docstring).
 
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-    world_T_imu0 : array_like, shape (4, 4), optional
-        The first pose (held); identity by default.
-    imu_T_cam, config, blas_threads
-        As in :func:`~._batch.smooth` (and refused as there). A window longer than the drive
-        optimises every frame so far at each new frame.
+    ``world_T_imu0`` (4, 4): the first pose (held), identity by default; ``imu_T_cam``, ``config``, ``blas_threads``:
+    as in :func:`~._batch.smooth` (and refused as there). A window longer than the drive optimises every frame so far
+    at each new frame.
 
     Returns
     -------
     SmootherResult
-        ``mode="window"``; ``world_T_imu`` holds each pose as estimated when it left the window
-        (the last window's for its frames), ``pose_cov`` the window marginal at exit
-        (conditioned on the held poses in ``"fix"`` mode, hence optimistic) from the factor of
-        the frame's last, damped step (a cheap approximation). No landmark covariances.
+        ``mode="window"``; ``world_T_imu`` holds each pose as estimated when it left the window (the last window's for
+        its frames), ``pose_cov`` the window marginal at exit (conditioned on the held poses in ``"fix"`` mode, hence
+        optimistic) from the factor of the frame's last, damped step (a cheap approximation); no landmark covariances.
     """
     config = as_smoother_config(config, "smooth_window")
     first = np.eye(4) if world_T_imu0 is None else check_trajectory(np.asarray(world_T_imu0)[None], 1,
@@ -256,9 +241,8 @@ def _run_window(dataset, world_T_imu0, camera, config):
 
 
 def _final_landmarks(dataset, state, config):
-    """The map without what the window never estimated, and the counts ``landmarks_too_far`` (never
-    triangulated: all below ``min_disparity``) and ``landmarks_too_few`` (below
-    ``min_observations``); their usable observations become ``OBS_DROPPED``, as in the batch.
+    """The map without what the window never estimated, and the counts ``landmarks_too_far`` (never triangulated:
+    all below ``min_disparity``) and ``landmarks_too_few``; their usable observations become ``OBS_DROPPED``.
     """
     status, M = state.status, dataset.num_landmarks
     used = np.bincount(dataset.obs_ids, status == OBS_USED, M)
