@@ -11,25 +11,16 @@ EXIT_INTERRUPTED = 130
 
 
 def console_main():
-    """Run the command line on ``sys.argv``; Ctrl-C at any moment gives exit status 130.
+    """Run the command line on ``sys.argv``; return :func:`visla_edu.cli.main`'s exit status, or 130 on Ctrl-C.
 
     * Loading :mod:`visla_edu.cli` (done here, inside the boundary): one line, 130, nothing written.
     * Parsing and the whole command, up to its last line: :func:`visla_edu.cli.main`'s boundary (one
       line, 130; files being written keep their previous content).
-    * After :func:`~visla_edu.cli.main` returns, SIGINT is ignored: the command is complete (every
-      output written and reported), so a Ctrl-C during the interpreter's shutdown changes nothing.
+    * After :func:`~visla_edu.cli.main` returns, SIGINT is ignored: the command is complete, so a
+      Ctrl-C during the interpreter's shutdown changes nothing.
 
-    Only the interpreter's own start-up, before this module runs, is not covered.
-
-    Returns
-    -------
-    int
-        :func:`visla_edu.cli.main`'s exit status, or 130.
-
-    Raises
-    ------
-    SystemExit
-        As :func:`visla_edu.cli.main`.
+    Only the interpreter's own start-up, before this module runs, is not covered. SystemExit: as
+    :func:`visla_edu.cli.main`.
     """
     started = False
     try:

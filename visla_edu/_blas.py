@@ -11,14 +11,9 @@ __all__ = ["limit_blas_threads", "check_blas_threads"]
 def limit_blas_threads(n):
     """Context manager limiting the BLAS threads of numpy and scipy to ``n`` (None: leave as is).
 
-    The filter's per-step matrices are a few hundred rows at most; on a 2-core machine a
-    multi-threaded BLAS spends more time synchronising than computing, so the drivers run with one
-    thread unless told otherwise.
-
-    Parameters
-    ----------
-    n : int or None
-        Threads, >= 1 (ValueError otherwise, :func:`check_blas_threads`).
+    ``n`` >= 1 (ValueError otherwise, :func:`check_blas_threads`). The drivers run with one thread
+    unless told otherwise: the filter's per-step matrices are a few hundred rows at most, and on a
+    2-core machine a multi-threaded BLAS spends more time synchronising than computing.
     """
     if check_blas_threads(n) is None:
         return contextlib.nullcontext()

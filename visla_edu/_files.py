@@ -1,10 +1,9 @@
 """Files visla-edu reads and writes: atomic writes, and checks of input and output paths.
 
-A leaf module (imports only the standard library). Every file the package writes (results,
-figures, datasets, trajectories, notebooks) goes through :func:`atomic_write`.
-:func:`check_output_path` and :func:`check_input_file` turn the usual path mistakes into one-line
-errors that name the path and what to do, before any work starts; they raise built-in types with
-that message as the only argument, so ``str(err)`` is the whole message.
+A leaf module (imports only the standard library). Every file the package writes goes through
+:func:`atomic_write`. :func:`check_output_path` and :func:`check_input_file` turn the usual path
+mistakes into one-line errors that name the path and what to do, before any work starts; they
+raise built-in types with that message as the only argument, so ``str(err)`` is the whole message.
 """
 
 import contextlib
@@ -50,11 +49,10 @@ def atomic_write(path, mode="w", encoding="utf-8", replace=True):
 
     ``mode`` is ``"w"`` (text, in ``encoding``) or ``"wb"``; write to the yielded file, do not close
     it. The bytes go to ``.<name>.<pid>.<random>.tmp`` in the target's folder, are flushed and
-    fsynced, then renamed over ``path`` with :func:`os.replace` (atomic on POSIX and Windows within
-    one file system): a reader sees the old file or the whole new one. If the body raises (or the
-    process is interrupted), the temporary file is removed and ``path`` keeps its previous content
-    (a kill leaves at most the hidden temporary file). A replaced file keeps its permission bits; a
-    new one gets those a plain ``open`` would give (``0o666`` minus the umask).
+    fsynced, then renamed over ``path`` with :func:`os.replace` (atomic within one file system): a
+    reader sees the old file or the whole new one. If the body raises, the temporary file is removed
+    and ``path`` keeps its content (a kill leaves at most the hidden temporary file). A replaced file
+    keeps its permission bits; a new one gets those a plain ``open`` would give.
 
     ``replace=False`` never replaces an existing file: the finished temporary file is hard-linked to
     ``path`` (:func:`os.link` fails if ``path`` exists, even if it appeared while writing; without
@@ -112,10 +110,9 @@ def format_bytes(n):
 def file_kind(path):
     """What ``path`` is, for messages: ``"a regular file"``, ``"a directory"``, ``"a FIFO (named pipe)"``, ...
 
-    Symbolic links are followed; also ``"a socket"``, ``"a character device"``, ``"a block
-    device"``, ``"missing"`` (nothing there, or a component of the path is not a folder) and ``"a
-    broken symbolic link"``. Other ``os.stat`` errors propagate (e.g. ``PermissionError`` on the
-    way).
+    Symbolic links are followed; also the other names of ``_KINDS``, ``"missing"`` (nothing there, or
+    a component of the path is not a folder) and ``"a broken symbolic link"``. Other ``os.stat``
+    errors propagate (e.g. ``PermissionError`` on the way).
     """
     try:
         mode = os.stat(path).st_mode
@@ -129,10 +126,9 @@ def file_kind(path):
 def check_input_file(path, what="data file"):
     """``path`` as an absolute Path (symbolic links resolved) if it is a readable regular file, else a clear error.
 
-    The message starts with ``what`` (e.g. ``"course file"``): a FileNotFoundError (nothing there,
-    or a broken symbolic link: it says where it points), IsADirectoryError, PermissionError (not
-    readable by this user), or ValueError for a FIFO, socket or device (visla-edu seeks in its
-    inputs).
+    The message starts with ``what``: FileNotFoundError (nothing there, or a broken symbolic link),
+    IsADirectoryError, PermissionError (not readable), or ValueError for a FIFO, socket or device
+    (visla-edu seeks in its inputs).
     """
     path = expand_user(path)
     kind = file_kind(path)
@@ -155,8 +151,7 @@ def check_input_file(path, what="data file"):
 def same_file(a, b):
     """Whether paths ``a`` and ``b`` (``~`` expanded) name the same file, through links, ``..`` or hard links.
 
-    :func:`os.path.samefile` (same device and inode) when both can be stat'ed; otherwise whether
-    both resolve to the same absolute path.
+    :func:`os.path.samefile` when both can be stat'ed, else whether both resolve to the same path.
     """
     a, b = expand_user(a), expand_user(b)
     with contextlib.suppress(OSError):
@@ -167,14 +162,13 @@ def same_file(a, b):
 def check_output_path(path, suffixes, option, inputs=(), others=()):
     """Check an output path before any work (suffix, folder, kind, no input); return the absolute path to write.
 
-    ``suffixes`` are the allowed ones, lower case with the dot (``(".npz",)``), the first suggested;
-    ``option`` is how the user gave the path (``"--out"``) and starts the message. The output may be
-    none of ``inputs`` (the files the command reads, not even through a symbolic link or a relative
-    path) nor of ``others`` (``(option, path)`` of the command's other outputs). The folder is
-    resolved, the name kept as given. Errors: ValueError (wrong suffix, an existing FIFO or device,
-    a name too long for the folder, an input or another output), IsADirectoryError (``path`` is a
-    folder), FileNotFoundError or NotADirectoryError (no such folder), PermissionError (not
-    writable).
+    ``suffixes``: the allowed ones, lower case with the dot (``(".npz",)``), the first suggested;
+    ``option``: how the user gave the path (``"--out"``), it starts the message. The output may be none
+    of ``inputs`` (the files the command reads, even through a link or a relative path) nor of
+    ``others`` (``(option, path)`` of the command's other outputs). The folder is resolved, the name
+    kept as given. Errors: ValueError (wrong suffix, an existing FIFO or device, a name too long for
+    the folder, an input or another output), IsADirectoryError (``path`` is a folder),
+    FileNotFoundError or NotADirectoryError (no such folder), PermissionError (not writable).
     """
     given = expand_user(path)
     kind = file_kind(given)

@@ -1,10 +1,10 @@
 """A small user cache of JSON files, keyed by the content of numpy arrays.
 
-Results that take a while to compute from a dataset (its calibration,
-:func:`visla_edu.diagnostics.calibrate`) are kept between runs in a user cache folder
-(:func:`cache_dir`), one JSON file per entry named by :func:`content_hash` of the arrays and a
-version. Entries are written atomically (:func:`save_json`); a missing or corrupt one reads as none
-(:func:`load_json`) and a folder that cannot be written is skipped: the cache never fails a run.
+Slow results of a dataset (its calibration, :func:`visla_edu.diagnostics.calibrate`) are kept
+between runs in :func:`cache_dir`, one JSON file per entry named by :func:`content_hash` of the
+arrays and a version. Entries are written atomically (:func:`save_json`); a missing or corrupt one
+reads as none (:func:`load_json`) and a folder that cannot be written is skipped: the cache never
+fails a run.
 """
 
 import hashlib
@@ -23,19 +23,11 @@ ENV_VAR = "VISLA_EDU_CACHE"
 
 
 def cache_dir():
-    """The user cache folder of visla-edu (not created here).
+    """The user cache folder of visla-edu, a :class:`pathlib.Path` (not created here).
 
-    Returns
-    -------
-    pathlib.Path
-        ``$VISLA_EDU_CACHE`` if set and not empty, else ``$XDG_CACHE_HOME/visla-edu``, else
-        ``~/.cache/visla-edu``.
-
-    Raises
-    ------
-    ValueError
-        The folder starts with ``~user`` of no user, or ``~`` without a home folder
-        (:func:`visla_edu._files.expand_user`); callers then skip the cache.
+    ``$VISLA_EDU_CACHE`` if set and not empty, else ``$XDG_CACHE_HOME/visla-edu``, else
+    ``~/.cache/visla-edu``. ValueError for ``~user`` of no user or ``~`` without a home folder
+    (:func:`visla_edu._files.expand_user`); callers then skip the cache.
     """
     explicit = os.environ.get(ENV_VAR, "").strip()
     if explicit:
@@ -47,19 +39,9 @@ def cache_dir():
 def content_hash(arrays, version):
     """Hex digest (BLAKE2b, 32 bytes: 64 characters) of named arrays and a version string.
 
-    Each array enters with its name, dtype, shape and bytes (C order): equal content gives the same
-    key whatever the memory layout, any changed value, shape or type a new one.
-
-    Parameters
-    ----------
-    arrays : dict
-        Name -> array_like (scalars too).
-    version : str
-        Bump it whenever what is cached changes meaning.
-
-    Returns
-    -------
-    str
+    ``arrays``: name -> array_like (scalars too); ``version``: bump it whenever what is cached changes
+    meaning. Each array enters with its name, dtype, shape and bytes (C order): equal content gives the
+    same key whatever the memory layout, any changed value, shape or type a new one.
     """
     digest = hashlib.blake2b(digest_size=32)
     digest.update(str(version).encode())
@@ -71,16 +53,7 @@ def content_hash(arrays, version):
 
 
 def load_json(path):
-    """The JSON object stored at ``path``, or None when it is missing, unreadable or not a JSON object.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-
-    Returns
-    -------
-    dict or None
-    """
+    """The JSON object (a dict) stored at ``path``, or None when it is missing, unreadable or not an object."""
     try:
         with open(path, encoding="utf-8") as handle:
             value = json.load(handle)
@@ -90,19 +63,10 @@ def load_json(path):
 
 
 def save_json(path, value):
-    """Write ``value`` as JSON to ``path`` atomically (:func:`visla_edu._files.atomic_write`), creating the folder.
+    """Write the dict ``value`` as JSON to ``path`` atomically, creating the folder.
 
-    Parameters
-    ----------
-    path : str or pathlib.Path
-    value : dict
-        JSON-serialisable.
-
-    Returns
-    -------
-    bool
-        True when the file was written; False (and nothing written) when the folder or file cannot
-        be written, or ``value`` is not JSON (NaN, infinity, other objects).
+    Through :func:`visla_edu._files.atomic_write`. True when written; False (and nothing written) when
+    the folder or file cannot be written, or ``value`` is not JSON (NaN, infinity, other objects).
     """
     path = Path(path)
     try:

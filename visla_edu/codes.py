@@ -4,8 +4,7 @@ A leaf module (it imports nothing of the package), so views and the command line
 codes and the mode names without importing the filters. The observation status is one
 vocabulary for every mode: one code per observation in a filter's
 :class:`visla_edu.filters.StepRecord` and in a smoother's ``SmootherResult.obs_status``, and a
-column per code in ``RunResult.status_counts`` (each code's meaning: its declaration below).
-``STATUS_NAMES[code]`` is the code's name in summaries and per-status counts. Codes are only
+column per code, named ``STATUS_NAMES[code]``, in ``RunResult.status_counts``. Codes are only
 ever appended, so a count saved with fewer columns is the first columns of today's.
 """
 

@@ -37,13 +37,10 @@ Perturbations and Jacobians (stated here once; every module follows it)
   ``c2 = (t^2 + 2 cos t - 2) / (2 t^4)``, ``c3 = (2 t - 3 sin t + t cos t) / (2 t^5)``. The
   closed forms of the inverse hold for ``t < pi``.
 
-Every function accepts a single input or a stack with any leading batch
-dimensions, e.g. ``hat`` maps ``(..., 3) -> (..., 3, 3)``.
-
-The closed forms switch to Taylor series for small angles (below
-``SMALL_ANGLE`` rad), where ``1 - cos`` and ``theta - sin`` lose their digits, and
-the SO(3) logarithm uses an ``atan2`` angle and the symmetric part of ``R`` near
-``pi``, so that all maps are accurate to about 1e-12 over the whole range.
+Every function takes one input or a stack with any leading batch dimensions (``in -> out``
+shapes in each docstring). Below ``SMALL_ANGLE`` rad the coefficients use Taylor series, and near
+``pi`` the SO(3) log takes its axis from the symmetric part of ``R``: every map is accurate to
+about 1e-12 over the whole range.
 """
 
 import numpy as np
@@ -92,16 +89,9 @@ def _as_matrices(x, rows, cols, name):
 
 
 def hat(w):
-    """Skew-symmetric matrix of a 3-vector: ``hat(w) @ x == cross(w, x)``.
+    """Skew-symmetric matrix of a 3-vector, (..., 3) -> (..., 3, 3): ``hat(w) @ x == cross(w, x)``.
 
-    Parameters
-    ----------
-    w : array_like, shape (..., 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-        ``[[0, -w3, w2], [w3, 0, -w1], [-w2, w1, 0]]``.
+    ``hat(w) = [[0, -w3, w2], [w3, 0, -w1], [-w2, w1, 0]]``.
     """
     w = _as_vectors(w, 3, "hat")
     W = np.zeros(w.shape[:-1] + (3, 3))
@@ -115,17 +105,7 @@ def hat(w):
 
 
 def vee(W):
-    """Inverse of :func:`hat` (3x3 -> 3) or of :func:`twist_hat` (4x4 -> 6).
-
-    Parameters
-    ----------
-    W : array_like, shape (..., 3, 3) or (..., 4, 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 3) or (..., 6)
-        For 3x3 input ``[W32, W13, W21]``; for 4x4 input the twist ``[v; w]``.
-    """
+    """Inverse of :func:`hat`, (..., 3, 3) -> (..., 3), or of :func:`twist_hat`, (..., 4, 4) -> (..., 6) ``[v; w]``."""
     W = np.asarray(W, dtype=float)
     if W.ndim >= 2 and W.shape[-2:] == (4, 4):
         return twist_vee(W)
@@ -134,16 +114,7 @@ def vee(W):
 
 
 def twist_hat(u):
-    """4x4 matrix of a twist ``u = [v; w]``: ``[[hat(w), v], [0, 0]]``.
-
-    Parameters
-    ----------
-    u : array_like, shape (..., 6)
-
-    Returns
-    -------
-    ndarray, shape (..., 4, 4)
-    """
+    """4x4 matrix of a twist ``u = [v; w]``, (..., 6) -> (..., 4, 4): ``[[hat(w), v], [0, 0]]``."""
     u = _as_vectors(u, 6, "twist_hat")
     U = np.zeros(u.shape[:-1] + (4, 4))
     U[..., :3, :3] = hat(u[..., 3:])
@@ -152,17 +123,9 @@ def twist_hat(u):
 
 
 def twist_vee(U):
-    """Inverse of :func:`twist_hat`: ``[[hat(w), v], [0, 0]] -> [v; w]``.
+    """Inverse of :func:`twist_hat`, (..., 4, 4) -> (..., 6): ``[[hat(w), v], [0, 0]] -> [v; w]``.
 
     Only ``U[..., :3, 3]`` and ``U32, U13, U21`` are read; the rest of ``U`` is not checked.
-
-    Parameters
-    ----------
-    U : array_like, shape (..., 4, 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 6)
     """
     U = _as_matrices(U, 4, 4, "twist_vee")
     w = np.stack([U[..., 2, 1], U[..., 0, 2], U[..., 1, 0]], axis=-1)
@@ -227,14 +190,7 @@ def _q_coefficients(theta, theta2):
 def so3_exp(w):
     """Rodrigues' formula: ``exp(hat(w)) = I + A hat(w) + B hat(w)^2``, ``A = sin(t) / t``, ``B`` as in the module.
 
-    Parameters
-    ----------
-    w : array_like, shape (..., 3)
-        Rotation vector (axis times angle, rad).
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
+    ``w`` (..., 3): rotation vector (axis times angle, rad) -> (..., 3, 3).
     """
     w = _as_vectors(w, 3, "so3_exp")
     theta, theta2 = _angle(w)
@@ -247,13 +203,7 @@ def so3_exp(w):
 def so3_left_jacobian(w):
     """Left Jacobian of SO(3): ``J_l(w) = I + B hat(w) + C hat(w)^2``, the ``V`` of :func:`se3_exp`.
 
-    Parameters
-    ----------
-    w : array_like, shape (..., 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
+    (..., 3) -> (..., 3, 3).
     """
     w = _as_vectors(w, 3, "so3_left_jacobian")
     theta, theta2 = _angle(w)
@@ -264,29 +214,14 @@ def so3_left_jacobian(w):
 
 
 def so3_right_jacobian(w):
-    """Right Jacobian of SO(3): ``J_r(w) = J_l(-w) = I - B hat(w) + C hat(w)^2`` (see the module docstring).
-
-    Parameters
-    ----------
-    w : array_like, shape (..., 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-    """
+    """Right Jacobian of SO(3): ``J_r(w) = J_l(-w) = I - B hat(w) + C hat(w)^2``, (..., 3) -> (..., 3, 3)."""
     return so3_left_jacobian(-_as_vectors(w, 3, "so3_right_jacobian"))
 
 
 def so3_right_jacobian_inv(w):
     """Inverse right Jacobian of SO(3): ``J_r(w)^{-1} = I + hat(w) / 2 + D hat(w)^2``, for ``|w| < pi``.
 
-    Parameters
-    ----------
-    w : array_like, shape (..., 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
+    (..., 3) -> (..., 3, 3).
     """
     w = _as_vectors(w, 3, "so3_right_jacobian_inv")
     D = _inverse_jacobian_coefficient(*_angle(w))[..., None, None]
@@ -295,19 +230,11 @@ def so3_right_jacobian_inv(w):
 
 
 def so3_log(R):
-    """Rotation vector of a rotation matrix, with angle in ``[0, pi]``.
+    """Rotation vector of a rotation matrix, (..., 3, 3) -> (..., 3), with angle in ``[0, pi]``.
 
     The angle is ``atan2(|s|, c)`` with ``s = vee(R - R^T) / 2 = sin(t) a`` and
     ``c = (trace(R) - 1) / 2 = cos(t)``. Near ``pi`` the axis ``a`` comes from the
     symmetric part ``(R + R^T) / 2 - c I = (1 - c) a a^T`` instead of ``s``.
-
-    Parameters
-    ----------
-    R : array_like, shape (..., 3, 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
     """
     R = _as_matrices(R, 3, 3, "so3_log")
     s = 0.5 * np.stack(
@@ -340,18 +267,10 @@ def _near_pi_log(R, s, c, theta):
 
 
 def se3_exp(u):
-    """SE(3) exponential of a twist ``u = [v; w]`` in closed form.
+    """SE(3) exponential of a twist ``u = [v; w]`` in closed form, (..., 6) -> (..., 4, 4).
 
     ``exp(twist_hat(u)) = [[R, V v], [0, 1]]`` with ``R = so3_exp(w)`` and ``V = J_l(w)``
     (:func:`so3_left_jacobian`).
-
-    Parameters
-    ----------
-    u : array_like, shape (..., 6)
-
-    Returns
-    -------
-    ndarray, shape (..., 4, 4)
     """
     u = _as_vectors(u, 6, "se3_exp")
     v, w = u[..., :3], u[..., 3:]
@@ -370,18 +289,10 @@ def se3_exp(u):
 
 
 def se3_log(T):
-    """SE(3) logarithm: the twist ``u = [v; w]`` with ``se3_exp(u) == T``.
+    """SE(3) logarithm: the twist ``u = [v; w]`` with ``se3_exp(u) == T``, (..., 4, 4) -> (..., 6).
 
     ``w = so3_log(R)`` and ``v = V^{-1} p`` with ``V^{-1} = I - hat(w)/2 + D hat(w)^2`` (``D`` as in
     the module docstring).
-
-    Parameters
-    ----------
-    T : array_like, shape (..., 4, 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 6)
     """
     T = _as_matrices(T, 4, 4, "se3_log")
     w = so3_log(T[..., :3, :3])
@@ -407,13 +318,7 @@ def _q_right(x):
 def se3_right_jacobian(x):
     """Right Jacobian of SE(3): ``J_r(x) = [[J_r(phi), Q_r], [0, J_r(phi)]]`` for ``x = [rho; phi]``.
 
-    Parameters
-    ----------
-    x : array_like, shape (..., 6)
-
-    Returns
-    -------
-    ndarray, shape (..., 6, 6)
+    (..., 6) -> (..., 6, 6).
     """
     x = _as_vectors(x, 6, "se3_right_jacobian")
     A = so3_right_jacobian(x[..., 3:])
@@ -426,14 +331,7 @@ def se3_right_jacobian(x):
 def se3_right_jacobian_inv(x):
     """Inverse right Jacobian of SE(3): ``[[A^{-1}, -A^{-1} Q_r A^{-1}], [0, A^{-1}]]``, ``A = J_r(phi)``.
 
-    Parameters
-    ----------
-    x : array_like, shape (..., 6)
-        Twists ``[rho; phi]`` with ``|phi| < pi``.
-
-    Returns
-    -------
-    ndarray, shape (..., 6, 6)
+    Twists ``x = [rho; phi]`` (..., 6) with ``|phi| < pi`` -> (..., 6, 6).
     """
     x = _as_vectors(x, 6, "se3_right_jacobian_inv")
     A_inv = so3_right_jacobian_inv(x[..., 3:])
@@ -444,16 +342,7 @@ def se3_right_jacobian_inv(x):
 
 
 def se3_inv(T):
-    """Inverse of a rigid transform: ``[[R^T, -R^T p], [0, 1]]``.
-
-    Parameters
-    ----------
-    T : array_like, shape (..., 4, 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 4, 4)
-    """
+    """Inverse of a rigid transform, (..., 4, 4) -> (..., 4, 4): ``[[R^T, -R^T p], [0, 1]]``."""
     T = _as_matrices(T, 4, 4, "se3_inv")
     Rt = np.swapaxes(T[..., :3, :3], -1, -2)
     out = np.zeros(T.shape)
@@ -464,17 +353,9 @@ def se3_inv(T):
 
 
 def adjoint(T):
-    """Adjoint of a pose for twists ``[v; w]``: ``[[R, hat(p) R], [0, R]]``.
+    """Adjoint of a pose for twists ``[v; w]``, (..., 4, 4) -> (..., 6, 6): ``[[R, hat(p) R], [0, R]]``.
 
     Satisfies ``T twist_hat(u) T^{-1} = twist_hat(adjoint(T) u)``.
-
-    Parameters
-    ----------
-    T : array_like, shape (..., 4, 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 6, 6)
     """
     T = _as_matrices(T, 4, 4, "adjoint")
     R = T[..., :3, :3]
@@ -486,16 +367,7 @@ def adjoint(T):
 
 
 def curly_hat(u):
-    """The 6x6 ``ad`` matrix of a twist ``u = [v; w]``: ``[[hat(w), hat(v)], [0, hat(w)]]``.
-
-    Parameters
-    ----------
-    u : array_like, shape (..., 6)
-
-    Returns
-    -------
-    ndarray, shape (..., 6, 6)
-    """
+    """The 6x6 ``ad`` matrix of a twist ``u = [v; w]``, (..., 6) -> (..., 6, 6): ``[[hat(w), hat(v)], [0, hat(w)]]``."""
     u = _as_vectors(u, 6, "curly_hat")
     out = np.zeros(u.shape[:-1] + (6, 6))
     W = hat(u[..., 3:])
@@ -506,16 +378,7 @@ def curly_hat(u):
 
 
 def odot(s):
-    """The 4x6 matrix with ``twist_hat(u) @ s == odot(s) @ u`` for homogeneous ``s``.
-
-    Parameters
-    ----------
-    s : array_like, shape (..., 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 4, 6)
-    """
+    """The 4x6 matrix with ``twist_hat(u) @ s == odot(s) @ u`` for homogeneous ``s``, (..., 4) -> (..., 4, 6)."""
     s = _as_vectors(s, 4, "odot")
     out = np.zeros(s.shape[:-1] + (4, 6))
     out[..., :3, :3] = s[..., 3, None, None] * np.eye(3)

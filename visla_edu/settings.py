@@ -29,26 +29,14 @@ _TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
 
 @dataclass(frozen=True)
 class SettingSpec:
-    """What one setting accepts.
+    """What one setting accepts; ``kind`` is ``float``, ``int``, ``bool`` or ``str``.
 
-    Attributes
-    ----------
-    kind : {float, int, bool, str}
-    low, high : float or None
-        The plausible range (None: unbounded on that side).
-    low_open : bool
-        The range excludes ``low``.
-    words : tuple of str
-        Text values accepted as they are (e.g. ``("auto",)``); for ``str`` settings, empty means any
-        text (checked where it is used).
-    optional : bool
-        None is allowed (``none`` on the command line).
-    per_axis : bool
-        A number setting also taking three, one per body axis, each in range (``0.1,0.02,0.02``).
-    unit, why : str
-        For messages: the unit of the value and why the range is what it is.
-    default : object
-        The field's default (what ``--help`` shows).
+    ``low``, ``high``: the plausible range (None: unbounded on that side), ``low_open``: the range
+    excludes ``low``; ``words``: text values accepted as they are (e.g. ``("auto",)``; for ``str``
+    settings, empty means any text, checked where it is used); ``optional``: None is allowed (``none``
+    on the command line); ``per_axis``: a number setting also taking three, one per body axis, each in
+    range (``0.1,0.02,0.02``); ``unit``, ``why``: for messages, the unit of the value and why the range
+    is what it is; ``default``: the field's default (what ``--help`` shows).
     """
 
     kind: type
@@ -120,36 +108,20 @@ class SettingSpec:
 
 def setting(default, kind, low=None, high=None, *, low_open=False, words=(), optional=False, unit="", why="",
             per_axis=False):
-    """A dataclass field with its :class:`SettingSpec`.
+    """A dataclass field with its :class:`SettingSpec`: ``dataclasses.field(default=default)``, spec in its metadata.
 
-    Parameters
-    ----------
-    default : object
-        Kept in the spec too; :func:`check_settings` checks it on each instance.
-    kind, low, high, low_open, words, optional, unit, why, per_axis
-        As the :class:`SettingSpec` attributes (``words``: any iterable, stored as a tuple).
-
-    Returns
-    -------
-    dataclasses.Field
-        ``dataclasses.field(default=default)`` with the spec in its metadata under :data:`SPEC`.
+    The spec is stored under :data:`SPEC`; the other arguments are its attributes (``words``: any
+    iterable, stored as a tuple). The default is kept in the spec too; :func:`check_settings` checks it
+    on each instance.
     """
     spec = SettingSpec(kind, low, high, low_open, tuple(words), optional, unit, why, per_axis, default)
     return dataclasses.field(default=default, metadata={SPEC: spec})
 
 
 def specs(cls):
-    """The :class:`SettingSpec` of each field of dataclass ``cls`` declared with :func:`setting`.
+    """Dict field name -> :class:`SettingSpec` of the fields of ``cls`` declared with :func:`setting`, in order.
 
-    Parameters
-    ----------
-    cls : type or instance
-        A dataclass (TypeError otherwise) or one of its instances.
-
-    Returns
-    -------
-    dict
-        Field name -> :class:`SettingSpec`, in declaration order (other fields are left out).
+    ``cls``: a dataclass (TypeError otherwise) or one of its instances; other fields are left out.
     """
     return {f.name: f.metadata[SPEC] for f in dataclasses.fields(cls) if SPEC in f.metadata}
 
@@ -160,11 +132,6 @@ def check_settings(config):
     Numbers of float fields become Python floats, integral numbers of int fields Python ints, numpy
     booleans Python booleans, and three per-axis numbers a tuple; other fields are left alone. The
     message is ``"<class>.<name> must be <what is valid> (<why>), got <value>"``.
-
-    Parameters
-    ----------
-    config : dataclass instance
-        E.g. a :class:`~visla_edu.filters.FilterConfig`; modified in place.
     """
     for name, spec in specs(config).items():
         setattr(config, name, spec.check(f"{type(config).__name__}.{name}", getattr(config, name)))
@@ -174,20 +141,9 @@ def parse_setting(cls, pair):
     """``"NAME=VALUE"`` -> ``(name, value)`` for a field of ``cls``, parsed strictly; ValueError otherwise.
 
     Split at the first ``=``, spaces around the name ignored; the value is parsed by
-    :meth:`SettingSpec.parse` (module docstring), then checked like a value given in Python. The
-    ValueError names a missing ``=``, an unknown name (listing the settings) or a bad value.
-
-    Parameters
-    ----------
-    cls : type
-        A dataclass whose fields were declared with :func:`setting`.
-    pair : str
-
-    Returns
-    -------
-    name : str
-    value : object
-        A declared word comes back in lower case, three numbers of a per-axis setting as a tuple.
+    :meth:`SettingSpec.parse` (module docstring), then checked like a value given in Python; a declared
+    word comes back in lower case, three numbers of a per-axis setting as a tuple. The ValueError names
+    a missing ``=``, an unknown name (listing the settings) or a bad value.
     """
     name, sep, text = pair.partition("=")
     name = name.strip()
@@ -201,17 +157,7 @@ def parse_setting(cls, pair):
 def parse_settings(cls, pairs):
     """``["sigma_pixel=2", ...]`` -> keyword arguments of ``cls``; ValueError for a refused pair or a name given twice.
 
-    Parameters
-    ----------
-    cls : type
-        As :func:`parse_setting`.
-    pairs : iterable of str
-        ``"NAME=VALUE"`` each.
-
-    Returns
-    -------
-    dict
-        Name -> parsed value, in the order given.
+    Each pair as :func:`parse_setting`; the dict keeps the order given.
     """
     out = {}
     for pair in pairs:
@@ -225,14 +171,7 @@ def parse_settings(cls, pairs):
 def format_value(value):
     """``value`` as ``NAME=VALUE`` would set it (for ``--help``): ``true``/``false``, ``none``, short numbers.
 
-    Parameters
-    ----------
-    value : bool, int, float, str, tuple or None
-
-    Returns
-    -------
-    str
-        E.g. ``"true"``, ``"none"``, ``"1000000"``, ``"1e-06"``, ``"auto"``, ``"0.1,0.02,0.02"``.
+    E.g. ``"true"``, ``"none"``, ``"1000000"``, ``"1e-06"``, ``"auto"``, ``"0.1,0.02,0.02"``.
     """
     if isinstance(value, bool) or value is None:
         return str(value).lower()

@@ -20,15 +20,10 @@ With the right perturbation ``world_T_imu = mu @ exp(twist_hat(delta))`` (the co
 one place, :func:`project_points`, which :func:`stereo_projection`, the filters, the smoothers,
 the visual odometry and the capstone all call.
 
-A rig may have two intrinsics (``K`` left, ``K_right`` right; rows 3 and 4 of ``Ks`` are the
-right camera's): see ``_intrinsics``. Its right camera can come from two extrinsics, read in
-one of four ways (camera->IMU or IMU->camera, optical or "regular" frame): see ``_extrinsics``.
-
-Modules (private; everything public is re-exported here): ``_projection`` (``pi``, ``dpi/dq``,
-:func:`project_points`, :func:`stereo_projection`), ``_intrinsics`` (the stereo matrix of one or
-two intrinsics, their pixel geometry and the exact row reduction), ``_extrinsics`` (the rig from
-two extrinsics and their readings), ``_triangulation`` (depth from disparity and from bearings,
-the triangulation Jacobian), ``_rig`` (:class:`StereoCamera`).
+Private modules, all re-exported here: ``_projection`` (``pi``, ``dpi/dq``, the two above),
+``_intrinsics`` (``Ks`` of one or two intrinsics: rows 3 and 4 are the right camera's),
+``_extrinsics`` (the rig from two extrinsics, read in one of four ways), ``_triangulation``
+(depth from disparity and from bearings, its Jacobian), ``_rig`` (:class:`StereoCamera`).
 """
 
 from visla_edu.camera._extrinsics import (DIRECTIONS, FRAMES, MAX_OFF_AXIS, MAX_RIG_ROTATION, REGULAR_T_OPTICAL,

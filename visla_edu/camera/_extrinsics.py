@@ -3,19 +3,17 @@
 visla-edu's rig is the left camera's pose ``imu_T_cam`` (optical frame) and a baseline ``b``
 (a rectified pair, :mod:`visla_edu.camera`). Two extrinsics ``imu_T_left``, ``imu_T_right``
 (both cameras' optical frames in the IMU frame) give it when
-``left_T_right = inv(imu_T_left) imu_T_right`` is a translation along x: :func:`rig_geometry`
-measures how far it is from one (the rotation between the cameras, the offset off the x axis)
-and :func:`rectified_baseline` returns ``b = |offset|`` or refuses with the reason.
+``left_T_right = inv(imu_T_left) imu_T_right`` is a translation along x (:func:`rig_geometry`,
+:func:`rectified_baseline`).
 
-A file's extrinsic ``E`` may be written either way (``E = imu_T_cam``, "camera->IMU": it maps
-camera points into the IMU frame; or ``E = cam_T_imu``, "IMU->camera") and in either camera frame
-(the optical one, or a "regular" one: x forward, y left, z up). The four readings
+A file's extrinsic ``E`` may be ``imu_T_cam`` ("camera->IMU") or ``cam_T_imu`` ("IMU->camera"),
+in the optical frame or a "regular" one (x forward, y left, z up). The four readings
 (:data:`DIRECTIONS` x :data:`FRAMES`, :func:`extrinsic_readings`) give four candidate rigs::
 
     imu_T_left = E  |  inv(E)  |  E @ REGULAR_T_OPTICAL  |  inv(E) @ REGULAR_T_OPTICAL
 
-and what decides between them is evidence: this geometry, and the motion the IMU and the camera
-see (:mod:`visla_edu.diagnostics`).
+and evidence decides between them: this geometry, and the motion the IMU and the camera see
+(:mod:`visla_edu.diagnostics`).
 """
 
 from dataclasses import dataclass
@@ -52,14 +50,12 @@ def rig_geometry(imu_T_left, imu_T_right):
     Returns
     -------
     left_T_right : ndarray, shape (4, 4)
-        ``inv(imu_T_left) imu_T_right``.
     rotation : float
         Angle between the cameras (rad), ``|so3_log(R)|``.
     offset : ndarray, shape (3,)
         The right camera's position in the left camera frame (m); ``[b, 0, 0]`` for a rectified pair.
     problem : str
-        ``""`` for a rectified pair within :data:`MAX_RIG_ROTATION` and :data:`MAX_OFF_AXIS`,
-        else the reason in words.
+        ``""`` within :data:`MAX_RIG_ROTATION` and :data:`MAX_OFF_AXIS`, else the reason in words.
     """
     left_T_right = lie.se3_inv(np.asarray(imu_T_left, dtype=float)) @ np.asarray(imu_T_right, dtype=float)
     rotation = float(np.linalg.norm(lie.so3_log(left_T_right[:3, :3])))
@@ -87,16 +83,7 @@ def _fmt(v):
 
 
 def rectified_baseline(imu_T_left, imu_T_right):
-    """The baseline ``b = |offset|`` (m) of :func:`rig_geometry`, or a ValueError with its ``problem``.
-
-    Parameters
-    ----------
-    imu_T_left, imu_T_right : ndarray, shape (4, 4)
-
-    Returns
-    -------
-    float
-    """
+    """The baseline ``b = |offset|`` (m) of :func:`rig_geometry`'s two poses, or a ValueError with its ``problem``."""
     _, _, offset, problem = rig_geometry(imu_T_left, imu_T_right)
     if problem:
         raise ValueError(f"not a rectified stereo pair: {problem}; visla-edu's stereo model needs the right camera "
@@ -116,18 +103,9 @@ def reading_name(direction, frame):
 class RigReading:
     """One reading of a file's two extrinsics: the rig it gives, and whether that rig is rectified.
 
-    Attributes
-    ----------
-    name : str
-        :func:`reading_name`, e.g. ``"camera->IMU, regular"``.
-    direction, frame : str
-        Of :data:`DIRECTIONS` and :data:`FRAMES`.
-    imu_T_left, imu_T_right : ndarray, shape (4, 4)
-        Under this reading.
-    rotation : float
-    offset : ndarray, shape (3,)
-    problem : str
-        As in :func:`rig_geometry`.
+    ``name``: :func:`reading_name`, e.g. ``"camera->IMU, regular"``; ``direction``, ``frame``: of
+    :data:`DIRECTIONS` and :data:`FRAMES`; ``imu_T_left``, ``imu_T_right`` (4, 4): under this
+    reading; ``rotation``, ``offset``, ``problem``: as in :func:`rig_geometry`.
     """
 
     name: str
@@ -151,17 +129,10 @@ def _imu_T_optical(E, direction, frame):
 
 
 def extrinsic_readings(ext_left, ext_right):
-    """The four readings (:data:`DIRECTIONS` x :data:`FRAMES`) of two extrinsics, with their rig geometry.
+    """The four readings (:data:`DIRECTIONS` x :data:`FRAMES`) of two extrinsics, as a tuple of :class:`RigReading`.
 
-    Parameters
-    ----------
-    ext_left, ext_right : ndarray, shape (4, 4)
-        The file's extrinsics of the left and the right camera (read the same way).
-
-    Returns
-    -------
-    tuple of RigReading
-        In the order camera->IMU optical, camera->IMU regular, IMU->camera optical, IMU->camera regular.
+    ``ext_left``, ``ext_right`` (4, 4): the file's extrinsics of the two cameras (read the same way).
+    Order: camera->IMU optical, camera->IMU regular, IMU->camera optical, IMU->camera regular.
     """
     readings = []
     for direction in DIRECTIONS:
@@ -174,18 +145,9 @@ def extrinsic_readings(ext_left, ext_right):
 
 
 def write_extrinsic(imu_T_cam, direction, frame):
-    """The extrinsic ``E`` a file written in reading ``(direction, frame)`` stores for ``imu_T_cam`` (optical).
+    """The extrinsic ``E`` (4, 4) a file written in reading ``(direction, frame)`` stores for ``imu_T_cam`` (optical).
 
     The inverse of the reading: ``_imu_T_optical(write_extrinsic(T, d, f), d, f) == T``.
-
-    Parameters
-    ----------
-    imu_T_cam : ndarray, shape (4, 4)
-    direction, frame : str
-
-    Returns
-    -------
-    ndarray, shape (4, 4)
     """
     reading_name(direction, frame)  # checks both
     T = np.asarray(imu_T_cam, dtype=float)

@@ -36,14 +36,6 @@ def single_intrinsics(Ks):
     """Whether the right rows of ``Ks`` (4, 4) repeat the left camera's but for the baseline term.
 
     True for a rig with one intrinsics: ``uR = uL + Ks[2, 3] / z`` and ``vR = vL`` exactly.
-
-    Parameters
-    ----------
-    Ks : ndarray, shape (4, 4)
-
-    Returns
-    -------
-    bool
     """
     return bool(Ks[2, 0] == Ks[0, 0] and Ks[2, 2] == Ks[0, 2] and Ks[3, 1] == Ks[1, 1] and Ks[3, 2] == Ks[1, 2])
 
@@ -51,18 +43,8 @@ def single_intrinsics(Ks):
 def stereo_matrix(K, b, K_right=None):
     """The 4x4 stereo calibration matrix ``Ks`` (module docstring) from the intrinsics and the baseline.
 
-    Parameters
-    ----------
-    K : array_like, shape (3, 3)
-        Left camera intrinsics ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]``.
-    b : float
-        Stereo baseline (m).
-    K_right : array_like, shape (3, 3), optional
-        Right camera intrinsics (default: ``K``).
-
-    Returns
-    -------
-    ndarray, shape (4, 4)
+    ``K`` (3, 3): left intrinsics ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]``; ``b``: baseline (m);
+    ``K_right`` (3, 3): right intrinsics (default: ``K``).
     """
     K, b = check_stereo_calibration(K, b, "stereo_matrix")
     R = K if K_right is None else check_intrinsics(K_right, "stereo_matrix: K_right", "K_right")
@@ -79,23 +61,15 @@ def stereo_matrix(K, b, K_right=None):
 
 
 def stereo_rows(Ks):
-    """The exact reduction of the four stereo rows ``[uL, vL, uR, vR]`` to three, for ``Ks``.
+    """The exact reduction of the four stereo rows ``[uL, vL, uR, vR]`` to three, ``Ks`` (4, 4) -> (3, 4).
 
     ``vL`` and ``vR`` (rows ``[0, fsv, cv, 0]`` and ``[0, fsv', cv', 0]`` of ``Ks``) depend on the
     state only through ``y / z``: their Jacobians are ``fsv g`` and ``fsv' g`` for the same row
     ``g``. Rotating the pair orthonormally by ``(a, c) = (fsv, fsv') / hypot(fsv, fsv')`` keeps
     all of their information in ``a vL + c vR``; the other combination ``-c vL + a vR`` has a
     zero Jacobian, and with pixel noise ``sigma^2 I`` it is independent of the rest, so dropping
-    it changes no update.
-
-    Parameters
-    ----------
-    Ks : ndarray, shape (4, 4)
-
-    Returns
-    -------
-    ndarray, shape (3, 4)
-        Orthonormal rows; the object :data:`STEREO_ROWS` when rows 2 and 4 of ``Ks`` are equal.
+    it changes no update. The rows are orthonormal; the object :data:`STEREO_ROWS` when rows 2 and 4
+    of ``Ks`` are equal.
     """
     if np.array_equal(Ks[1], Ks[3]):
         return STEREO_ROWS
@@ -104,19 +78,10 @@ def stereo_rows(Ks):
 
 
 def right_in_left_pixels(z, K, K_right=None):
-    """Stereo pixels with the right image's ``[uR, vR]`` mapped into the left camera's intrinsics.
+    """Stereo pixels (..., 4) with the right image's ``[uR, vR]`` mapped into the left camera's intrinsics.
 
     The map of the module docstring (the same normalised image point seen through ``K``); ``z``
-    itself when ``K_right`` is None or equal to ``K``.
-
-    Parameters
-    ----------
-    z : ndarray, shape (..., 4)
-    K, K_right : ndarray, shape (3, 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 4)
+    itself when ``K_right`` is None or equal to ``K``. ``K``, ``K_right``: (3, 3).
     """
     if same_intrinsics(K, K_right):
         return z
@@ -138,16 +103,8 @@ def left_in_right_u(u, K, K_right=None):
 def disparity(z, K, K_right=None):
     """Disparity in the left camera's pixels, ``uL - uR`` after :func:`right_in_left_pixels`: ``fsu b / depth``.
 
-    Parameters
-    ----------
-    z : ndarray, shape (..., 4)
-    K, K_right : ndarray, shape (3, 3)
-        ``K_right`` None (or equal to ``K``): the course's ``uL - uR``, bit for bit.
-
-    Returns
-    -------
-    ndarray, shape (...)
-        Positive for points in front of the rig.
+    ``z`` (..., 4) -> (...), positive for points in front of the rig. ``K``, ``K_right`` (3, 3);
+    ``K_right`` None (or equal to ``K``): the course's ``uL - uR``, bit for bit.
     """
     z = np.asarray(z, dtype=float)
     if same_intrinsics(K, K_right):

@@ -23,16 +23,7 @@ __all__ = ["projection", "projection_jacobian", "project_points", "stereo_projec
 
 
 def projection(q):
-    """Perspective division ``pi(q) = q / q3`` of homogeneous camera points.
-
-    Parameters
-    ----------
-    q : array_like, shape (..., 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 4)
-    """
+    """Perspective division ``pi(q) = q / q3`` of homogeneous camera points, (..., 4) -> (..., 4)."""
     q = np.asarray(q, dtype=float)
     if q.ndim == 0 or q.shape[-1] != 4:
         raise ValueError(f"projection: expected shape (..., 4), got {q.shape}")
@@ -40,17 +31,9 @@ def projection(q):
 
 
 def projection_jacobian(q):
-    """Jacobian ``dpi/dq`` of :func:`projection`.
+    """Jacobian ``dpi/dq`` of :func:`projection`, (..., 4) -> (..., 4, 4).
 
     ``dpi/dq = (1/q3) [[1, 0, -q1/q3, 0], [0, 1, -q2/q3, 0], [0, 0, 0, 0], [0, 0, -q4/q3, 1]]``
-
-    Parameters
-    ----------
-    q : array_like, shape (..., 4)
-
-    Returns
-    -------
-    ndarray, shape (..., 4, 4)
     """
     q = np.asarray(q, dtype=float)
     if q.ndim == 0 or q.shape[-1] != 4:
@@ -77,15 +60,12 @@ def project_points(Ks, A, p, jacobians=True):
         odometry's frame-to-frame motions, ``(P, 4, 4)`` or ``(P, H, 4, 4)``).
     p : ndarray, shape (..., N, 3)
         The points in frame ``x``.
-    jacobians : bool
 
     Returns
     -------
-    z : ndarray, shape (..., N, 4)
-    q : ndarray, shape (..., N, 4)
-        The homogeneous points in the left camera (``q[..., 2]`` is the depth).
-    J_z_point : ndarray, shape (..., N, 4, 3)
-    J_z_transform : ndarray, shape (..., N, 4, 6)
+    z, q : ndarray, shape (..., N, 4)
+        The pixels, and the homogeneous points in the left camera (``q[..., 2]`` is the depth).
+    J_z_point, J_z_transform : ndarray, shape (..., N, 4, 3) and (..., N, 4, 6)
         Only if ``jacobians``.
     """
     A = np.asarray(A, dtype=float)
@@ -103,22 +83,19 @@ def stereo_projection(Ks, cam_T_imu, world_T_imu, p_world, jacobians=True):
 
     Parameters
     ----------
-    Ks : ndarray, shape (4, 4)
-    cam_T_imu : ndarray, shape (4, 4)
+    Ks, cam_T_imu : ndarray, shape (4, 4)
     world_T_imu : ndarray, shape (4, 4) or (N, 4, 4)
         One pose ``T`` for every landmark (a filter's frame), or the pose of each observation (a
         smoother's).
     p_world : ndarray, shape (N, 3)
-        The landmark ``m`` of each observation, world frame.
-    jacobians : bool
+        The landmark ``m`` of each observation.
 
     Returns
     -------
     z : ndarray, shape (N, 4)
     depth : ndarray, shape (N,)
         ``q3``, the landmark's depth in the left camera.
-    J_z_landmark : ndarray, shape (N, 4, 3)
-    J_z_pose : ndarray, shape (N, 4, 6)
+    J_z_landmark, J_z_pose : ndarray, shape (N, 4, 3) and (N, 4, 6)
         Only if ``jacobians``; ``J_z_pose`` for the right perturbation of ``T``.
     """
     imu_T_world = lie.se3_inv(world_T_imu)

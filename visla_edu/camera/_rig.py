@@ -27,19 +27,17 @@ class StereoCamera:
 
     Parameters
     ----------
-    K : array_like, shape (3, 3)
-        Left camera intrinsics.
+    K, K_right : array_like, shape (3, 3)
+        Left and right camera intrinsics (``K_right`` default: ``K``).
     b : float
         Baseline (m).
     imu_T_cam : array_like, shape (4, 4)
-        Pose of the left camera (optical frame) in the IMU frame.
-    K_right : array_like, shape (3, 3), optional
-        Right camera intrinsics (default: ``K``); see :mod:`visla_edu.camera._intrinsics`.
+        The left camera (optical frame).
 
     Attributes
     ----------
     Ks : ndarray, shape (4, 4)
-        Stereo matrix, see :func:`~visla_edu.camera.stereo_matrix`.
+        :func:`~visla_edu.camera.stereo_matrix`.
     cam_T_imu : ndarray, shape (4, 4)
         ``inv(imu_T_cam)``, written ``o_T_i`` in the course.
     K_right : ndarray, shape (3, 3)
@@ -47,7 +45,7 @@ class StereoCamera:
     same_intrinsics : bool
         ``K_right == K``: every computation is the single-intrinsics one, bit for bit.
     stereo_rows : ndarray, shape (3, 4)
-        The exact reduction of the four stereo rows (:func:`~visla_edu.camera.stereo_rows`).
+        :func:`~visla_edu.camera.stereo_rows` of ``Ks``.
     fsu_b : float
         ``fsu b``: a landmark at depth ``d`` has :meth:`disparity` ``fsu b / d`` (px).
     """
@@ -69,17 +67,9 @@ class StereoCamera:
     def from_extrinsics(cls, K, K_right, imu_T_left, imu_T_right):
         """The rig of two cameras given by their poses, the baseline derived (a rectified pair only).
 
-        Parameters
-        ----------
-        K, K_right : array_like, shape (3, 3)
-        imu_T_left, imu_T_right : array_like, shape (4, 4)
-            Both cameras' optical frames in the IMU frame.
-
-        Returns
-        -------
-        StereoCamera
-            ``b = |inv(imu_T_left) imu_T_right|`` (:func:`~visla_edu.camera.rectified_baseline`, which
-            raises the ``ValueError`` of a pair that is not rectified).
+        ``K``, ``K_right`` (3, 3); ``imu_T_left``, ``imu_T_right`` (4, 4): both cameras' optical frames.
+        ``b = |inv(imu_T_left) imu_T_right|`` (:func:`~visla_edu.camera.rectified_baseline`, which
+        raises the ``ValueError`` of a pair that is not rectified).
         """
         return cls(K, rectified_baseline(imu_T_left, imu_T_right), imu_T_left, K_right)
 
@@ -88,56 +78,21 @@ class StereoCamera:
         return f"StereoCamera(fsu={self.K[0, 0]:.2f}, fsv={self.K[1, 1]:.2f}{right}, b={self.b:.4f} m)"
 
     def disparity(self, z):
-        """Disparity ``uL - uR`` in the left camera's pixels (:func:`~visla_edu.camera.disparity`).
-
-        Parameters
-        ----------
-        z : array_like, shape (..., 4)
-
-        Returns
-        -------
-        ndarray, shape (...)
-            ``fsu b / depth`` on noise-free pixels.
-        """
+        """Disparity ``uL - uR`` in the left camera's pixels, (..., 4) -> (...): :func:`~visla_edu.camera.disparity`."""
         return disparity(z, self.K, None if self.same_intrinsics else self.K_right)
 
     def points_in_camera(self, world_T_imu, p_world):
-        """Homogeneous landmark coordinates in the left camera, ``q = cam_T_imu inv(T) m``.
-
-        Parameters
-        ----------
-        world_T_imu : array_like, shape (4, 4)
-        p_world : array_like, shape (M, 3)
-
-        Returns
-        -------
-        ndarray, shape (M, 4)
-        """
+        """Homogeneous landmark coordinates in the left camera, ``q = cam_T_imu inv(T) m``, shape (M, 4)."""
         cam_T_world = self.cam_T_imu @ lie.se3_inv(world_T_imu)
         p_world = _check_points(p_world, "points_in_camera")
         return p_world @ cam_T_world[:, :3].T + cam_T_world[:, 3]
 
     def predict(self, world_T_imu, p_world):
-        """Predicted stereo pixels ``z = Ks pi(cam_T_imu inv(world_T_imu) m)`` (``pi`` of :meth:`points_in_camera`).
-
-        Parameters
-        ----------
-        world_T_imu : array_like, shape (4, 4)
-        p_world : array_like, shape (M, 3)
-
-        Returns
-        -------
-        ndarray, shape (M, 4)
-        """
+        """Stereo pixels ``z = Ks pi(cam_T_imu inv(world_T_imu) m)``, (M, 4); ``pi`` of :meth:`points_in_camera`."""
         return projection(self.points_in_camera(world_T_imu, p_world)) @ self.Ks.T
 
     def predict_with_jacobians(self, world_T_imu, p_world):
         """Predicted pixels and both observation Jacobians (:func:`~visla_edu.camera.stereo_projection`).
-
-        Parameters
-        ----------
-        world_T_imu : array_like, shape (4, 4)
-        p_world : array_like, shape (M, 3)
 
         Returns
         -------
@@ -153,47 +108,18 @@ class StereoCamera:
         return z, J_z_landmark, J_z_pose
 
     def jacobian_landmark(self, world_T_imu, p_world):
-        """``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T`` of :meth:`predict_with_jacobians`.
-
-        Parameters
-        ----------
-        world_T_imu : array_like, shape (4, 4)
-        p_world : array_like, shape (M, 3)
-
-        Returns
-        -------
-        ndarray, shape (M, 4, 3)
-        """
+        """``J_z_landmark = Ks dpi/dq(q) cam_T_imu inv(mu) P^T``, (M, 4, 3), of :meth:`predict_with_jacobians`."""
         return self.predict_with_jacobians(world_T_imu, p_world)[1]
 
     def jacobian_pose(self, world_T_imu, p_world):
-        """``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)`` of :meth:`predict_with_jacobians`.
-
-        Parameters
-        ----------
-        world_T_imu : array_like, shape (4, 4)
-        p_world : array_like, shape (M, 3)
-
-        Returns
-        -------
-        ndarray, shape (M, 4, 6)
-        """
+        """``J_z_pose = -Ks dpi/dq(q) cam_T_imu odot(inv(mu) m)``, (M, 4, 6), of :meth:`predict_with_jacobians`."""
         return self.predict_with_jacobians(world_T_imu, p_world)[2]
 
     def triangulate(self, z, world_T_imu=None, method="disparity"):
-        """Landmark positions from stereo pixels (:mod:`visla_edu.camera._triangulation`).
+        """Landmark positions (M, 3) from stereo pixels ``z`` (M, 4) (:mod:`visla_edu.camera._triangulation`).
 
-        Parameters
-        ----------
-        z : array_like, shape (M, 4)
-        world_T_imu : array_like, shape (4, 4), optional
-            If given, points are returned in the world frame, else in the left camera frame.
-        method : {"disparity", "bearing"}
-
-        Returns
-        -------
-        ndarray, shape (M, 3)
-            NaN rows where the disparity is not positive.
+        In the world frame if ``world_T_imu`` is given, else in the left camera frame; NaN rows where the
+        disparity is not positive. ``method``: ``"disparity"`` or ``"bearing"``.
         """
         if method == "disparity":
             p_cam = triangulate_disparity(z, self.K, self.b, self._right())
@@ -211,21 +137,10 @@ class StereoCamera:
         return triangulation_jacobian(z, self.K, self.b, self._right())
 
     def triangulation_covariance(self, z, noise_var, world_T_imu=None):
-        """Covariance ``J (noise_var I4) J^T`` of triangulated points, ``J`` of :meth:`triangulation_jacobian`.
+        """Covariance ``J (noise_var I4) J^T`` (M, 3, 3) of triangulated points, ``J``: :meth:`triangulation_jacobian`.
 
-        With a pose it is rotated into the world frame: ``R Sigma_cam R^T``, ``R`` the rotation of
-        ``world_T_imu @ imu_T_cam``.
-
-        Parameters
-        ----------
-        z : array_like, shape (M, 4)
-        noise_var : float
-            Pixel noise variance (px^2).
-        world_T_imu : array_like, shape (4, 4), optional
-
-        Returns
-        -------
-        ndarray, shape (M, 3, 3)
+        ``noise_var``: pixel noise variance (px^2). With a pose it is rotated into the world frame:
+        ``R Sigma_cam R^T``, ``R`` the rotation of ``world_T_imu @ imu_T_cam``.
         """
         J = self.triangulation_jacobian(z)
         cov = noise_var * J @ np.swapaxes(J, -1, -2)

@@ -24,20 +24,9 @@ def _check_pixels(z, name):
 
 
 def triangulate_disparity(z, K, b, K_right=None):
-    """Points from stereo pixels by disparity; NaN rows where the disparity is not positive.
+    """Points (..., 3) from stereo pixels by disparity; NaN rows where the disparity is not positive.
 
     ``depth = fsu b / (uL - uR)``, ``x = (uL - cu) depth / fsu``, ``y = (vL - cv) depth / fsv``.
-
-    Parameters
-    ----------
-    z : array_like, shape (..., 4)
-    K : array_like, shape (3, 3)
-    b : float
-    K_right : array_like, shape (3, 3), optional
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
     """
     z = _check_pixels(z, "triangulate_disparity")
     K, b = check_stereo_calibration(K, b, "triangulate_disparity")
@@ -52,7 +41,7 @@ def triangulate_disparity(z, K, b, K_right=None):
 
 
 def triangulate_bearing(z, K, b, K_right=None):
-    """Points by the course's bearing triangulation; NaN rows where ``lambda1`` is not positive.
+    """Points (..., 3) by the course's bearing triangulation; NaN rows where ``lambda1`` is not positive.
 
     With normalised bearings ``z1 = K^-1 [uL, vL, 1]`` and ``z2 = K_right^-1 [uR, vR, 1]``,
     the right camera at ``p = [b, 0, 0]`` and ``R = I`` in the left frame,
@@ -60,17 +49,6 @@ def triangulate_bearing(z, K, b, K_right=None):
     ``lambda1 = a^T c / a^T a`` with ``a = R^T z1 - (e3^T R^T z1) z2`` and
     ``c = R^T p - (e3^T R^T p) z2``; then ``m = lambda1 z1``.
     On noise-free rectified pixels it equals :func:`triangulate_disparity`.
-
-    Parameters
-    ----------
-    z : array_like, shape (..., 4)
-    K : array_like, shape (3, 3)
-    b : float
-    K_right : array_like, shape (3, 3), optional
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
     """
     z = _check_pixels(z, "triangulate_bearing")
     K, b = check_stereo_calibration(K, b, "triangulate_bearing")
@@ -90,7 +68,7 @@ def triangulate_bearing(z, K, b, K_right=None):
 
 
 def triangulation_jacobian(z, K, b, K_right=None):
-    """Jacobian of :func:`triangulate_disparity` with respect to ``[uL, vL, uR, vR]``.
+    """Jacobian (..., 3, 4) of :func:`triangulate_disparity` with respect to ``[uL, vL, uR, vR]``.
 
     With disparity ``d = uL - uR`` and ``p = [X, Y, Z]``::
 
@@ -100,20 +78,9 @@ def triangulation_jacobian(z, K, b, K_right=None):
 
     (``vR`` is not used.) With a right camera of its own intrinsics, ``d`` is taken after mapping
     ``uR`` and the ``uR`` column is multiplied by ``fsu / fsu'``. The triangulation covariance
-    ``J (sigma^2 I) J^T`` grows with depth squared.
-
-    Parameters
-    ----------
-    z : array_like, shape (..., 4)
-    K : array_like, shape (3, 3)
-    b : float
-    K_right : array_like, shape (3, 3), optional
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 4)
-        Where the disparity is not positive, every entry that depends on the depth is NaN
-        (the entries that are always zero, such as the ``vR`` column, stay 0).
+    ``J (sigma^2 I) J^T`` grows with depth squared. Where the disparity is not positive, every entry
+    that depends on the depth is NaN (the entries that are always zero, such as the ``vR`` column,
+    stay 0).
     """
     z = _check_pixels(z, "triangulation_jacobian")
     K = np.asarray(K, dtype=float)
