@@ -1,10 +1,9 @@
 """Matplotlib views: top-down trajectory and map, covariance ellipses, image-plane view, NIS.
 
-Every function draws into a given ``Axes`` (or a new figure) and returns it; nothing is shown
-or saved unless asked, so notebooks, the CLI and the widgets share them. Every role has one
-style (:data:`STYLES`) from one colour-blind-safe palette (:data:`PALETTE`), trajectories
-differing in colour *and* line style, which keeps them apart in greyscale and for every kind
-of colour blindness; :func:`course_style` does the same for matplotlib's colour cycle.
+Every function draws into a given ``Axes`` (or a new figure) and returns it; nothing is shown or saved unless
+asked, so notebooks, the CLI and the widgets share them. Every role has one style (:data:`STYLES`) from one
+colour-blind-safe palette (:data:`PALETTE`), trajectories differing in colour *and* line style (apart in
+greyscale too); :func:`course_style` does the same for matplotlib's colour cycle.
 """
 
 
@@ -19,13 +18,9 @@ __all__ = ["PALETTE", "STYLES", "SERIES_COLORS", "SERIES_LINESTYLES", "series_st
 
 
 def figure_suffixes():
-    """Suffixes matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
+    """Suffixes (tuple of str) matplotlib can save a figure as: ``".png"``, ``".pdf"``, ``".svg"``, then the others.
 
-    Returns
-    -------
-    tuple of str
-        Lower case with the dot, the rest of ``FigureCanvasBase.get_supported_filetypes()`` in
-        alphabetical order, without ``.pgf`` (it needs LaTeX).
+    Lower case with the dot; the rest alphabetical, without ``.pgf`` (it needs LaTeX).
     """
     from matplotlib.backend_bases import FigureCanvasBase
 
@@ -35,20 +30,15 @@ def figure_suffixes():
 
 
 def save_figure(fig, path, dpi=120):
-    """Save ``fig`` to ``path`` atomically (a temporary file renamed over it); return the absolute path.
+    """Save ``fig`` (a matplotlib Figure) to ``path`` atomically; return the absolute path (pathlib.Path).
 
     Parameters
     ----------
-    fig : matplotlib Figure
     path : str or os.PathLike
-        ``~`` is expanded. Its suffix (any case) is the format, one of :func:`figure_suffixes`;
-        no suffix saves a PNG under that name.
+        ``~`` is expanded. Its suffix (any case) is the format, one of :func:`figure_suffixes`; no suffix saves a
+        PNG under that name.
     dpi : float
         Resolution of raster formats.
-
-    Returns
-    -------
-    pathlib.Path
 
     Raises
     ------
@@ -102,26 +92,13 @@ SERIES_LINESTYLES = ("-", "--", "-.", ":", (0, (8, 3)), (0, (3, 1, 1, 1, 1, 1)),
 
 
 def series_style(index):
-    """``{"color", "linestyle"}`` (``Axes.plot`` keywords) of the ``index``-th series, cycling after eight.
-
-    Parameters
-    ----------
-    index : int
-
-    Returns
-    -------
-    dict
-    """
+    """``{"color", "linestyle"}`` (``Axes.plot`` keywords) of the ``index``-th series, cycling after eight."""
     k = int(index) % len(SERIES_COLORS)
     return {"color": SERIES_COLORS[k], "linestyle": SERIES_LINESTYLES[k]}
 
 
 def course_style():
-    """Make matplotlib's colour cycle :data:`SERIES_COLORS`, with :data:`SERIES_LINESTYLES`.
-
-    Successive ``plot`` calls on one Axes then differ in colour and line style. It sets
-    ``matplotlib.rcParams`` (call it once, at the top of a notebook); nothing happens at import.
-    """
+    """Make matplotlib's colour cycle :data:`SERIES_COLORS` with :data:`SERIES_LINESTYLES` (sets ``rcParams``)."""
     import matplotlib
     from cycler import cycler
 
@@ -137,19 +114,7 @@ def _axes(ax, figsize=(8, 7)):
 
 
 def covariance_ellipse(mean_xy, cov_xy, n_sigma=2.0, n_points=60):
-    """Points of the ``n_sigma`` ellipse of a 2-D Gaussian.
-
-    Parameters
-    ----------
-    mean_xy : array_like, shape (2,)
-    cov_xy : array_like, shape (2, 2)
-    n_sigma : float
-    n_points : int
-
-    Returns
-    -------
-    ndarray, shape (n_points, 2)
-    """
+    """Points (n_points, 2) of the ``n_sigma`` ellipse of the 2-D Gaussian ``mean_xy`` (2,), ``cov_xy`` (2, 2)."""
     vals, vecs = np.linalg.eigh(np.asarray(cov_xy, dtype=float))
     angles = np.linspace(0, 2 * np.pi, n_points)
     circle = np.stack([np.cos(angles), np.sin(angles)], axis=1)
@@ -166,20 +131,12 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
     world_T_imu : ndarray, shape (T, 4, 4)
     landmarks : ndarray, shape (M, 3), optional
         NaN rows are skipped.
-    ax : matplotlib Axes, optional
-    label : str
     color, landmark_color : matplotlib colour, optional
         Default: ``STYLES["estimate"]``, ``STYLES["landmarks"]``.
     reference : ndarray, shape (T, 4, 4), optional
         A second trajectory (e.g. dead reckoning), in ``STYLES["dead_reckoning"]``.
-    reference_label : str
     ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
-        In :data:`GROUND_TRUTH_STYLE`, with a legend entry; it may cover fewer frames than
-        the estimate. Anything else is a ValueError.
-
-    Returns
-    -------
-    matplotlib Axes
+        In :data:`GROUND_TRUTH_STYLE`; it may cover fewer frames than the estimate. Anything else: ValueError.
     """
     ax = _axes(ax)
     if landmarks is not None:
@@ -226,20 +183,9 @@ def _limit_to_path(ax, paths, margin=0.15):
 
 
 def plot_result(result, path=None, ground_truth=None, title=None):
-    """Figure of a :class:`visla_edu.run.RunResult`: trajectory and map, with dead reckoning.
+    """A matplotlib Figure of a :class:`visla_edu.run.RunResult`: trajectory and map, with dead reckoning.
 
-    Parameters
-    ----------
-    result : visla_edu.run.RunResult
-    path : str or Path, optional
-        Save the figure there (:func:`save_figure`).
-    ground_truth : visla_edu.dataset.GroundTruth or ndarray of shape (n, 4, 4), optional
-        As in :func:`plot_trajectory_map`.
-    title : str, optional
-
-    Returns
-    -------
-    matplotlib Figure
+    Saved to ``path`` when given (:func:`save_figure`); ``ground_truth`` as in :func:`plot_trajectory_map`.
     """
     import matplotlib.pyplot as plt
 
@@ -259,18 +205,12 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
 
     Parameters
     ----------
-    z : ndarray, shape (k, 4)
-        Observed ``[uL, vL, uR, vR]``.
-    z_pred : ndarray, shape (k, 4), optional
-        Predicted (NaN rows skipped), each joined to its observation by a line.
+    z, z_pred : ndarray, shape (k, 4)
+        Observed and (optional) predicted ``[uL, vL, uR, vR]``; predictions (NaN rows skipped) are joined to their
+        observations by a line.
     status : ndarray of int, shape (k,), optional
         ``OBS_*`` codes (:mod:`visla_edu.codes`); gated observations are drawn as red crosses.
     image_size : (width, height)
-    ax : matplotlib Axes, optional
-
-    Returns
-    -------
-    matplotlib Axes
     """
     ax = _axes(ax, figsize=(10, 4))
     gated = np.zeros(len(z), dtype=bool) if status is None else status == OBS_GATED
@@ -291,19 +231,7 @@ def plot_image_plane(z, z_pred=None, status=None, image_size=(1400, 500), ax=Non
 
 
 def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
-    """:func:`covariance_ellipse` of many 2-D Gaussians at once (e.g. for a ``LineCollection``).
-
-    Parameters
-    ----------
-    means_xy : array_like, shape (n, 2)
-    covs_xy : array_like, shape (n, 2, 2)
-    n_sigma : float
-    n_points : int
-
-    Returns
-    -------
-    ndarray, shape (n, n_points, 2)
-    """
+    """:func:`covariance_ellipse` of ``means_xy`` (n, 2), ``covs_xy`` (n, 2, 2) at once: (n, n_points, 2)."""
     means_xy = np.asarray(means_xy, dtype=float).reshape(-1, 2)
     covs_xy = np.asarray(covs_xy, dtype=float).reshape(-1, 2, 2)
     if len(means_xy) != len(covs_xy):
@@ -320,22 +248,13 @@ def covariance_ellipses(means_xy, covs_xy, n_sigma=2.0, n_points=40):
 def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     """NIS per degree of freedom over time, with the ``probability`` band of ``chi2(dof)/dof``.
 
-    A consistent filter stays inside it (:func:`visla_edu.metrics.nis_band`) about ``probability``
-    of the time; above it, it is over-confident (noise too small), below it too cautious.
+    A consistent filter stays inside it (:func:`visla_edu.metrics.nis_band`) about ``probability`` of the time;
+    above it, it is over-confident (noise too small), below it too cautious.
 
     Parameters
     ----------
-    nis : array_like, shape (T,)
-        NaN where there was no update.
-    dof : array_like of int, shape (T,)
-    time : array_like, shape (T,), optional
-        x values (default: frame index).
-    probability : float
-    ax : matplotlib Axes, optional
-
-    Returns
-    -------
-    matplotlib Axes
+    nis, dof, time : array_like, shape (T,)
+        NIS (NaN where there was no update), its degrees of freedom (int), x values (default: frame index).
     """
     from visla_edu.metrics import nis_band
 

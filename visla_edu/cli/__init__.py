@@ -1,23 +1,18 @@
 """Command line: ``visla-edu {info,run,stepper,release,student,project,book} ...`` (also ``python -m visla_edu``).
 
-Examples: the README's "Command line" section; every option: ``visla-edu COMMAND --help``.
-
-Errors: :func:`main` is the one error boundary. Whatever a user can get wrong is reported
-as ONE line on stderr that names the file, key, value, setting or frame and what to try,
-never a traceback. Exit status:
+Examples: the README's "Command line" section. :func:`main` is the one error boundary: whatever a user can get
+wrong is reported as ONE line on stderr that names the file, key, value, setting or frame and what to try, never
+a traceback (``--debug`` or ``VISLA_EDU_DEBUG=1`` adds it). Every file is written atomically, so an error or
+Ctrl-C never leaves a half-written file where a good one was. Exit status:
 
 * 0 - done;
-* 1 - the filter (or the diagnostics) failed on valid input: divergence, a singular matrix,
-  numerical overflow, out of memory (the line names the frame and the likely cause), or an
-  error marked ``failed = True`` (its ``hint``, like any error's, ends the line);
-* 2 - bad input: a command-line error, a bad ``--set`` value, a missing, unreadable or
-  invalid file, an output path that cannot or must not be written (checked before any work);
+* 1 - the filter (or the diagnostics) failed on valid input: divergence, a singular matrix, numerical overflow,
+  out of memory (the line names the frame and the likely cause), or an error marked ``failed = True`` (its
+  ``hint``, like any error's, ends the line);
+* 2 - bad input: a command-line error, a bad ``--set`` value, a missing, unreadable or invalid file, an output
+  path that cannot or must not be written (checked before any work);
 * 3 - an internal error (a bug): one line asking to report it;
 * 130 - interrupted (Ctrl-C), at any moment after the process starts (``visla_edu.__main__``).
-
-``--debug`` (or the environment variable ``VISLA_EDU_DEBUG=1``) adds the traceback.
-Every file is written atomically, so an error or Ctrl-C never leaves a half-written file
-where a good one was.
 """
 
 import argparse
@@ -72,16 +67,10 @@ _DATASET_HELP = "03, 0022, 0020, 0042, 10, datasetNN, sim, sim-small, sim-tiny, 
 
 
 def build_parser():
-    """The argument parser of ``visla-edu``.
+    """The ``argparse.ArgumentParser`` of ``visla-edu``; its usage errors are one line and status 2 (:class:`_Parser`).
 
-    Subcommands (required, stored as ``command``): ``info``, ``run``, ``stepper``, ``release``,
-    ``student``, ``project``, ``book``; ``--debug`` before or after the subcommand, ``--data-dir``
-    after ``info``, ``run``, ``stepper``; values checked while parsing (:mod:`visla_edu.cli.options`).
-
-    Returns
-    -------
-    argparse.ArgumentParser
-        Its usage errors are one line and status 2 (:class:`_Parser`).
+    The subcommand (required) is stored as ``command``; ``--debug`` goes before or after it, ``--data-dir`` after
+    ``info``, ``run``, ``stepper``; values are checked while parsing (:mod:`visla_edu.cli.options`).
     """
     parser = _Parser(prog="visla-edu",
                      description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
@@ -171,9 +160,8 @@ def _add_frames_option(parser):
 def _select_frames(dataset, frames, truth_option=None):
     """``dataset`` cut to ``frames``, ``--frames (start, stop)`` (stop None: the end), or unchanged.
 
-    A range outside the drive is a ValueError. A segment that keeps fewer ground-truth poses than an
-    ATE needs is refused when ``truth_option`` (the user's ``--ground-truth`` file) was given, and
-    otherwise loses its ground truth, with a note on stdout (:func:`_segment_truth_checked`).
+    A range outside the drive is a ValueError; too few ground-truth poses left: :func:`_segment_truth_checked`
+    (``truth_option``: the user's ``--ground-truth`` file).
     """
     if frames is None:
         return dataset
@@ -456,27 +444,20 @@ _HANDLERS["project"] = _project_commands.run
 def main(argv=None):
     """The one error boundary of the commands: parse ``argv``, run the command, return its exit status.
 
-    Numerical warnings (numpy's ``RuntimeWarning``) are collected: a failure is reported by its one
-    line (the filter detects a non-finite state itself), a success by one line counting them;
-    ``--debug`` prints them as they happen. ``visla_edu.__main__.console_main`` also covers loading
-    this module and the moments after this function returns.
-
-    Parameters
-    ----------
-    argv : list of str, optional
-        The arguments after ``visla-edu`` (default: ``sys.argv[1:]``).
+    ``argv`` (list of str): the arguments after ``visla-edu``, default ``sys.argv[1:]``. Numerical warnings
+    (numpy's ``RuntimeWarning``) are collected: a failure is reported by its one line, a success by one line
+    counting them; ``--debug`` prints them as they happen. ``visla_edu.__main__.console_main`` also covers
+    loading this module and the moments after this function returns.
 
     Returns
     -------
     int
-        The exit status of a command that ran (the module docstring); 130 for Ctrl-C at any moment
-        from parsing to the last line printed.
+        The module docstring's status; 130 for Ctrl-C at any moment from parsing to the last line printed.
 
     Raises
     ------
     SystemExit
-        For a usage error (status 2), ``--help`` (0) and ``release --check`` finding notebooks that
-        drifted (1).
+        For a usage error (status 2), ``--help`` (0) and ``release --check`` finding notebooks that drifted (1).
     """
     command, debug = None, os.environ.get(DEBUG_ENV, "").strip() not in ("", "0")
     try:

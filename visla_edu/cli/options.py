@@ -1,8 +1,7 @@
 """The values of the command line's options, parsed (argparse ``type=`` functions).
 
-Each function takes the option's text and returns its value, or raises
-:class:`argparse.ArgumentTypeError` with one line that names what is wrong: a usage error of
-:mod:`visla_edu.cli` (see there).
+Each takes the option's text and returns its value, or raises :class:`argparse.ArgumentTypeError` with one line
+that names what is wrong: a usage error of :mod:`visla_edu.cli` (see there).
 """
 
 import argparse
@@ -15,13 +14,8 @@ __all__ = ["settings_help", "frames", "integer_in", "blas_threads", "path", "por
 def settings_help():
     """The epilog of ``run --help``: every ``--set`` and ``--smoother-set`` setting, its default and what it accepts.
 
-    One line a setting (:meth:`visla_edu.settings.SettingSpec.describe`); the configs are imported
-    only when the help is asked for.
-
-    Returns
-    -------
-    str
-        Lines for :class:`argparse.RawDescriptionHelpFormatter`.
+    One line a setting (:meth:`visla_edu.settings.SettingSpec.describe`), for
+    :class:`argparse.RawDescriptionHelpFormatter`; the configs are imported only when the help is asked for.
     """
     from visla_edu import smoother
     from visla_edu.filters import FilterConfig
@@ -106,8 +100,7 @@ def setting(text):
 def smoother_setting(text):
     """``--smoother-set NAME=VALUE``: ``(name, value)`` of a smoother setting of its own, parsed by its declaration.
 
-    A setting the smoother takes from the filter's (:data:`visla_edu.smoother.FROM_FILTER`) is
-    refused with the ``--set`` that gives it.
+    One it takes from the filter's (:data:`visla_edu.smoother.FROM_FILTER`) is refused with the ``--set`` giving it.
     """
     from visla_edu import smoother
 

@@ -1,22 +1,14 @@
 """One driver for every filter mode and the smoothers: build, step, run, evaluate, save.
 
-How the driver runs is in its arguments, not in the filter's settings: the BLAS thread limit
-(:func:`limit_blas_threads`) and the progress bar. Results and their file:
-:mod:`visla_edu.run._results`; cost and failure hints: :mod:`visla_edu.run.workload`.
+Entry points: :func:`make_filter`, :func:`iterate_filter`, :func:`run_filter`, :func:`run_smoother`,
+:func:`evaluate_result`; results and their file: :mod:`visla_edu.run._results`; cost and failure hints:
+:mod:`visla_edu.run.workload`. How the driver runs (:func:`limit_blas_threads`, the progress bar) is in its
+arguments, not in the filter's settings.
 
-**"auto" settings.** Every run first measures the settings left at ``"auto"`` from the data
-(:func:`resolve_config`): the velocity noise and the IMU lag by
-:func:`visla_edu.diagnostics.calibrate` (cached by the data's content, applied by
-:meth:`~visla_edu.filters.FilterConfig.resolve`), and ``extrinsic_correction`` with the camera,
-from the same calibration (:func:`visla_edu.diagnostics.resolve_extrinsics`; ``verbose`` prints
-its evidence). The smoothers take the resolved values
-(:meth:`~visla_edu.smoother.SmootherConfig.from_filter_config`).
-
->>> from visla_edu import data, run
->>> ds = data.load("sim-tiny")
->>> result = run.run_filter(ds, mode="slam", progress=False)
->>> result.world_T_imu.shape == (ds.num_frames, 4, 4)
-True
+**"auto" settings.** Every run first measures the settings left at ``"auto"`` from the data (:func:`resolve_config`):
+the velocity noise and the IMU lag by :func:`visla_edu.diagnostics.calibrate` (cached by the data's content,
+applied by :meth:`~visla_edu.filters.FilterConfig.resolve`), ``extrinsic_correction`` with the camera
+(:func:`visla_edu.diagnostics.resolve_extrinsics`). The smoothers take the resolved values.
 """
 
 import contextlib
@@ -47,9 +39,7 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     ----------
     dataset : visla_edu.dataset.Dataset
     mode : {"deadreckon", "mapping", "vio", "slam"}
-        One of :data:`visla_edu.codes.MODES`.
     config : visla_edu.filters.FilterConfig, optional
-        Default ``FilterConfig()``.
     dense : bool
         Textbook joint EKF over all (strided) landmarks; only for ``mode="slam"``.
     verbose : bool
@@ -58,13 +48,12 @@ def make_filter(dataset, mode=SLAM, config=None, dense=False, verbose=False):
     Returns
     -------
     filters.DeadReckoning, filters.LandmarkMapping, filters.VisualInertialOdometry or filters.JointSlam
-        Its ``config`` is :func:`resolve_config`'s.
 
     Raises
     ------
     ValueError
-        A bad mode, ``dense`` without ``"slam"``, a dataset without observations for a mode that
-        needs them, or an implausible calibration (:func:`visla_edu.data.calibration_problems`).
+        A bad mode, ``dense`` without ``"slam"``, no observations for a mode that needs them, or an implausible
+        calibration (:func:`visla_edu.data.calibration_problems`).
     """
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -96,17 +85,9 @@ def _check_enough_data(dataset, mode):
 
 
 def resolve_config(dataset, config):
-    """``config`` with its ``"auto"`` settings measured from ``dataset`` (module docstring).
+    """``config`` with its ``"auto"`` settings measured from ``dataset`` (module docstring), a FilterConfig.
 
-    Parameters
-    ----------
-    dataset, config
-        As :func:`make_filter` (``config`` not optional).
-
-    Returns
-    -------
-    visla_edu.filters.FilterConfig
-        The same object when nothing was ``"auto"``; ``extrinsic_correction`` is left to the camera.
+    The same object when nothing was ``"auto"``; ``extrinsic_correction`` is left to the camera.
     """
     if config.resolved:
         return config
@@ -127,15 +108,8 @@ def _imu_T_cam(dataset, config, verbose):
 def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1):
     """Yield one :class:`~visla_edu.filters.StepRecord` per frame, ``t = 0 .. T - 1``.
 
-    Parameters
-    ----------
-    dataset, mode, config, dense, blas_threads
-        As in :func:`run_filter` (no progress bar, nothing printed); the BLAS thread limit holds
-        while the generator runs, and its errors come at the first ``next()``.
-
-    Yields
-    ------
-    visla_edu.filters.StepRecord
+    Arguments as :func:`run_filter` (no progress bar, nothing printed); the BLAS thread limit holds while the
+    generator runs, and its errors come at the first ``next()``.
     """
     flt = make_filter(dataset, mode, config, dense)
     with limit_blas_threads(blas_threads):
@@ -144,7 +118,7 @@ def iterate_filter(dataset, mode=SLAM, config=None, dense=False, blas_threads=1)
 
 
 def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verbose=False, blas_threads=1):
-    """Run a filter over the whole dataset.
+    """Run a filter over the whole dataset; return a :class:`RunResult`.
 
     Parameters
     ----------
@@ -153,20 +127,15 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
     progress : bool, optional
         Show a tqdm progress bar; by default only for runs longer than 500 frames.
     blas_threads : int or None
-        BLAS threads while the filter runs (1 is fastest for its small matrices); None leaves
-        numpy's setting alone. See :func:`limit_blas_threads`.
-
-    Returns
-    -------
-    RunResult
+        BLAS threads while the filter runs (1 is fastest for its small matrices); None: numpy's own. See
+        :func:`limit_blas_threads`.
 
     Raises
     ------
     ValueError
         As :func:`make_filter`, or a bad ``blas_threads``.
     visla_edu.filters.FilterDivergedError, numpy.linalg.LinAlgError, ArithmeticError, MemoryError
-        The filter failed; the exception's ``frame`` attribute is the frame it failed at
-        (see :func:`visla_edu.run.workload.divergence_hint`).
+        The filter failed; the exception's ``frame`` is the frame it failed at (for :func:`.workload.divergence_hint`).
     """
     _check_blas_threads(blas_threads)
     config = config or FilterConfig()
@@ -200,24 +169,21 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
                  blas_threads=1, smoother_settings=None):
     """Run a smoother over the whole dataset, into the same :class:`RunResult` as the filters.
 
-    ``"smooth"``: the batch smoother (:func:`visla_edu.smoother.smooth`) started from the joint
-    EKF's trajectory and map (:func:`run_filter`, ``"slam"``; kept as ``start_world_T_imu``);
-    ``"window"``: the fixed-lag sliding window (:func:`visla_edu.smoother.smooth_window`). Both use
-    the filter's model: the resolved ``config`` and its camera calibration (module docstring).
+    ``"smooth"``: :func:`visla_edu.smoother.smooth` started from the joint EKF's trajectory and map (kept as
+    ``start_world_T_imu``); ``"window"``: :func:`visla_edu.smoother.smooth_window`; both with the filter's model.
 
     Parameters
     ----------
     dataset, config
         As :func:`make_filter`.
     mode : {"smooth", "window"}
-        One of :data:`visla_edu.codes.SMOOTHER_MODES`.
     smoother_config : visla_edu.smoother.SmootherConfig, optional
         Default: :meth:`~visla_edu.smoother.SmootherConfig.from_filter_config` of ``config``.
     progress, verbose, blas_threads
         As in :func:`run_filter` (the progress bar is the EKF's).
     smoother_settings : dict, optional
-        Smoother settings of its own (:data:`visla_edu.smoother.OWN_SETTINGS`, e.g.
-        ``{"window_size": 40}``) over the default model; not with ``smoother_config``.
+        Its own settings (:data:`visla_edu.smoother.OWN_SETTINGS`, e.g. ``{"window_size": 40}``) over the
+        default model; not with ``smoother_config``.
 
     Returns
     -------
@@ -252,8 +218,8 @@ def run_smoother(dataset, mode=SMOOTH, config=None, smoother_config=None, progre
 def _best_start(dataset, config, settings, progress, verbose, blas_threads):
     """The batch smoother's start (a RunResult, its ``mode`` naming it) and a line of the candidates' costs.
 
-    The joint EKF, or with ``start="best"`` the lowest :func:`visla_edu.smoother.start_cost` of dead
-    reckoning (no map: the smoother triangulates it), VIO and the joint EKF.
+    The joint EKF, or with ``start="best"`` the lowest :func:`visla_edu.smoother.start_cost` of dead reckoning
+    (no map: the smoother triangulates it), VIO and the joint EKF.
     """
     from visla_edu import smoother
 
@@ -268,11 +234,7 @@ def _best_start(dataset, config, settings, progress, verbose, blas_threads):
 
 
 def _smoother_settings(config, mode, own=None):
-    """The smoother's model from the filter's resolved settings and its own ``own``; a ValueError names ``mode``.
-
-    E.g. a velocity noise of 0, which the filters accept and the smoother's motion factors cannot
-    weigh.
-    """
+    """The smoother's model: the filter's resolved settings, then ``own``; ValueError (e.g. noise 0) names ``mode``."""
     from visla_edu import smoother
 
     try:
@@ -301,9 +263,7 @@ def _smoother_run_result(dataset, config, solved, start):
 
 
 def evaluate_result(result, ground_truth):
-    """ATE and KITTI drift of a run's estimate and of its dead reckoning against the ground truth.
-
-    Also stores the figures in ``result.evaluation`` (:attr:`RunResult.evaluation`).
+    """ATE and KITTI drift of a run's estimate and of its dead reckoning; also stored in ``result.evaluation``.
 
     Parameters
     ----------

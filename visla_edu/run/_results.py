@@ -1,14 +1,12 @@
 """A whole run's result, its per-frame arrays, and its file (re-exported by :mod:`visla_edu.run`).
 
-**The file** (``.npz``, no pickle; written atomically by :func:`save_result`, read by
-:func:`load_result`): one key per array field of :class:`RunResult` (``start_world_T_imu`` only
-from the batch smoother), ``name``, ``mode``, ``dense``, ``notes`` and ``start_mode``;
-``config_<name>`` for every setting used (None stored as an empty array), ``eval_<name>`` for
-:attr:`RunResult.evaluation`, ``track_<name>`` for :attr:`RunResult.track_counts`, and
-``status_names``, the name of each column of ``status_counts``. Codes are only appended, so a
-file of an earlier version (fewer columns, or no ``status_names``: the first codes) loads with
-zeros in the missing ones; its smoother runs counted the observations of dropped landmarks as
-``ignored`` (the file cannot tell them apart).
+**The file** (``.npz``, no pickle, written atomically by :func:`save_result`, read by :func:`load_result`): one
+key per array field of :class:`RunResult` (``start_world_T_imu`` only from the batch smoother), ``name``, ``mode``,
+``dense``, ``notes`` and ``start_mode``; ``config_<name>`` for every setting used (None stored as an empty array),
+``eval_<name>`` for :attr:`RunResult.evaluation`, ``track_<name>`` for :attr:`RunResult.track_counts`, and
+``status_names``, the name of each column of ``status_counts``. Codes are only appended, so a file of an earlier
+version (fewer columns, or no ``status_names``: the first codes) loads with zeros in the missing ones; its
+smoother runs counted the observations of dropped landmarks as ``ignored`` (the file cannot tell them apart).
 """
 
 from dataclasses import dataclass, field
@@ -28,38 +26,29 @@ class RunResult:
 
     Attributes
     ----------
-    name, mode : str
-    dense : bool
-    time_stamps : ndarray, shape (T,)
-    world_T_imu : ndarray, shape (T, 4, 4)
-        ``world`` is the IMU frame at the first time stamp.
+    time_stamps, step_seconds : ndarray, shape (T,)
+        ``step_seconds``: wall time of each step.
+    world_T_imu, dead_reckoning : ndarray, shape (T, 4, 4)
+        The estimate and the IMU-only trajectory; ``world`` is the IMU frame at the first time stamp.
     pose_cov : ndarray, shape (T, 6, 6)
     landmarks : ndarray, shape (M, 3)
         NaN for landmarks never initialised.
     landmark_cov : ndarray, shape (M, 3, 3)
-    dead_reckoning : ndarray, shape (T, 4, 4)
-        The IMU-only trajectory, for comparison.
     nis, nis_dof : ndarray, shape (T,)
         NaN (0) where there was no update.
     status_counts : ndarray of int, shape (T, len(STATUS_NAMES))
         Observations per frame by status (:data:`visla_edu.codes.STATUS_NAMES`).
-    step_seconds : ndarray, shape (T,)
-        Wall time of each step.
-    config : dict
     imu_T_cam : ndarray, shape (4, 4)
         The calibration used (after any correction).
     evaluation : dict
-        Figures against ground truth, filled by :func:`evaluate_result` (empty without):
-        ``estimate_<name>``, ``dead_reckoning_<name>`` (and for the batch smoother
-        ``start_<name>``, the start it took, :attr:`start_mode`) for every field of
-        :class:`visla_edu.metrics.TrajectoryEvaluation`, and ``ground_truth_source``.
+        Filled by :func:`evaluate_result`: ``estimate_<name>``, ``dead_reckoning_<name>`` (batch smoother:
+        ``start_<name>`` too) per :class:`visla_edu.metrics.TrajectoryEvaluation` field, ``ground_truth_source``.
     start_world_T_imu : ndarray, shape (T, 4, 4), or None
         Batch smoother: the trajectory it started from (None otherwise).
+    start_mode : str
+        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``), else ``""``.
     track_counts : dict of str -> int
         Joint SLAM with clones: :attr:`visla_edu.filters.JointSlam.track_counts` (empty otherwise).
-    start_mode : str
-        Batch smoother: the mode of that start (``"deadreckon"``, ``"vio"`` or ``"slam"``), else
-        ``""``.
     notes : str
         Lines the mode adds to :meth:`summary` (the smoothers' iterations and rejections).
     """
@@ -88,9 +77,8 @@ class RunResult:
     def status_totals(self):
         """Total observations by status name, e.g. ``{"used": ..., "gated": ...}``.
 
-        With clones, the ``delayed`` observations of tracks used or gated later count as ``used`` or
-        ``gated`` (:attr:`track_counts`); the rest stay ``delayed`` (short, failed or still open
-        tracks).
+        With clones, the ``delayed`` observations of tracks used or gated later count as ``used`` or ``gated``
+        (:attr:`track_counts`); the rest stay ``delayed`` (short, failed or still open tracks).
         """
         totals = dict(zip(STATUS_NAMES, self.status_counts.sum(axis=0).tolist()))
         used, gated = (int(self.track_counts.get(k, 0)) for k in ("observations_used", "observations_gated"))
@@ -126,7 +114,7 @@ class RunResult:
 
 
     def _camera_line(self):
-        """How far the run trusted the camera (the resolved ``pixel_noise_inflation``, and in slam the clones), or None."""
+        """How far the run trusted the camera (resolved ``pixel_noise_inflation``, in slam the clones), or None."""
         c = self.config or {}
         inflation, window = c.get("pixel_noise_inflation"), c.get("msckf_window")
         if self.mode == "deadreckon" or not isinstance(inflation, (int, float)) or "sigma_pixel" not in c:
@@ -140,15 +128,7 @@ class RunResult:
 class RunArrays:
     """Per-frame arrays of a run (of :func:`run_filter` and the stepper), filled one StepRecord at a time.
 
-    Parameters
-    ----------
-    num_frames : int
-        ``T``.
-
-    Attributes
-    ----------
-    world_T_imu, pose_cov, nis, nis_dof, status_counts, step_seconds
-        As :class:`RunResult`'s (:attr:`FIELDS`).
+    ``num_frames`` is ``T``; the attributes, :attr:`FIELDS`, are as :class:`RunResult`'s.
     """
 
     #: The arrays, in the order :class:`RunResult` lists them.
@@ -179,18 +159,13 @@ class RunArrays:
 
 
 def save_result(result, path):
-    """Save a :class:`RunResult` to ``path`` (the module docstring's file), atomically; return the path written.
+    """Write ``result`` to ``path`` atomically (the module docstring's file); return its absolute pathlib.Path.
 
     Parameters
     ----------
     result : RunResult
     path : str or os.PathLike
         ``.npz`` is appended if missing (as ``numpy.savez`` does).
-
-    Returns
-    -------
-    pathlib.Path
-        The absolute path written.
     """
     path = expand_user(path)
     if path.suffix.lower() != ".npz":
@@ -214,22 +189,12 @@ def _setting(array):
 
 
 def load_result(path):
-    """Load a :class:`RunResult` written by :func:`save_result` (or ``visla-edu run --out``).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-
-    Returns
-    -------
-    RunResult
-        Of a file of an earlier version too (the module docstring).
+    """Load a :class:`RunResult` written by :func:`save_result` (or ``visla-edu run --out``), of an earlier version too.
 
     Raises
     ------
     FileNotFoundError, ValueError, KeyError
-        As :func:`numpy.load` for a missing or broken file, or a file without the keys a result
-        has; a ValueError for statuses this version does not know (a newer file).
+        As :func:`numpy.load` for a missing or broken file, a file without a result's keys; ValueError: newer statuses.
     """
     with np.load(path, allow_pickle=False) as f:
         config = {k[len("config_"):]: _setting(f[k]) for k in f.files if k.startswith("config_")}

@@ -1,8 +1,6 @@
-"""How much work a run will be, and what to say when one fails.
+"""How much work a run will be (:func:`estimate_work`), and what to say when one fails (:func:`divergence_hint`).
 
-:func:`estimate_work` predicts the memory and time of a filter run before it starts (the
-command line refuses one past :data:`WORK_LIMIT_BYTES` or :data:`WORK_LIMIT_SECONDS` unless
-given ``--force``); :func:`divergence_hint` names the likely cause of a failed run.
+The command line refuses a run past :data:`WORK_LIMIT_BYTES` or :data:`WORK_LIMIT_SECONDS` unless given ``--force``.
 """
 
 from dataclasses import dataclass
@@ -43,11 +41,8 @@ class WorkEstimate:
 
     Attributes
     ----------
-    mode : str
-    dense : bool
     state_dim : int
         Largest state: ``6 + 3 n`` with n the landmarks in the joint state (SLAM), else 6.
-    frames : int
     max_rows : int
         Most observation rows of one update.
     peak_bytes : int
@@ -85,21 +80,12 @@ class WorkEstimate:
 
 
 def estimate_work(dataset, mode=SLAM, config=None, dense=False):
-    """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``.
+    """Estimate the memory and time of ``run_filter(dataset, mode, config, dense=dense)``: a :class:`WorkEstimate`.
 
-    The dense filter carries every (strided) landmark, the active set those whose track spans the
-    frame, both with 3 rows per observation; VIO solves a 4-row block per observation; mapping and
-    dead reckoning work in cheap 3x3 and 6x6 blocks. The smoothers: the joint EKF's estimate times
-    :data:`SMOOTHER_FACTOR`, plus their memory per observation.
-
-    Parameters
-    ----------
-    dataset, mode, config, dense
-        As :func:`visla_edu.run.run_filter`; ``config.landmark_stride`` decides the landmarks used.
-
-    Returns
-    -------
-    WorkEstimate
+    ``config.landmark_stride`` decides the landmarks used. The dense filter carries every (strided) landmark, the
+    active set those whose track spans the frame, both with 3 rows per observation; VIO solves a 4-row block per
+    observation; mapping and dead reckoning work in cheap 3x3 and 6x6 blocks. The smoothers: the joint EKF's
+    estimate times :data:`SMOOTHER_FACTOR`, plus their memory per observation.
     """
     config = config or FilterConfig()
     if mode in SMOOTHER_MODES:  # the smoothers start from the joint EKF and cost a few times as much
@@ -141,21 +127,11 @@ def _landmarks_in_state(dataset, stride, dense):
 
 
 def divergence_hint(dataset, config, frame=None):
-    """The likely cause of a filter failure at ``frame``, as one sentence.
+    """The likely cause of a filter failure at ``frame`` (int, optional), as one sentence.
 
-    Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`:
-    calibration, time stamps, velocities), else the step into ``frame`` and then an angular rate
-    beyond a car's (deg/s given as rad/s?) or the settings.
-
-    Parameters
-    ----------
-    dataset, config
-        As :func:`visla_edu.run.run_filter`.
-    frame : int, optional
-
-    Returns
-    -------
-    str
+    Names the implausible parts of the data first (:func:`visla_edu.data.dataset_problems`: calibration, time
+    stamps, velocities), else the step into ``frame`` and then an angular rate beyond a car's (deg/s given as
+    rad/s?) or the settings. ``dataset``, ``config``: as :func:`visla_edu.run.run_filter`.
     """
     problems = data.dataset_problems(dataset)
     if problems:

@@ -1,8 +1,6 @@
-"""The stepper as a page of its own: the Voila app notebook and the server that shows it.
+"""The stepper as a page of its own (``visla-edu stepper --port 8866``): the Voila app notebook and its server.
 
-    visla-edu stepper --port 8866          # or: python -c "from visla_edu.stepper.app import serve; serve(wait=True)"
-
-The page is ``visla_edu/stepper_app.ipynb`` (package data): one cell showing a
+The page, ``visla_edu/stepper_app.ipynb`` (package data), is one cell showing a
 :class:`~visla_edu.stepper.widget.StepperWidget`.
 """
 
@@ -17,13 +15,7 @@ __all__ = ["serve", "app_notebook_path"]
 
 
 def app_notebook_path():
-    """Path of the standalone stepper page, ``stepper_app.ipynb`` in the installed package.
-
-    Returns
-    -------
-    pathlib.Path
-        Absolute, symbolic links resolved; its existence is not checked.
-    """
+    """Path of ``stepper_app.ipynb`` in the installed package: absolute, links resolved, existence not checked."""
     return Path(__file__).resolve().parent.parent / "stepper_app.ipynb"
 
 
@@ -32,18 +24,12 @@ def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None,
 
     Parameters
     ----------
-    port : int
-    open_browser : bool
     data_dir : str or os.PathLike, optional
         Folder of the course files, passed to the page as ``VISLA_EDU_DATA``.
     dataset, mode : str, optional
-        What the page opens with (default ``"sim"``, ``"slam"``), via
-        ``VISLA_EDU_STEPPER_DATASET`` and ``VISLA_EDU_STEPPER_MODE``.
+        What the page opens with (default ``"sim"``, ``"slam"``), via ``VISLA_EDU_STEPPER_DATASET``/``_MODE``.
     wait : bool
-        Block until the server exits (Ctrl-C or a SIGTERM stops it, never leaving Voila
-        running behind); otherwise return at once.
-    **popen_options
-        Passed to :class:`subprocess.Popen` (e.g. ``stdout=``, ``stderr=``).
+        Block until the server exits (Ctrl-C or SIGTERM stop it, never leaving Voila behind); else return at once.
 
     Returns
     -------

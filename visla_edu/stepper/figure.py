@@ -1,6 +1,4 @@
-"""The stepper's figure: one persistent matplotlib figure that renders a
-:class:`~visla_edu.stepper.Stepper` to PNG bytes (no ipywidgets: usable and testable alone).
-"""
+"""The stepper's figure (no ipywidgets): a persistent matplotlib figure rendering a :class:`Stepper` to PNG bytes."""
 
 import contextlib
 import io
@@ -36,14 +34,10 @@ _STATUS_STYLE = {  # status -> (marker, colour, label)
 class StepperFigure:
     """One persistent matplotlib figure of a :class:`Stepper`, redrawn by updating its artists.
 
-    Panels: the top-down map (estimate, dead reckoning, ground truth, the pose covariance
-    ellipse, the map so far, the active landmarks with their ellipses), the stereo frame (left
-    and right: observed and predicted pixels, innovations, gated outliers) and NIS/dof over
-    time with the 95% band of ``chi2(dof)/dof``.
-
-    What does not change is drawn once into cached backgrounds (the map's redrawn only when its
-    view moves, :meth:`draw`); each frame blits the time-dependent artists on top. Text is slow,
-    so besides the title the per-frame numbers are only in :attr:`captions` unless ``annotate``.
+    Panels: the top-down map, the stereo frame (left and right: observed and predicted pixels, innovations) and
+    NIS/dof over time with the 95% band of ``chi2(dof)/dof``. What does not change is drawn once into cached backgrounds
+    (the map's redrawn only when its view moves, :meth:`draw`); each frame blits the time-dependent artists on top.
+    Text is slow, so besides the title the per-frame numbers are only in :attr:`captions` unless ``annotate``.
 
     Parameters
     ----------
@@ -52,11 +46,8 @@ class StepperFigure:
     n_sigma : float
         Size of the covariance ellipses.
     follow : bool
-        Map view around the current pose (at least ``follow_radius`` metres each way, moving
-        in jumps when the pose nears its edge) instead of the whole drive.
-    follow_radius : float
-    annotate : bool
-        Also draw the captions in the figure.
+        Map view around the current pose (at least ``follow_radius`` metres each way, moving in jumps when the
+        pose nears its edge) instead of the whole drive.
 
     Attributes
     ----------

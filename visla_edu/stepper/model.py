@@ -1,27 +1,11 @@
 """The filter stepper's model: a filter you can move through in time, forwards and backwards.
 
-A :class:`Stepper` owns one filter (:func:`visla_edu.run.make_filter`) and the
-:class:`~visla_edu.filters.StepRecord` of every frame processed so far (a small snapshot: pose,
-pose covariance, the frame's observations, the active landmarks). The *frontier* is the last
-frame processed: ``goto(t)`` reads the history up to it, and beyond it steps the filter to
-``t`` and no further (a step forward costs one filter step, never a re-run). Changing the
-dataset, the mode or the noise settings resets the filter to frame 0.
-
-It imports neither ipywidgets nor matplotlib (the views: :mod:`visla_edu.stepper.figure`,
-:mod:`visla_edu.stepper.widget`), so it can be scripted and tested on its own::
-
-    >>> from visla_edu.stepper import Stepper
-    >>> s = Stepper("sim-tiny", mode="slam")
-    >>> rec = s.goto(12)            # processes frames 0..12
-    >>> s.t, s.frontier, rec.t
-    (12, 12, 12)
-    >>> s.trajectory.shape         # poses 0..t
-    (13, 4, 4)
-    >>> s.goto(3) is s.records[3]  # stepping back reads the history
-    True
-
-``Stepper(dataset, mode, config, filter_factory=f)`` steps ``f(dataset, config)`` instead: any
-:class:`SteppableFilter`, e.g. a student's own filter (notebook 12).
+A :class:`Stepper` owns one filter (:func:`visla_edu.run.make_filter`, or with ``filter_factory`` any
+:class:`SteppableFilter`, e.g. a student's own, notebook 12) and the :class:`~visla_edu.filters.StepRecord` of
+every frame processed so far. The *frontier* is the last frame processed: ``goto(t)`` reads the history up to
+it, and beyond it steps the filter to ``t`` and no further (a step forward costs one filter step, never a
+re-run). Changing the dataset, the mode or the noise settings resets the filter to frame 0. It imports neither
+ipywidgets nor matplotlib (the views: :mod:`visla_edu.stepper.figure`, :mod:`visla_edu.stepper.widget`).
 """
 
 import time
@@ -64,17 +48,7 @@ _EXTRA_SIMULATED = ("sim-small", "sim-tiny")
 
 
 def dataset_choices(data_dir=None):
-    """Dataset names and labels for a menu: :func:`visla_edu.data.available`'s, then ``"sim-small"``, ``"sim-tiny"``.
-
-    Parameters
-    ----------
-    data_dir : str or os.PathLike, optional
-        Default: :func:`visla_edu.data.data_dir`.
-
-    Returns
-    -------
-    list of (label, name)
-    """
+    """``[(label, name), ...]`` for a menu: :func:`visla_edu.data.available`'s, then ``"sim-small"``, ``"sim-tiny"``."""
     from visla_edu import data
 
     names = list(data.available(data_dir))
@@ -97,12 +71,8 @@ def dataset_choices(data_dir=None):
 def world_position_covariance(world_T_imu, pose_cov):
     """World-frame covariance of the IMU position, ``R Sigma_vv R^T``, shape (3, 3).
 
-    To first order ``p = p_mu + R_mu v`` (right perturbation ``[v; w]``, see :mod:`visla_edu.lie`).
-
-    Parameters
-    ----------
-    world_T_imu : ndarray, shape (4, 4)
-    pose_cov : ndarray, shape (6, 6)
+    To first order ``p = p_mu + R_mu v`` (right perturbation ``[v; w]``, see :mod:`visla_edu.lie`);
+    ``world_T_imu`` is (4, 4), ``pose_cov`` (6, 6).
     """
     R = np.asarray(world_T_imu)[:3, :3]
     return R @ np.asarray(pose_cov)[:3, :3] @ R.T
@@ -112,20 +82,12 @@ def world_position_covariance(world_T_imu, pose_cov):
 class SteppableFilter(Protocol):
     """The interface of a filter the :class:`Stepper` can step (the library's filters have it).
 
-    Attributes
-    ----------
-    config : visla_edu.filters.FilterConfig
-        The resolved settings the factory received (keeping them is enough): the noise sliders
-        show them, the dead-reckoning reference uses their ``imu_lag``.
-
-    Methods
-    -------
-    step() -> visla_edu.filters.StepRecord
-        The next frame's record (frames ``0, 1, 2, ...``, one per call, only while frames
-        remain): ``t``, ``world_T_imu`` (4, 4) and ``pose_cov`` (6, 6, right perturbation
-        ``[v; w]``), the frame's observations with their status codes, the active landmarks the
-        map draws (empty arrays are fine). What it raises propagates; the stepper stays at the
-        last good frame.
+    ``config``: the resolved :class:`~visla_edu.filters.FilterConfig` the factory received (keeping it is enough):
+    the noise sliders show it, the dead-reckoning reference uses its ``imu_lag``. ``step()``: the next frame's
+    :class:`~visla_edu.filters.StepRecord` (frames ``0, 1, 2, ...``, one per call, only while frames remain): ``t``,
+    ``world_T_imu`` (4, 4) and ``pose_cov`` (6, 6, right perturbation ``[v; w]``), the frame's observations with
+    their status codes, the active landmarks the map draws (empty arrays are fine). What it raises propagates;
+    the stepper stays at the last good frame.
     """
 
     config: FilterConfig
@@ -140,17 +102,14 @@ class Stepper:
     Parameters
     ----------
     dataset : str or visla_edu.dataset.Dataset
-        A name :func:`visla_edu.data.load` understands (``"sim-tiny"``, ``"03"``...) or a dataset.
+        A name :func:`visla_edu.data.load` understands (``"sim-tiny"``, ``"03"``...; from ``data_dir``) or a dataset.
     mode : {"deadreckon", "mapping", "vio", "slam"}
     config : visla_edu.filters.FilterConfig, optional
-    data_dir : str or os.PathLike, optional
-        Folder of the course files when ``dataset`` is a name.
     blas_threads : int or None
         BLAS thread limit while the filter steps (:func:`visla_edu.run.limit_blas_threads`).
     filter_factory : callable, optional
-        ``filter_factory(dataset, config) -> filter``, a :class:`SteppableFilter` (``config``
-        resolved), instead of :func:`visla_edu.run.make_filter`; called again at every reset.
-        ``mode`` then only labels the views.
+        ``filter_factory(dataset, config) -> filter``, a :class:`SteppableFilter` (``config`` resolved), instead of
+        :func:`visla_edu.run.make_filter`; called again at every reset. ``mode`` then only labels the views.
 
     Attributes
     ----------
@@ -203,21 +162,10 @@ class Stepper:
         return self.filter.config
 
     def configure(self, dataset=None, mode=None, config=None, **settings):
-        """Change the dataset, mode or noise settings; if anything changed, the filter restarts at frame 0.
+        """Change the dataset, mode or noise settings; True if anything changed (the filter then restarts at frame 0).
 
-        Parameters
-        ----------
-        dataset : str or Dataset, optional
-        mode : str, optional
-        config : FilterConfig, optional
-            Replaces the whole configuration.
-        **settings
-            :class:`FilterConfig` fields, e.g. ``sigma_pixel=4.0`` (applied after ``config``).
-
-        Returns
-        -------
-        bool
-            True if anything changed.
+        ``dataset``, ``mode``: as the constructor's; ``config`` replaces the whole configuration; ``**settings`` are
+        :class:`FilterConfig` fields (e.g. ``sigma_pixel=4.0``) applied after ``config``, an unknown one a ValueError.
         """
         new_dataset = self._dataset if dataset is None else self._load(dataset)
         new_mode = self._mode if mode is None else self._check_mode(mode)
@@ -275,19 +223,10 @@ class Stepper:
         self.goto(value)
 
     def goto(self, t):
-        """Move to frame ``t`` and return its record (history up to the frontier, then filter steps).
+        """Move to frame ``t`` (``0 <= t < num_frames``, else IndexError) and return its StepRecord.
 
-        What the filter raises on the way (e.g. ``FilterDivergedError``) propagates; the stepper
-        stays at the last good frame.
-
-        Parameters
-        ----------
-        t : int
-            ``0 <= t < num_frames``, else IndexError.
-
-        Returns
-        -------
-        StepRecord
+        History up to the frontier, then filter steps. What the filter raises on the way (e.g. ``FilterDivergedError``)
+        propagates; the stepper stays at the last good frame.
         """
         if isinstance(t, (bool, np.bool_)) or int(t) != t:
             raise TypeError(f"Stepper.goto: t must be an integer frame index, got {t!r}")

@@ -1,12 +1,8 @@
-"""The filter stepper as an interactive view (ipywidgets + matplotlib)::
+"""The filter stepper as an interactive view (ipywidgets + matplotlib): ``StepperWidget("sim")``.
 
-    from visla_edu.stepper.widget import StepperWidget; StepperWidget("sim")
-
-As a page of its own (Voila): ``visla-edu stepper --port 8866`` (:mod:`visla_edu.stepper.app`).
-
-Every control re-configures the :class:`~visla_edu.stepper.Stepper` (dataset, mode, noise:
-the filter restarts from frame 0) or sets its time; the figure is then rendered to a PNG in
-an ``ipywidgets.Output``: no ipympl, the same image in JupyterLab, classic notebooks and Voila.
+Every control re-configures the :class:`~visla_edu.stepper.Stepper` (dataset, mode, noise: the filter restarts
+from frame 0) or sets its time; the figure is then rendered to a PNG in an ``ipywidgets.Output``: no ipympl, the
+same image in JupyterLab, classic notebooks and Voila (a page of its own: :mod:`visla_edu.stepper.app`).
 """
 
 import base64
@@ -68,8 +64,8 @@ class StepperWidget(w.VBox):
     dataset : str or Dataset
         Initial dataset, a name of :func:`visla_edu.stepper.dataset_choices` or a loaded one.
     mode, config, data_dir, filter_factory
-        As :class:`visla_edu.stepper.Stepper`. With a ``filter_factory`` the mode menu is
-        disabled, and any error its ``step()`` raises is shown under the figure.
+        As :class:`visla_edu.stepper.Stepper`. With a ``filter_factory`` the mode menu is disabled, and any error
+        its ``step()`` raises is shown under the figure.
     **figure_options
         Passed to :class:`~visla_edu.stepper.figure.StepperFigure` (``figsize``, ``dpi``, ``follow``...).
 
@@ -78,20 +74,10 @@ class StepperWidget(w.VBox):
     stepper : visla_edu.stepper.Stepper
         The model; the view only calls ``goto``/``configure`` on it.
     figure : visla_edu.stepper.figure.StepperFigure
-    dataset_dropdown, mode_dropdown, view_toggle : ipywidgets selection widgets
-    play, time_slider : ipywidgets.Play, ipywidgets.IntSlider
-        Linked.
-    first_button, back_button, step_button, jump_button, end_button : ipywidgets.Button
-        Frame 0, one back, one forward, ten forward, the last frame.
     noise_sliders : dict of str -> slider
         One per :data:`visla_edu.stepper.NOISE_FIELDS`; a change re-runs the filter.
-    defaults_button : ipywidgets.Button
-    status : ipywidgets.HTML
-        ``t = ...`` and what the current frame did; errors show here.
-    output : ipywidgets.Output
-        Holds the rendered figure.
-    render_count : int
-    last_redraw_seconds, last_update_seconds : float
+    status, output : ipywidgets.HTML, ipywidgets.Output
+        ``t = ...``, what the current frame did and errors; the rendered figure.
     """
 
     def __init__(self, dataset="sim", mode=SLAM, config=None, data_dir=None, filter_factory=None, **figure_options):
@@ -297,9 +283,7 @@ def _slider_value(value):
 
 
 def _noise_slider(name, value, default):
-    """Slider of one noise setting (linear for the gate probability, log scale for the sigmas) over
-    :data:`NOISE_RANGES`, widened to hold the current value and the default.
-    """
+    """Slider over :data:`NOISE_RANGES`, widened to hold ``value`` and ``default``: the gate's linear, sigmas' log."""
     lo, hi = NOISE_RANGES[name]
     label, tip = _NOISE_DESCRIPTIONS[name]
     common = dict(description=label, tooltip=tip, continuous_update=False,
