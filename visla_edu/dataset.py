@@ -1,10 +1,8 @@
 """The in-memory dataset every part of visla-edu works on (one class for all formats).
 
-Observations are stored sparse and frame-major (compressed sparse rows over frames):
-frame ``t`` owns entries ``frame_ptr[t]:frame_ptr[t + 1]`` of ``obs_ids`` (landmark
-indices, increasing within a frame) and ``obs_z`` (pixels ``[uL, vL, uR, vR]``). About 1% of
-the course files' dense ``(4, M, T)`` array is valid, so this is ~100x smaller.
-:func:`frame_major_order` builds the layout (the loader, the simulator, :meth:`Dataset.from_dense`).
+Observations are stored sparse and frame-major (compressed sparse rows over frames): frame ``t`` owns
+entries ``frame_ptr[t]:frame_ptr[t + 1]`` of ``obs_ids`` (landmark indices, increasing within a frame)
+and ``obs_z`` (pixels ``[uL, vL, uR, vR]``). :func:`frame_major_order` builds the layout.
 """
 
 from dataclasses import dataclass, field
@@ -22,17 +20,13 @@ __all__ = ["Dataset", "GroundTruth", "frame_major_order", "repeated_frames", "st
 class GroundTruth:
     """True poses of a drive, and for simulated drives its true landmarks and velocities.
 
-    A real drive's ground truth (KITTI poses, :mod:`visla_edu.data._groundtruth`) has only the
-    poses, possibly of fewer frames than the dataset: compare an estimate's first
-    :attr:`num_frames` poses (:func:`visla_edu.metrics.evaluate` does this itself).
-
     Attributes
     ----------
     world_T_imu : ndarray, shape (n, 4, 4)
-        True IMU poses of frames ``0 .. n - 1``, ``world`` = the IMU frame at the first time
-        stamp; ``n = T`` for simulated drives, ``n <= T`` for real ones.
+        Frames ``0 .. n - 1``, ``world`` = the IMU frame at the first time stamp; ``n = T`` for simulated
+        drives, ``n <= T`` for real ones (KITTI poses, :mod:`visla_edu.data._groundtruth`).
     landmarks : ndarray, shape (M, 3), or None
-        True landmark positions in the world frame.
+        In the world frame.
     linear_velocity, angular_velocity : ndarray, shape (T, 3), or None
         Noise-free body-frame velocities (m/s, rad/s) that generated the drive.
     outlier : ndarray of bool, shape (M,), or None
@@ -40,8 +34,7 @@ class GroundTruth:
     source : str
         The poses' file, or ``""`` for a simulation.
     file_rows : int or None
-        Poses in the source file (None for a simulation); more than :attr:`num_frames` when it is
-        a longer KITTI sequence (``0042.npz``), of which rows ``0 .. num_frames - 1`` were used.
+        Poses in the source file (None for a simulation), of which rows ``0 .. num_frames - 1`` are used.
     """
 
     world_T_imu: np.ndarray
@@ -76,44 +69,32 @@ class Dataset:
 
     Attributes
     ----------
-    name : str
-        Short name (``"03"``, ``"0022"``, ``"sim"``, ``"10-standin"``...).
-    source : str
-        Where it came from (file path, or a description of the simulation).
+    name, source, label : str
+        Short name (``"03"``, ``"sim"``, ``"10-standin"``...); file path or description of the simulation;
+        human-readable description (stand-ins say so here).
     time_stamps : ndarray, shape (T,)
         Seconds, strictly increasing.
     linear_velocity, angular_velocity : ndarray, shape (T, 3)
         IMU body-frame velocities (m/s, rad/s); twist at ``t`` is ``[v_t; w_t]``.
-    K : ndarray, shape (3, 3)
-        Left camera intrinsics.
+    K, K_right : ndarray, shape (3, 3)
+        Left and right camera intrinsics; ``K_right`` None (the same as ``K``) unless a 2025+ file gives it.
     b : float
         Stereo baseline (m).
     imu_T_cam : ndarray, shape (4, 4)
         Pose of the left camera (optical frame) in the IMU frame.
-    K_right : ndarray, shape (3, 3), or None
-        Right camera intrinsics when the file gives them (2025+; they may differ from ``K``);
-        None: the same as ``K``.
     extrinsic_readings : tuple of visla_edu.camera.RigReading, or None
-        A 2025+ file's four readings of its extrinsics (:mod:`visla_edu.data._format2025`), of
-        which ``imu_T_cam`` is the loader's choice by geometry; None for the other formats.
+        A 2025+ file's four readings of its extrinsics (:mod:`visla_edu.data._format2025`); None otherwise.
     num_landmarks : int
         M, the number of landmark tracks.
-    frame_ptr : ndarray of int, shape (T + 1,)
-    obs_ids : ndarray of int, shape (N,)
-    obs_z : ndarray, shape (N, 4)
+    frame_ptr, obs_ids, obs_z : ndarray, shapes (T + 1,) int, (N,) int, (N, 4)
         Sparse observations, see the module docstring.
     ground_truth : GroundTruth or None
-        Present for simulated drives, and for real drives whose KITTI poses were found
-        (:func:`visla_edu.data.load`, :func:`visla_edu.data.attach_ground_truth`).
-    label : str
-        A human-readable description; stand-ins say so here.
+        Present for simulated drives, and for real drives whose KITTI poses were found.
     extra : dict
-        Metadata, not written by :func:`visla_edu.data.save`. A loaded course file has
-        ``"sha256"``, ``"format"`` and ``"known_file"`` (a 2025+ file also ``"extrinsic_reading"``,
-        ``"ignored_keys"`` and, without features, ``"no_features"``: why, in words); a simulated
-        drive ``"preset"``, ``"seed"`` and ``"config"`` (and ``"simulated_imu_T_cam"`` when the
-        reported calibration differs from the simulated rig's). Diagnostics keep results here
-        (``"calibration"``, ``"visual_odometry"``).
+        Metadata, not written by :func:`visla_edu.data.save`: a course file's ``"sha256"``, ``"format"``,
+        ``"known_file"`` (2025+: also ``"extrinsic_reading"``, ``"ignored_keys"``, ``"no_features"``: why, in
+        words); a simulation's ``"preset"``, ``"seed"``, ``"config"`` (``"simulated_imu_T_cam"`` when the reported
+        calibration differs from the simulated rig's); diagnostics' results (``"calibration"``, ``"visual_odometry"``).
     """
 
     name: str
@@ -150,17 +131,7 @@ class Dataset:
         return self.stereo_camera()
 
     def stereo_camera(self, imu_T_cam=None):
-        """The drive's stereo rig (``K``, ``K_right``, ``b``), with ``imu_T_cam`` replaced if given.
-
-        Parameters
-        ----------
-        imu_T_cam : array_like, shape (4, 4), optional
-            E.g. a corrected one; default :attr:`imu_T_cam`.
-
-        Returns
-        -------
-        visla_edu.camera.StereoCamera
-        """
+        """The drive's :class:`~visla_edu.camera.StereoCamera`, with ``imu_T_cam`` (4, 4) replaced if given."""
         return StereoCamera(self.K, self.b, self.imu_T_cam if imu_T_cam is None else imu_T_cam, self.K_right)
 
     def disparity(self):
@@ -178,17 +149,9 @@ class Dataset:
         return np.diff(self.time_stamps)
 
     def observations(self, t):
-        """Landmark ids and pixels observed at frame ``t`` (``0 <= t < T``, else ``IndexError``).
+        """Landmark ids (k,) and pixels ``[uL, vL, uR, vR]`` (k, 4) of frame ``0 <= t < T`` (else ``IndexError``).
 
-        Parameters
-        ----------
-        t : int
-
-        Returns
-        -------
-        ids : ndarray of int, shape (k,)
-        z : ndarray, shape (k, 4)
-            ``[uL, vL, uR, vR]``; views into the dataset: do not modify.
+        Both are views into the dataset: do not modify.
         """
         if not 0 <= t < self.num_frames:
             raise IndexError(f"{self.name}: frame {t} out of range [0, {self.num_frames})")
@@ -219,22 +182,11 @@ class Dataset:
     def segment(self, start, stop):
         """Frames ``start .. stop - 1`` as a drive of their own, its world at the segment's first pose.
 
-        For quick iterations, or several independent drives with ground truth from one long one
-        (``benchmarks/bench_accuracy.py --only segments``).
-
-        Parameters
-        ----------
-        start, stop : int
-            Integers, ``0 <= start``, ``start + 2 <= stop <= T`` (else ``ValueError``).
-
-        Returns
-        -------
-        Dataset
-            Named ``"<name>[start:stop]"``, with only the landmarks observed in the segment
-            (renumbered in order) and ``extra`` empty (calibrations are measured anew). Ground truth
-            that covers frame ``start`` moves to the segment's world, ``seg_world_T_imu[k] =
-            inv(world_T_imu[start]) @ world_T_imu[start + k]``, the landmarks likewise, and keeps
-            only the poses it has (``None`` if it ends before ``start``).
+        ``0 <= start``, ``start + 2 <= stop <= T`` (else ``ValueError``). The segment is named ``"<name>[start:stop]"``,
+        has only the landmarks observed in it (renumbered in order) and ``extra`` empty. Ground truth that covers
+        frame ``start`` moves to the segment's world, ``seg_world_T_imu[k] = inv(world_T_imu[start]) @
+        world_T_imu[start + k]``, the landmarks likewise, and keeps only the poses it has (``None`` if it ends
+        before ``start``).
         """
         start, stop = _segment_bounds(start, stop, self.num_frames, self.name)
         lo, hi = self.frame_ptr[start], self.frame_ptr[stop]
@@ -252,17 +204,9 @@ class Dataset:
             K_right=None if self.K_right is None else self.K_right.copy(), extrinsic_readings=self.extrinsic_readings)
 
     def to_dense_features(self, frames=None, landmarks=None):
-        """The course's dense layout: ``(4, M', T')`` with -1 where not observed.
+        """The course's dense layout ``(4, M', T')``, -1 where not observed, of ``frames`` and ``landmarks``.
 
-        Parameters
-        ----------
-        frames, landmarks : slice or array of int, optional
-            Frames and landmarks to include (default all). Dense arrays are large (dataset 10:
-            1.3 GB), so exercises should select a window.
-
-        Returns
-        -------
-        ndarray, shape (4, M', T')
+        Each a slice or array of int (default all); dense arrays are large, so exercises should select a window.
         """
         frame_idx = np.arange(self.num_frames)[frames if frames is not None else slice(None)]
         lm_idx = np.arange(self.num_landmarks)[landmarks if landmarks is not None else slice(None)]
@@ -278,20 +222,10 @@ class Dataset:
 
     @classmethod
     def from_dense(cls, features, **fields):
-        """Build a dataset from dense course features (layout: :mod:`visla_edu.data`).
+        """Build a dataset from dense course features ``(4, M, T)``, ``features[0, m, t] != -1`` observed.
 
-        Parameters
-        ----------
-        features : array_like, shape (4, M, T)
-            ``features[0, m, t] != -1`` marks an observation.
-        **fields
-            The other :class:`Dataset` fields but the sparse ones and ``num_landmarks``; a missing,
-            unknown or repeated one is a ``TypeError``.
-
-        Returns
-        -------
-        Dataset
-            ``num_landmarks = M``, the observed entries frame-major (:func:`frame_major_order`), float.
+        ``**fields`` are the other :class:`Dataset` fields but the sparse ones and ``num_landmarks`` (``= M``); a
+        missing, unknown or repeated one is a ``TypeError``. ``obs_z`` is float.
         """
         features = np.asarray(features, dtype=float)
         landmark_ids, frames = np.nonzero(features[0] != -1)
@@ -340,9 +274,8 @@ def frame_major_order(obs_ids, obs_frames, num_frames):
 
     Parameters
     ----------
-    obs_ids : array_like of int, shape (N,)
-    obs_frames : array_like of int, shape (N,)
-        ``0 <= frame < num_frames``; each ``(frame, id)`` pair once.
+    obs_ids, obs_frames : array_like of int, shape (N,)
+        Each ``(frame, id)`` pair once, ``0 <= frame < num_frames`` (else ``ValueError``).
     num_frames : int
 
     Returns
@@ -366,18 +299,9 @@ def frame_major_order(obs_ids, obs_frames, num_frames):
 
 
 def repeated_frames(dataset):
-    """Frames ``t >= 1`` with observations that repeat frame ``t - 1``'s exactly (ids and pixels).
+    """Frames ``t >= 1`` (list of int) whose observations repeat frame ``t - 1``'s exactly (ids and pixels).
 
-    Usually a duplicated camera frame while the IMU kept going: the landmarks seem to move with
-    the vehicle.
-
-    Parameters
-    ----------
-    dataset : Dataset
-
-    Returns
-    -------
-    list of int
+    Usually a duplicated camera frame while the IMU kept going: the landmarks seem to move with the vehicle.
     """
     counts = np.diff(dataset.frame_ptr)
     candidates = np.flatnonzero((counts[1:] == counts[:-1]) & (counts[1:] > 0)) + 1
@@ -391,23 +315,11 @@ def repeated_frames(dataset):
 
 
 def stale_copies(dataset):
-    """Observations whose four pixels repeat their landmark's at the frame before, bit for bit.
+    """Observations whose four pixels repeat their landmark's at the frame before, bit for bit; bool, shape (N,).
 
-    The course files have frames (one in seven to twelve on 0020, 0022 and 03) at which every
-    continuing track is a copy of the previous frame's pixels while new tracks start: the copies
-    say the scene did not move, and on a moving vehicle they are errors of the whole step
-    (``0020`` with its ground truth: 7.8 px median residual, against 3.4 px for the other
-    observations). Real pixels of a moving camera are never bit-identical.
-
-    Parameters
-    ----------
-    dataset : Dataset
-
-    Returns
-    -------
-    ndarray of bool, shape (N,)
-        In the dataset's observation order; True for the copy at frame ``t`` (frame ``t - 1``'s
-        observation is kept).
+    In the dataset's observation order, True for the copy at frame ``t`` (frame ``t - 1``'s is kept). Course
+    files have frames where every continuing track copies the previous frame's pixels: on a moving vehicle the
+    copies are errors of the whole step (real pixels of a moving camera are never bit-identical).
     """
     frames = dataset.observation_frames()
     order = np.lexsort((frames, dataset.obs_ids))

@@ -1,13 +1,10 @@
 """The one home of each check that a calibration or a rigid transform is valid and plausible.
 
-*Valid* is what the math needs: ``K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive
-focal lengths (:func:`check_intrinsics`), a positive baseline (:func:`check_baseline`), a pose
-in SE(3) (:func:`nonrigid_frames`, :func:`check_rigid`, :func:`check_rigid_poses`). *Plausible*
-is what a real rig can be (:func:`check_plausible_calibration`): a course file can be well formed
-and still wrong (a focal length of 1e300 px, a baseline of 600 m: millimetres stored as
-metres), and the filter would run on it into inf/NaN covariances or a garbage map. Each range
-is wide enough for any real rig and its message says what is plausible and what was probably
-meant:
+*Valid* is what the math needs: ``K = [[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths
+(:func:`check_intrinsics`), a positive baseline (:func:`check_baseline`), a pose in SE(3)
+(:func:`nonrigid_frames`, :func:`check_rigid`, :func:`check_rigid_poses`). *Plausible* is what a real rig can
+be (:func:`check_plausible_calibration`): a well-formed file can still be wrong (millimetres stored as metres).
+Each range is wide enough for any real rig; its message says what is plausible and what was probably meant:
 
 ========================  ====================  ============================================
 quantity                  plausible             why
@@ -21,10 +18,9 @@ baseline b                0.005 .. 5 m          a phone's stereo pair to a rig a
 extrinsic translation     <= 20 m               camera and IMU ride the same vehicle
 ========================  ====================  ============================================
 
-The plausible time stamps, velocities and observed pixels of a drive are
-:mod:`visla_edu.data._plausible`'s. Every check raises a one-line ``ValueError`` that starts with
-the caller's name of the input (``subject``: ``"stereo_matrix: K"`` for a function's argument,
-``"path: key 'K'"`` for a file's key) and says what was expected and what was found.
+A drive's plausible time stamps, velocities and pixels are :mod:`visla_edu.data._plausible`'s. Every check
+raises a one-line ``ValueError`` that starts with ``subject``, the caller's name of the input
+(``"stereo_matrix: K"``, ``"path: key 'K'"``), and says what was expected and what was found.
 """
 
 import numpy as np
@@ -62,17 +58,7 @@ MAX_EXTRINSIC_TRANSLATION = 20.0  # m
 
 
 def magnitude(vectors):
-    """Norms ``hypot(hypot(v1, v2), v3)`` of ``vectors``, without overflow (1e200 stays 1e200, not inf).
-
-    Parameters
-    ----------
-    vectors : array_like, shape (..., 3)
-
-    Returns
-    -------
-    ndarray, shape (...)
-        The norms (a numpy float for one vector).
-    """
+    """Norms ``hypot(hypot(v1, v2), v3)`` (...) of ``vectors`` (..., 3), without overflow (1e200 stays 1e200)."""
     v = np.asarray(vectors, dtype=float)
     return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
 
@@ -80,19 +66,8 @@ def magnitude(vectors):
 def check_intrinsics(K, subject, key="K"):
     """``K`` as a (3, 3) float array ``[[fsu, 0, cu], [0, fsv, cv], [0, 0, 1]]`` with positive focal lengths.
 
-    A skew ``K[0, 1] != 0`` is refused: the stereo model (:func:`visla_edu.camera.stereo_matrix`)
-    has none (rectified images have none), so it would be silently ignored.
-
-    Parameters
-    ----------
-    K : array_like, shape (3, 3)
-    subject : str
-    key : str
-        How its entries are written in the messages (``K[0, 1]``).
-
-    Returns
-    -------
-    ndarray, shape (3, 3)
+    A skew ``K[0, 1] != 0`` is refused: the stereo model (:func:`visla_edu.camera.stereo_matrix`) has none
+    (rectified images have none), so it would be silently ignored. ``key`` writes the entries in messages.
 
     Raises
     ------
@@ -119,17 +94,7 @@ def check_intrinsics(K, subject, key="K"):
 
 
 def check_baseline(b, subject):
-    """The stereo baseline ``b`` (metres) as a finite positive float, else a ValueError.
-
-    Parameters
-    ----------
-    b : float or ndarray of shape ()
-    subject : str
-
-    Returns
-    -------
-    float
-    """
+    """The stereo baseline ``b`` (metres, a float or 0-d array) as a finite positive float, else a ValueError."""
     b = float(b)
     if not np.isfinite(b):
         raise ValueError(f"{subject} (stereo baseline, metres) must be a finite number, got {b!r}")
@@ -146,20 +111,9 @@ def check_stereo_calibration(K, b, name):
 def check_plausible_calibration(K, b, path, pose=None, pose_key="imu_T_cam", K_key="K", b_key="b"):
     """Focal lengths, aspect, principal point, baseline and extrinsic translation in their plausible ranges.
 
-    ``K`` (3, 3) must already be valid (:func:`check_intrinsics`), ``b`` positive and ``pose``
-    (4, 4) rigid; without ``pose`` its translation is not checked.
-
-    Parameters
-    ----------
-    K : ndarray, shape (3, 3)
-    b : float
-        Stereo baseline (m).
-    path : pathlib.Path or str
-        The file (or dataset name), for messages.
-    pose : ndarray, shape (4, 4), optional
-        The extrinsics (``imu_T_cam`` or ``cam_T_imu``).
-    pose_key, K_key, b_key : str
-        The keys of the extrinsics, the intrinsics and the baseline in the file, for messages.
+    ``K`` (3, 3) must already be valid (:func:`check_intrinsics`), ``b`` (m) positive and ``pose`` (4, 4, the
+    extrinsics ``imu_T_cam`` or ``cam_T_imu``) rigid; without ``pose`` its translation is not checked. ``path``
+    (the file or dataset name) and the file's keys ``pose_key``, ``K_key``, ``b_key`` are for messages.
 
     Raises
     ------
@@ -209,24 +163,14 @@ def _rigid_errors(poses):
 
 
 def nonrigid_frames(poses, tolerance, last_row_tolerance=None):
-    """Which poses of a batch are not in SE(3), and how far their rotations are from orthonormal.
+    """Which poses ``[[R, p], [a, b]]`` of a finite batch (n, 4, 4) are not in SE(3), and how far from orthonormal.
 
-    A pose ``[[R, p], [a, b]]`` is rigid when every entry of ``|R^T R - I|`` is at most
-    ``tolerance``, every entry of ``|[a, b] - [0, 0, 0, 1]|`` at most ``last_row_tolerance``
-    and ``det R > 0``.
-
-    Parameters
-    ----------
-    poses : ndarray, shape (n, 4, 4)
-        Finite.
-    tolerance : float
-    last_row_tolerance : float, optional
-        Default: ``tolerance``; 0 asks for an exact last row.
+    Rigid: every entry of ``|R^T R - I|`` at most ``tolerance``, every entry of ``|[a, b] - [0, 0, 0, 1]|`` at
+    most ``last_row_tolerance`` (default ``tolerance``; 0 asks for an exact last row) and ``det R > 0``.
 
     Returns
     -------
     bad : ndarray of bool, shape (n,)
-        True for a pose that is not rigid.
     orthogonality : ndarray, shape (n,)
         ``max |R^T R - I|`` of each pose (for the message).
     """
@@ -243,21 +187,10 @@ def rigid_detail(pose, tolerance):
 
 
 def check_rigid(T, subject, tolerance=RIGID_TOL):
-    """``T`` (4, 4) is in SE(3): ``R^T R = I`` within ``tolerance``, ``det R = +1``, last row exactly ``[0, 0, 0, 1]``.
+    """``T`` (4, 4, finite) in SE(3): ``R^T R = I`` to ``tolerance``, ``det R = +1``, last row exactly ``[0, 0, 0, 1]``.
 
-    Parameters
-    ----------
-    T : ndarray, shape (4, 4)
-        Finite.
-    subject : str
-    tolerance : float
-
-    Raises
-    ------
-    ValueError
-        An entry of ``R^T R - I`` exceeds ``tolerance`` in size (a small excess suggests rounded
-        entries), ``det R`` is negative (a reflection), or the last row is not exactly
-        ``[0, 0, 0, 1]`` (checked in this order).
+    Else a ``ValueError`` for the first that fails, in this order (a small excess of ``R^T R - I`` suggests
+    rounded entries).
     """
     if not nonrigid_frames(T[None], tolerance, last_row_tolerance=0.0)[0][0]:
         return
@@ -274,16 +207,10 @@ def check_rigid(T, subject, tolerance=RIGID_TOL):
 
 
 def check_rigid_poses(poses, subject, tolerance=POSE_RIGID_TOL):
-    """Every pose of ``poses`` (n, 4, 4) in SE(3) to ``tolerance`` (:func:`nonrigid_frames`), else a ValueError.
+    """Every pose of ``poses`` (n, 4, 4, finite) in SE(3) to ``tolerance`` (:func:`nonrigid_frames`), else a ValueError.
 
-    Parameters
-    ----------
-    poses : ndarray, shape (n, 4, 4)
-        Finite.
-    subject : str
-        Names the poses (``"path: key 'ground_truth_world_T_imu': the pose"``); the message is
-        ``f"{subject} of frame {t} is not a rigid transform ({rigid_detail})"`` for the first such ``t``.
-    tolerance : float
+    Its message is ``f"{subject} of frame {t} is not a rigid transform ({rigid_detail})"`` for the first such ``t``
+    (``subject`` e.g. ``"path: key 'ground_truth_world_T_imu': the pose"``).
     """
     bad = np.flatnonzero(nonrigid_frames(poses, tolerance)[0])
     if bad.size:

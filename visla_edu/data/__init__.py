@@ -1,18 +1,13 @@
 """Load, check, save and summarise the course data files.
 
-Where the files are
--------------------
-The data directory is, in this order: the ``data_dir`` argument, the environment
-variable ``VISLA_EDU_DATA``, or ``./data`` under the current working directory.
-Course files are never copied into the project: point ``VISLA_EDU_DATA`` at them.
+The data directory is, in this order: the ``data_dir`` argument, the environment variable
+``VISLA_EDU_DATA``, or ``./data`` under the current working directory (course files are never copied
+into the project).
 
     >>> from visla_edu import data
     >>> ds = data.load("03")                # <data dir>/03.npz
     >>> print(data.format_summary(ds))      # what ``visla-edu info 03`` prints
     >>> sim = data.load("sim")              # a simulated drive with ground truth
-    >>> ds = data.load("0020")              # KITTI odometry 06, its ground truth attached when
-    >>> ds.ground_truth.num_frames          # the KITTI pose files are in the data dir
-    1101
 
 Throughout, T is the number of frames, M of landmarks and N of observations.
 
@@ -25,13 +20,12 @@ and ``imu_T_cam`` (4, 4); the 2019/2020 format has ``rotational_velocity`` (3, T
 and ``cam_T_imu`` (4, 4), the inverse transform. :func:`save` writes the 2021+ format,
 plus the ground truth of a simulated drive (:data:`GROUND_TRUTH_KEYS`) and the
 :data:`TEXT_KEYS` ``name`` and ``label``. :func:`load` converts both to the time-major
-:class:`~visla_edu.dataset.Dataset` once, and keeps the features sparse: the dense array
-is streamed from the file in chunks (dataset 10's is 1.3 GB), never held whole.
+:class:`~visla_edu.dataset.Dataset`, streaming the dense features (never held whole).
 
 The 2025+ format
 ----------------
-The current edition ships ``datasetNN/datasetNN.npy``, ``np.save`` of a dict that its student
-code reads with ``np.load(path, allow_pickle=True).item()``:
+``datasetNN/datasetNN.npy``, ``np.save`` of a dict (the course reads it with
+``np.load(path, allow_pickle=True).item()``):
 
 ==============================  ===========================================================
 key                             value
@@ -49,27 +43,21 @@ It is read without unpickling anything but plain arrays (module ``_pickle``); th
 layout and the extrinsics' direction and camera frame are decided from the data (module
 ``_format2025``, :func:`load_course2025`). :func:`save_course2025` writes a drive in it.
 
-When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`):
-dataset 10's real IMU drive with simulated stereo tracks. :func:`course_standin10` builds
-the same drive with another seed or harder settings (more outliers, an IMU lag).
-
-Ground truth of real drives
----------------------------
-KITTI odometry poses (``poses/NN.txt``, left-camera poses, 12 or 13 columns) and their
-``times.txt`` are read, checked against the drive's time stamps and converted to
-``world_T_imu`` by :func:`load_ground_truth` / :func:`attach_ground_truth` (module
+When ``10.npz`` is absent, ``load("10")`` builds a stand-in (:func:`standin_dataset10`): dataset 10's
+real IMU drive with simulated stereo tracks; :func:`course_standin10` varies its seed and settings.
+KITTI odometry ground truth of real drives (``poses/NN.txt``, ``times.txt``) is read, checked and
+converted to ``world_T_imu`` by :func:`load_ground_truth` / :func:`attach_ground_truth` (module
 ``_groundtruth``); a registered drive (``"0020"``) gets its own automatically.
 
 Errors
 ------
-Every problem with a file is reported as a ``FileNotFoundError`` or ``ValueError`` (or,
-for a folder or an unreadable file, ``IsADirectoryError`` or ``PermissionError``) whose
-message names the file, the key, and the expected and actual shape or value; the functions
-that read files list only what is particular to them. Besides the format, a file must be
-plausible (:mod:`visla_edu.validation`, :mod:`~visla_edu.data._plausible`: each range with its
-reason), and the declared array sizes are bounded from the headers before any data is read.
-In the private modules ``path`` (pathlib.Path or str) is the file and ``key`` an array's key
-in it, both only named in messages.
+Every problem with a file is a ``FileNotFoundError`` or ``ValueError`` (or, for a folder or an
+unreadable file, ``IsADirectoryError`` or ``PermissionError``) whose message names the file, the key,
+and the expected and actual shape or value; the functions that read files list only what is particular
+to them. A file must also be plausible (:mod:`visla_edu.validation`, :mod:`~visla_edu.data._plausible`),
+and the declared array sizes are bounded from the headers before any data is read. In the private
+modules ``path`` (pathlib.Path or str) is the file and ``key`` an array's key in it, both only named in
+messages.
 
 Modules (private; everything public is re-exported here): ``_load``, ``_registry``, ``_npz``,
 ``_zip``, ``_format``, ``_features``, ``_plausible``, ``_format2025``, ``_pickle`` (reading);

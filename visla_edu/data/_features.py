@@ -1,11 +1,9 @@
 """The ``features`` key of a course file (:mod:`visla_edu.data`), streamed into the sparse Dataset layout.
 
-Dataset 10's is 1.3 GB, of which about 1% is observations, so it is decoded in chunks straight
-from the zip member, checked (finite; each observation all -1 or none, ``uL`` deciding; at most
-:data:`MAX_OBSERVATIONS`) and collected frame-major (:func:`visla_edu.dataset.frame_major_order`).
-A C-order array is decoded in chunks of landmark rows of one plane; a Fortran-order one (the
-bytes of a C-order ``(T, M, 4)`` array) in chunks of whole frames. The memory is one chunk plus
-the observations.
+Decoded in chunks straight from the zip member, checked (finite; each observation all -1 or none, ``uL``
+deciding; at most :data:`MAX_OBSERVATIONS`) and collected frame-major. A C-order array is decoded in chunks
+of landmark rows of one plane; a Fortran-order one (the bytes of a C-order ``(T, M, 4)`` array) in chunks of
+whole frames. The memory is one chunk plus the observations.
 """
 
 import numpy as np

@@ -1,12 +1,10 @@
 """The course file format: its keys, and the checks of every array but the features.
 
-Keys and shapes: :mod:`visla_edu.data`. :func:`check_course_headers` runs on the ``.npy``
-headers alone (:class:`~visla_edu.data._zip.NpyHeader`), before any data is read, and bounds
-the cost of reading (:data:`MAX_FRAMES`, :data:`MAX_FEATURES_BYTES`); :func:`check_course_arrays`
-then checks the small arrays' values and plausibility (:mod:`visla_edu.data._plausible`,
-:mod:`visla_edu.validation`). Every check raises ``ValueError`` at the first failure, naming
-``path`` and ``key`` (:mod:`visla_edu.data`); an ``NpyHeader`` works where only ``dtype`` and
-``shape`` are read.
+Keys and shapes: :mod:`visla_edu.data`. :func:`check_course_headers` runs on the ``.npy`` headers alone
+(:class:`~visla_edu.data._zip.NpyHeader`, which works wherever only ``dtype`` and ``shape`` are read), before
+any data is read, and bounds the cost of reading (:data:`MAX_FRAMES`, :data:`MAX_FEATURES_BYTES`);
+:func:`check_course_arrays` then checks the small arrays' values and plausibility. Every check raises
+``ValueError`` at the first failure, naming ``path`` and ``key`` (:mod:`visla_edu.data`).
 """
 
 import numpy as np
@@ -197,10 +195,10 @@ def check_increasing(stamps, path, key="time_stamps", index="[0, {}]"):
 def check_extras(arrays, T, M, path):
     """Check the ground-truth keys (all or none) and the text keys, as :func:`~visla_edu.data.save` writes them.
 
-    Ground truth: numeric (``ground_truth_outlier`` boolean), the shapes of
-    :class:`~visla_edu.dataset.GroundTruth` from T and M, finite, rigid poses within the drive's
-    reach (:func:`~._plausible.check_ground_truth_reach`, which needs ``time_stamps``); ``name``
-    and ``label``: one string of at most 10,000 characters. Other keys are ignored.
+    Ground truth: numeric (``ground_truth_outlier`` boolean), the shapes of :class:`~visla_edu.dataset.GroundTruth`
+    from T and M, finite, rigid poses within the drive's reach (:func:`~._plausible.check_ground_truth_reach`,
+    which needs ``time_stamps``); ``name`` and ``label``: one string of at most 10,000 characters. Other keys
+    are ignored.
     """
     _check_extras_layout(arrays, T, M, path)
     for key in GROUND_TRUTH_KEYS:

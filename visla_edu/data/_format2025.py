@@ -10,8 +10,7 @@ Two things the format leaves open are decided from evidence, not assumed:
   gives a rig; under the right one the right camera is the left one moved along the left
   camera's x axis. The loader keeps every reading (``Dataset.extrinsic_readings``) and starts
   from the first rectified one in :data:`READING_ORDER` (a file rectified under none is refused
-  with the reason); :func:`visla_edu.diagnostics.calibrate` then decides with the motion the IMU
-  and the camera see, and ``visla-edu info`` shows the evidence.
+  with the reason); :func:`visla_edu.diagnostics.calibrate` then decides with the motion.
 """
 
 import numpy as np
@@ -40,19 +39,10 @@ _BASELINE_KEY = "extL_T_imu, extR_T_imu (the baseline between them)"
 
 
 def load_course2025(path):
-    """Read, check and convert one 2025+ course file (see the module docstring).
+    """Read, check and convert one existing 2025+ ``.npy`` course file (str or path-like) to a Dataset.
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-        An existing ``.npy`` file.
-
-    Returns
-    -------
-    Dataset
-        ``K`` = ``K_l``, ``K_right`` = ``K_r``, ``b`` from the extrinsics, ``imu_T_cam`` the
-        loader's reading, ``extrinsic_readings`` all four, ``extra`` as listed for a 2025+ file
-        in :class:`~visla_edu.dataset.Dataset` (:data:`NO_FEATURES`: why there are no tracks).
+    ``K`` = ``K_l``, ``K_right`` = ``K_r``, ``b`` from the extrinsics, ``imu_T_cam`` the loader's reading,
+    ``extrinsic_readings`` all four, ``extra`` as listed for a 2025+ file in :class:`~visla_edu.dataset.Dataset`.
     """
     path, contents = read_pickled_dict(path)
     _check_keys(contents, path)

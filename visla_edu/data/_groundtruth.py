@@ -1,19 +1,16 @@
 """Ground truth of real drives: KITTI odometry poses, checked and converted to ``world_T_imu``.
 
-The KITTI odometry benchmark gives, per sequence, ``poses/NN.txt`` (row ``i``: the 3x4 pose
-``P_i`` of the left camera at frame ``i`` in the left camera frame of frame 0, 12 numbers,
-row-major; a 13-column variant puts the time first) and ``sequences/NN/times.txt`` (seconds
-since frame 0, one per row). visla-edu's ``world`` is the IMU frame at frame 0, so with the
-drive's calibration ``imu_T_cam`` (``cam_T_imu = inv(imu_T_cam)``)
+KITTI odometry gives, per sequence, ``poses/NN.txt`` (row ``i``: the 3x4 pose ``P_i`` of the left camera at
+frame ``i`` in the left camera frame of frame 0, 12 numbers, row-major; a 13-column variant puts the time
+first) and ``sequences/NN/times.txt`` (seconds since frame 0, one per row). visla-edu's ``world`` is the IMU
+frame at frame 0, so with the drive's ``imu_T_cam`` (``cam_T_imu = inv(imu_T_cam)``)
 
     world_T_imu[i] = inv(cam_T_imu) @ P_i @ cam_T_imu = imu_T_cam @ P_i @ inv(imu_T_cam).
 
-Row ``i`` is the dataset's frame ``i``. The poses may cover fewer frames than the dataset
-(``0020.npz`` has 1104 frames, its poses 1101) or more: a course file that is the first part
-of a KITTI sequence (``0042.npz``, the first 500 of sequence 01's 1101 frames) uses the first
-rows and says which (:attr:`~visla_edu.dataset.GroundTruth.rows_text`). The times, when given,
-must equal ``time_stamps - time_stamps[0]`` to :data:`TIME_TOLERANCE` on every frame they
-share; they tell a longer sequence that starts with this drive from another drive's poses.
+Row ``i`` is the dataset's frame ``i``. The poses may cover fewer frames than the dataset or more (a course
+file that is the first part of a KITTI sequence, ``0042.npz``: the first rows are used, as
+:attr:`~visla_edu.dataset.GroundTruth.rows_text` says). The times, when given, must equal
+``time_stamps - time_stamps[0]`` to :data:`TIME_TOLERANCE` on every frame they share.
 """
 
 import dataclasses
@@ -45,73 +42,36 @@ MIN_POSES = 3
 
 
 def read_kitti_times(path):
-    """Read a KITTI ``times.txt``: one number per row, seconds since frame 0.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-
-    Returns
-    -------
-    ndarray, shape (n,)
-    """
+    """Read a KITTI ``times.txt`` (str or path-like) as shape (n,): one number per row, seconds since frame 0."""
     table, _ = read_table(path, (1,), "KITTI times: one number per row, seconds since frame 0")
     return table[:, 0]
 
 
 def imu_poses_from_kitti(cam0_T_cam, imu_T_cam):
-    """KITTI left-camera poses to IMU poses: ``world_T_imu[i] = imu_T_cam @ P_i @ inv(imu_T_cam)``.
+    """KITTI left-camera poses to IMU poses: ``world_T_imu[i] = imu_T_cam @ P_i @ inv(imu_T_cam)``, (n, 4, 4).
 
-    ``inv`` is the matrix inverse (a course file's rotation is orthonormal only to about 1e-7):
-    so ``P_0 = I`` maps to ``I`` and :func:`kitti_poses_from_imu` inverts this to rounding.
-
-    Parameters
-    ----------
-    cam0_T_cam : array_like, shape (n, 4, 4)
-        ``P_i``: the left camera at frame ``i`` in the left camera frame of frame 0.
-    imu_T_cam : array_like, shape (4, 4)
-        The left camera in the IMU frame.
-
-    Returns
-    -------
-    ndarray, shape (n, 4, 4)
-        ``world_T_imu``, ``world`` = the IMU frame at frame 0 when ``P_0`` is the identity.
+    ``cam0_T_cam`` (n, 4, 4) holds the ``P_i``; ``world`` is the IMU frame at frame 0 when ``P_0`` is the identity.
+    ``inv`` is the matrix inverse (a course file's rotation is orthonormal only to about 1e-7): so ``P_0 = I`` maps
+    to ``I`` and :func:`kitti_poses_from_imu` inverts this to rounding.
     """
     imu_T_cam = np.asarray(imu_T_cam, dtype=float)
     return imu_T_cam @ np.asarray(cam0_T_cam, dtype=float) @ np.linalg.inv(imu_T_cam)
 
 
 def kitti_poses_from_imu(world_T_imu, imu_T_cam):
-    """IMU poses to KITTI left-camera poses: ``P_i = inv(imu_T_cam) @ world_T_imu[i] @ imu_T_cam``.
+    """IMU poses to KITTI left-camera poses: ``P_i = inv(imu_T_cam) @ world_T_imu[i] @ imu_T_cam``, (n, 4, 4).
 
     The inverse of :func:`imu_poses_from_kitti`; :func:`visla_edu.trajectory.write_kitti` writes it.
-
-    Parameters
-    ----------
-    world_T_imu : array_like, shape (n, 4, 4)
-    imu_T_cam : array_like, shape (4, 4)
-
-    Returns
-    -------
-    ndarray, shape (n, 4, 4)
     """
     imu_T_cam = np.asarray(imu_T_cam, dtype=float)
     return np.linalg.inv(imu_T_cam) @ np.asarray(world_T_imu, dtype=float) @ imu_T_cam
 
 
 def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE, allow_longer=False):
-    """Check ground-truth times against the dataset's ``time_stamps - time_stamps[0]``.
+    """Check ground-truth ``times`` (n,), seconds since frame 0, against the dataset's ``time_stamps - time_stamps[0]``.
 
-    Parameters
-    ----------
-    times : ndarray, shape (n,)
-        Seconds since frame 0, row ``i`` for frame ``i``.
-    time_stamps : ndarray, shape (T,)
-    path : str or os.PathLike
-    tolerance : float
-        Seconds, finite and >= 0.
-    allow_longer : bool
-        Accept ``n > T`` (a sequence longer than the drive) and check the first ``T``.
+    ``tolerance`` in seconds, finite and >= 0; ``allow_longer`` accepts ``n > T`` (a sequence longer than the
+    drive) and checks the first ``T``.
     """
     times = np.asarray(times, dtype=float).ravel()
     time_stamps = np.asarray(time_stamps, dtype=float).ravel()
@@ -154,28 +114,14 @@ def _read_checked_poses(dataset, poses_path, times_path, tolerance):
 def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLERANCE):
     """Read a KITTI odometry ground truth for ``dataset`` as its :class:`~visla_edu.dataset.GroundTruth`.
 
-    Parameters
-    ----------
-    dataset : Dataset
-        Its ``imu_T_cam`` converts the camera poses, its ``time_stamps`` check the times.
-    poses_path : str or os.PathLike
-        KITTI ``poses/NN.txt`` (12 columns, or 13 with the time first), row ``i`` = frame ``i``.
-    times_path : str or os.PathLike, optional
-        KITTI ``times.txt``, one row per pose.
-    tolerance : float
-        Seconds allowed between the times and ``time_stamps - time_stamps[0]``.
+    ``poses_path`` is ``poses/NN.txt`` (12 columns, or 13 with the time first; row ``i`` = frame ``i``),
+    ``times_path`` ``times.txt`` (one row per pose), ``tolerance`` (s) as in :func:`check_times`. The dataset's
+    ``imu_T_cam`` converts the poses, its ``time_stamps`` check the times. The result's ``world_T_imu``
+    (n, 4, 4), ``n <= T``, is ``imu_T_cam @ inv(P_0) @ P_i @ inv(imu_T_cam)`` (``world`` = the IMU at frame 0);
+    ``file_rows`` counts the file's rows.
 
-    Returns
-    -------
-    GroundTruth
-        ``world_T_imu`` (n, 4, 4) of frames ``0 .. n - 1``, ``n <= T`` (``file_rows``: the file's
-        rows), ``world`` = the IMU at frame 0: ``imu_T_cam @ inv(P_0) @ P_i @ inv(imu_T_cam)``.
-
-    Raises
-    ------
-    ValueError
-        Also for fewer than :data:`MIN_POSES` poses, times that are not the dataset's
-        (:func:`check_times`), or a pose out of reach (:func:`~._plausible.check_ground_truth_reach`).
+    ``ValueError`` also for fewer than :data:`MIN_POSES` poses, times that are not the dataset's, or a pose out
+    of reach (:func:`~._plausible.check_ground_truth_reach`).
     """
     if not isinstance(dataset, Dataset):
         raise TypeError(f"load_ground_truth: expected a visla_edu.dataset.Dataset, got {type(dataset).__name__}")
@@ -190,38 +136,17 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
 def attach_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLERANCE):
     """A copy of ``dataset`` whose ``ground_truth`` is read from KITTI files (:func:`load_ground_truth`).
 
-    Replaces any ground truth the dataset had; the arrays are shared with ``dataset``, not copied.
-
-    Parameters
-    ----------
-    dataset : Dataset
-        Not modified.
-    poses_path : str or os.PathLike
-    times_path : str or os.PathLike, optional
-    tolerance : float
-        As in :func:`load_ground_truth`.
-
-    Returns
-    -------
-    Dataset
+    Replaces any ground truth; ``dataset`` is not modified, and its arrays are shared with the copy, not copied.
     """
     truth = load_ground_truth(dataset, poses_path, times_path, tolerance)
     return dataclasses.replace(dataset, ground_truth=truth)
 
 
 def attach_registered_ground_truth(dataset):
-    """``dataset`` with the ground truth the registry names for it, when its files are beside the npz.
+    """``dataset`` with the ground truth :data:`~visla_edu.data.REGISTRY` names for its ``name``, beside ``source``.
 
-    Parameters
-    ----------
-    dataset : Dataset
-        ``name`` picks the :data:`~visla_edu.data.REGISTRY` entry, ``source`` the folder. Not modified.
-
-    Returns
-    -------
-    Dataset
-        ``dataset`` itself if it has ground truth or no ``source``, or the registered poses file
-        is absent (its times file is optional); else a copy (:func:`attach_ground_truth`).
+    ``dataset`` itself (not modified) if it has ground truth or no ``source``, or the registered poses file is
+    absent (its times file is optional); else a copy (:func:`attach_ground_truth`).
     """
     if dataset.ground_truth is not None or not dataset.source:
         return dataset

@@ -32,9 +32,8 @@ def load(name_or_path, data_dir=None):
     Returns
     -------
     Dataset
-        ``source`` is the absolute file path, ``label`` describes known files (recognised by
-        sha256); a registered drive gets its KITTI ground truth when the files are beside it
-        (:func:`~visla_edu.data.attach_registered_ground_truth`).
+        ``source`` is the absolute file path, ``label`` describes known files (recognised by sha256); a registered
+        drive gets its KITTI ground truth beside it (:func:`~visla_edu.data.attach_registered_ground_truth`).
 
     Raises
     ------
@@ -71,21 +70,12 @@ def _load_file(path):
 
 
 def input_files(name_or_path, data_dir=None):
-    """The existing files :func:`load` would read, so that a caller can refuse to write over them first.
+    """The existing files (list of pathlib.Path) :func:`load` would read, so that a caller can refuse to overwrite them.
 
-    Parameters
-    ----------
-    name_or_path : str or os.PathLike
-        As in :func:`load`. A relative path counts both as given and under the data directory;
-        ``"10"`` adds the stand-in's inputs, ``"datasetNN"`` both places of its ``.npy``; a
-        simulated drive or anything else gives no files.
-    data_dir : str or os.PathLike, optional
-
-    Returns
-    -------
-    list of pathlib.Path
-        The candidates that exist, as built (not resolved), then every registered KITTI
-        ground-truth file in the folder of each of them.
+    ``name_or_path`` and ``data_dir`` as in :func:`load`: a relative path counts both as given and under the data
+    directory, ``"10"`` adds the stand-in's inputs, ``"datasetNN"`` both places of its ``.npy``; a simulated drive
+    or anything else gives none. The candidates that exist come as built (not resolved), then every registered
+    KITTI ground-truth file in the folder of each of them.
     """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(name_or_path):
         given = expand_user(name_or_path)

@@ -1,15 +1,12 @@
 """The one reader of ``.npz`` files in visla-edu: course files, and named arrays of any archive.
 
-:func:`load_npz` reads a course file into a :class:`~visla_edu.dataset.Dataset`;
-:func:`read_arrays` reads named arrays of any archive (the dataset-10 stand-in's inputs).
-Both read the zip members themselves (``allow_pickle=False``), so a damaged, truncated or
-foreign file is a ``ValueError`` naming the file, never a zipfile or numpy traceback.
+:func:`load_npz` reads a course file into a :class:`~visla_edu.dataset.Dataset`; :func:`read_arrays` reads
+named arrays of any archive (the dataset-10 stand-in's inputs). Both read the zip members themselves
+(``allow_pickle=False``), so a damaged, truncated or foreign file is a ``ValueError`` naming the file.
 
-Reading goes in passes, each bounded before the next starts: the zip directory and every
-member's ``.npy`` header (:mod:`visla_edu.data._zip`), the dtypes and shapes
-(:func:`~visla_edu.data._format.check_course_headers`), the small arrays' values and
-plausibility, then the features, streamed, and the checks that need the observations
-(:func:`~visla_edu.data._plausible.check_observations`, :func:`~._plausible.check_track_layout`).
+Reading goes in passes, each bounded before the next starts: the zip directory and every member's ``.npy``
+header (:mod:`visla_edu.data._zip`), the dtypes and shapes, the small arrays' values and plausibility, then
+the features, streamed, and the checks that need the observations.
 """
 
 import hashlib

@@ -1,14 +1,12 @@
 """A dict of numpy arrays from a pickled ``.npy`` file, read without running any code from it.
 
-The 2025+ course files are ``np.save(path, dict)``: an ``.npy`` header declaring a 0-d object
-array, then a pickle of it. ``np.load(path, allow_pickle=True)`` would unpickle it with every
-installed class available, so a crafted file could run code (``os.system``) on load. Here the
-header is parsed as numpy's reader does (a Python literal, never evaluated) and
-:class:`ArrayUnpickler` resolves only the globals numpy's own pickles of plain arrays use
-(``numpy.ndarray``, ``numpy.dtype`` and ``numpy(._)core``'s ``_reconstruct``, ``scalar`` and
-``_frombuffer``), each through a wrapper below that checks its arguments. Python's containers
-(dict, list, tuple, str, bytes, numbers, None) need no global; anything else (``os.system``,
-``builtins.eval``, a class's ``__reduce__``...) is refused before it is looked up.
+The 2025+ course files are ``np.save(path, dict)``: an ``.npy`` header declaring a 0-d object array, then a
+pickle of it, which ``np.load(path, allow_pickle=True)`` would unpickle with every installed class available
+(a crafted file could run ``os.system``). Here the header is parsed as numpy's reader does (a Python literal,
+never evaluated) and :class:`ArrayUnpickler` resolves only the globals numpy's own pickles of plain arrays use
+(``numpy.ndarray``, ``numpy.dtype`` and ``numpy(._)core``'s ``_reconstruct``, ``scalar`` and ``_frombuffer``),
+each through a wrapper below that checks its arguments. Python's containers (dict, list, tuple, str, bytes,
+numbers, None) need no global; anything else is refused before it is looked up.
 """
 
 import pickle

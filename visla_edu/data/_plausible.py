@@ -1,8 +1,8 @@
 """Plausible time stamps, velocities and observed pixels of a drive, and why.
 
-The drive's counterpart of the calibration's plausible ranges (:mod:`visla_edu.validation`
-says what *plausible* means and why it is checked): a well-formed file with time stamps in
-nanoseconds, a gap of 1e6 s, velocities in km/h or a 'missing' marker other than -1 is refused.
+The drive's counterpart of the calibration's plausible ranges (:mod:`visla_edu.validation` says what
+*plausible* means): a well-formed file with time stamps in nanoseconds, a gap of 1e6 s, velocities in
+km/h or a 'missing' marker other than -1 is refused.
 
 ========================  ====================  ============================================
 quantity                  plausible             why
@@ -21,10 +21,9 @@ ground-truth position     <= 343 m/s x elapsed  the drive cannot outrun sound ei
                           time + 20 m           slack for the camera-IMU lever arm)
 ========================  ====================  ============================================
 
-Every check raises ``ValueError`` naming the file, the key, the value and the plausible range.
-:func:`dataset_problems` returns the messages for an in-memory Dataset; the filter driver
-refuses a dataset that fails :func:`calibration_problems` (the filter would silently turn it
-into a garbage map) and names the other problems when a run diverges.
+Every check raises ``ValueError`` naming the file, the key, the value and the plausible range;
+:func:`dataset_problems` and :func:`calibration_problems` return the messages for an in-memory Dataset
+(the filter driver refuses a dataset that fails the latter).
 """
 
 import numpy as np
@@ -73,12 +72,11 @@ _TIME_UNITS = ((1e-3, "milliseconds", "/ 1e3"), (1e-6, "microseconds", "/ 1e6"),
 
 
 def check_time_stamps(stamps, path, key="time_stamps", index="[0, {}]"):
-    """Seconds, at a camera's frame rate, without long gaps (``stamps`` (T,), increasing).
+    """Seconds, at a camera's frame rate, without long gaps (``stamps`` (T,), increasing; fewer than 2 pass).
 
-    The median step must lie in :data:`FRAME_STEP_RANGE` (else the message suggests the unit,
-    milliseconds to hours, that would fit); no step may exceed ``max(MAX_GAP_SECONDS,
-    MAX_GAP_STEPS * median)``. Fewer than 2 stamps pass. ``path`` may be a dataset's name;
-    ``key`` and ``index`` as in :func:`~visla_edu.data._format.check_increasing`.
+    The median step must lie in :data:`FRAME_STEP_RANGE` (else the message suggests the unit, milliseconds to
+    hours, that would fit); no step may exceed ``max(MAX_GAP_SECONDS, MAX_GAP_STEPS * median)``. ``path`` may
+    be a dataset's name; ``key`` and ``index`` as in :func:`~visla_edu.data._format.check_increasing`.
     """
     if len(stamps) < 2:
         return
@@ -121,9 +119,8 @@ def check_velocities(linear, angular, keys, path):
 def check_ground_truth_reach(world_T_imu, time_stamps, what, path):
     """Each ground-truth position within ``MAX_SPEED * (t_i - t_0) + MAX_EXTRINSIC_TRANSLATION`` of the first.
 
-    ``world_T_imu`` (n, 4, 4), finite; ``time_stamps`` (T,) in s, ``T >= n``; ``what`` names the
-    poses' key or file. Refuses poses in another unit (the message says when millimetres would fit)
-    or overflowing ones (1e200 m), which would give an ATE of inf or nonsense after the whole run.
+    ``world_T_imu`` (n, 4, 4), finite; ``time_stamps`` (T,) in s, ``T >= n``; ``what`` names the poses' key or
+    file. Refuses poses in another unit (the message says when millimetres would fit) or overflowing ones.
     """
     positions = np.asarray(world_T_imu, dtype=float)[:, :3, 3]
     distance = magnitude(positions - positions[:1])
@@ -207,10 +204,9 @@ def _check_disparity_sign(obs_z, path):
 def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
     """When M = T, refuse features whose landmark and frame axes are swapped, if the tracks say so.
 
-    A tracker follows each landmark over one contiguous run of frames; swapped, every "frame" (a
-    landmark) sees one contiguous run of ids while the "landmarks" (frames) have gaps. The file is
-    refused when every frame's ids are contiguous and more than half of the landmarks seen at
-    least twice have gaps (tracks with gaps alone are allowed). ``obs_ids`` (N,) is frame-major.
+    A tracker follows a landmark over contiguous frames, so swapped, every "frame" sees one contiguous run of
+    ids. Refused when every frame's ids are contiguous and more than half of the landmarks seen at least twice
+    have gaps (gaps alone are allowed). ``obs_ids`` (N,) is frame-major.
     """
     T = len(frame_ptr) - 1
     if num_landmarks != T or len(obs_ids) == 0:
@@ -238,16 +234,7 @@ def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
 
 
 def calibration_problems(dataset):
-    """Messages of the calibration checks (:func:`~visla_edu.validation.check_plausible_calibration`) a Dataset fails.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-
-    Returns
-    -------
-    list of str
-    """
+    """Messages (list of str) of the failed :func:`~visla_edu.validation.check_plausible_calibration` (K, K_right)."""
     checks = [lambda: check_plausible_calibration(np.asarray(dataset.K, dtype=float), float(dataset.b), dataset.name,
                                                   np.asarray(dataset.imu_T_cam, dtype=float))]
     if dataset.K_right is not None:
@@ -257,16 +244,7 @@ def calibration_problems(dataset):
 
 
 def dataset_problems(dataset):
-    """Messages of the plausibility checks (calibration, time stamps, velocities, pixels) a Dataset fails.
-
-    Parameters
-    ----------
-    dataset : visla_edu.dataset.Dataset
-
-    Returns
-    -------
-    list of str
-    """
+    """Messages (list of str) of the checks (calibration, time stamps, velocities, pixels) a Dataset fails."""
     name = dataset.name
     return calibration_problems(dataset) + _problems([
         lambda: check_time_stamps(np.asarray(dataset.time_stamps, dtype=float), name),

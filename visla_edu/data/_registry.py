@@ -87,10 +87,7 @@ COURSE2025_NAME = re.compile(r"^dataset\d+$")
 
 
 def resolve_dir(path=None):
-    """``(directory, how)``: the data directory of :func:`data_dir` and where it came from, for messages.
-
-    ``how`` is e.g. ``"VISLA_EDU_DATA=/data"``.
-    """
+    """``(directory, how)``: :func:`data_dir`'s folder and where it came from (``"VISLA_EDU_DATA=/data"``)."""
     if path is not None:
         return expand_user(path).resolve(), "the data_dir argument"
     env = os.environ.get(ENV_VAR, "").strip()
@@ -102,31 +99,17 @@ def resolve_dir(path=None):
 def data_dir(path=None):
     """The folder with the course files, absolute and not checked to exist.
 
-    Parameters
-    ----------
-    path : str or os.PathLike, optional
-        This folder; else ``VISLA_EDU_DATA`` if set and not empty, else ``./data`` under the
-        current working directory.
-
-    Returns
-    -------
-    pathlib.Path
+    ``path`` if given, else ``VISLA_EDU_DATA`` if set and not empty, else ``./data`` under the current working
+    directory.
     """
     return resolve_dir(path)[0]
 
 
 def available(data_dir=None):
-    """Names :func:`~visla_edu.data.load` can answer now, for menus in the CLI and widgets.
+    """Names (list of str) :func:`~visla_edu.data.load` can answer now, for menus in the CLI and widgets.
 
-    Parameters
-    ----------
-    data_dir : str or os.PathLike, optional
-
-    Returns
-    -------
-    list of str
-        Course names whose files exist (``"10"`` also with only the stand-in inputs), the 2025+
-        ``datasetNN`` found (either place of :func:`course2025_files`), then ``"sim"``.
+    Course names whose files exist (``"10"`` also with only the stand-in inputs), the 2025+ ``datasetNN``
+    found (either place of :func:`course2025_files`), then ``"sim"``.
     """
     directory, _ = resolve_dir(data_dir)
     names = []
@@ -177,20 +160,10 @@ def identify(path, sha, stored_name=None, stored_label=None):
 
 
 def ground_truth_files(name, directory):
-    """The KITTI ground-truth files the registry names for drive ``name``, if present in ``directory``.
+    """``(poses, times)`` paths the registry names for drive ``name``, if its poses file is in ``directory``.
 
-    Parameters
-    ----------
-    name : str
-        A :data:`REGISTRY` name.
-    directory : pathlib.Path
-        The folder of the drive's ``.npz``.
-
-    Returns
-    -------
-    (pathlib.Path, pathlib.Path or None) or None
-        The poses and the times file (None when absent: the times are then not checked), or
-        None when the drive has no registered ground truth or its poses file is absent.
+    ``times`` is None when absent (the times are then not checked); the result is None when the drive has no
+    registered ground truth or its poses file is absent.
     """
     files = REGISTRY.get(name, {}).get("ground_truth")
     if files is None or not (directory / files["poses"]).is_file():

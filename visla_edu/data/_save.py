@@ -11,23 +11,12 @@ __all__ = ["save"]
 
 
 def save(dataset, path):
-    """Write a dataset as a 2021+ course file (plus ground truth and its name and label).
+    """Write a dataset as a 2021+ course file ``path`` (``.npz`` appended if missing); return the absolute path.
 
-    A simulated drive's ground truth is written with it, a real drive's KITTI poses are not (load
-    them again from their files). A 2025+ drive keeps its one reading of the extrinsics
-    (``imu_T_cam``); one with two intrinsics is refused (``ValueError``: the format has one ``K``).
-
-    Parameters
-    ----------
-    dataset : Dataset
-    path : str or os.PathLike
-        ``.npz`` is appended if missing. Written atomically (:func:`visla_edu._files.atomic_write`);
-        the dense features ``(4, M, T)`` are built in memory.
-
-    Returns
-    -------
-    pathlib.Path
-        The absolute path; :func:`~visla_edu.data.load` on it gives back identical arrays.
+    A simulated drive's ground truth, name and label are written with it, a real drive's KITTI poses are not;
+    a 2025+ drive keeps its one reading of the extrinsics (``imu_T_cam``), and one with two intrinsics is refused
+    (``ValueError``: the format has one ``K``). Written atomically, the dense features ``(4, M, T)`` built in memory;
+    :func:`~visla_edu.data.load` on the file gives back identical arrays.
     """
     if not same_intrinsics(dataset.K, dataset.K_right):
         raise ValueError(f"save: {dataset.name} has two intrinsics (K_l != K_r), but the 2021+ format holds one K; "

@@ -1,7 +1,7 @@
 """Write a Dataset as a 2025+ course file, the extrinsics in a chosen reading.
 
-The inverse of :func:`~visla_edu.data._format2025.load_course2025` for the drives we simulate:
-it lets the tests exercise every direction and frame the format may use.
+The inverse of :func:`~visla_edu.data._format2025.load_course2025` for the drives we simulate (the tests
+exercise every direction and frame the format may use).
 """
 
 import numpy as np
@@ -17,16 +17,14 @@ VELOCITY_LAYOUTS = ("T x 3", "3 x T")
 
 def save_course2025(dataset, path, direction=DIRECTIONS[0], frame=FRAMES[1], velocity_layout=VELOCITY_LAYOUTS[0],
                     features=True):
-    """Write ``dataset`` as a 2025+ course file (``np.save`` of the dict of :mod:`visla_edu.data`).
+    """Write ``dataset`` as a 2025+ course file (``np.save`` of the dict of :mod:`visla_edu.data`); return the path.
 
-    The right camera is the left one (``imu_T_cam``) moved by ``b`` along its x axis; both
-    extrinsics are written in the reading ``(direction, frame)`` (:func:`visla_edu.camera.write_extrinsic`).
+    The right camera is the left one (``imu_T_cam``) moved by ``b`` along its x axis; both extrinsics are written
+    in the reading ``(direction, frame)`` (:func:`visla_edu.camera.write_extrinsic`). ``path`` gets ``.npy``
+    appended if missing and is written atomically; the path returned is absolute.
 
     Parameters
     ----------
-    dataset : visla_edu.dataset.Dataset
-    path : str or os.PathLike
-        ``.npy`` is appended if missing. Written atomically.
     direction : {"camera->IMU", "IMU->camera"}
         ``imu_T_cam`` as stored, or its inverse.
     frame : {"regular", "optical"}
@@ -34,11 +32,6 @@ def save_course2025(dataset, path, direction=DIRECTIONS[0], frame=FRAMES[1], vel
     velocity_layout : {"T x 3", "3 x T"}
     features : bool
         False writes ``features = None`` (a dataset shipped with images).
-
-    Returns
-    -------
-    pathlib.Path
-        The absolute path written.
     """
     reading_name(direction, frame)  # checks both
     if velocity_layout not in VELOCITY_LAYOUTS:

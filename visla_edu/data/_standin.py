@@ -51,27 +51,12 @@ def course_standin10(data_dir=None, seed=0, **overrides):
     """The dataset-10 stand-in as ``load("10")`` builds it (seed 0), with its seed and simulation changed.
 
     E.g. 5% gross outlier tracks and dataset 3's IMU lag: ``course_standin10(outlier_share=0.05, imu_lag=1)``.
-    Dataset 3's ``imu_T_cam`` disagrees with its IMU (:func:`visla_edu.diagnostics.check_extrinsics`)
-    and the real ``10.npz`` has the same one, so the tracks are simulated with the corrected
-    extrinsic (the physical rig) and the dataset reports the file's, as the real ``10.npz`` would.
+    Dataset 3's ``imu_T_cam`` disagrees with its IMU (:func:`visla_edu.diagnostics.check_extrinsics`) and the
+    real ``10.npz`` has the same one, so the tracks are simulated with the corrected extrinsic (the physical rig,
+    ``extra["simulated_imu_T_cam"]``) and the dataset reports the file's, as the real ``10.npz`` would.
 
-    Parameters
-    ----------
-    data_dir : str or os.PathLike, optional
-        The folder with the stand-in inputs (:func:`visla_edu.data.data_dir`).
-    seed : int
-    **overrides
-        As in :func:`standin_dataset10`, but not ``imu_T_cam``.
-
-    Returns
-    -------
-    Dataset
-        As :func:`standin_dataset10`; ``extra["simulated_imu_T_cam"]`` is the simulated extrinsic.
-
-    Raises
-    ------
-    ValueError
-        Also for an override that is unknown or out of range.
+    ``data_dir`` is the folder with the stand-in inputs (:func:`visla_edu.data.data_dir`); ``**overrides`` as in
+    :func:`standin_dataset10` but not ``imu_T_cam`` (``ValueError`` also for one unknown or out of range).
     """
     from visla_edu import diagnostics  # lazy: only the stand-in needs it
 
@@ -101,33 +86,18 @@ PHYSICAL_RIG_NOTE = ("tracks simulated with 03's corrected imu_T_cam (the physic
 def standin_dataset10(imu_only_path, calibration_path, seed=0, imu_T_cam=None, extrinsic_note=None, **overrides):
     """The STAND-IN for course dataset 10: its real IMU drive with simulated stereo tracks.
 
-    The velocities of ``10_imu_only.npz`` define the true drive; landmarks along it are tracked as
-    in :func:`visla_edu.simulate.simulate_drive`, and the measured IMU is the real velocities plus
-    the simulation noise. The real gyro's biases (about 0.01 rad/s) would make the "true" car climb
-    over a kilometre and roll over, so the true angular velocity is the real one minus its mean
-    roll and pitch rates (a car ends about as level as it started), which the measurement keeps as
-    a constant gyro bias (``config.gyro_bias``, ``extra["level_gyro_bias"]``).
+    The velocities of ``10_imu_only.npz`` define the true drive; landmarks along it are tracked as in
+    :func:`visla_edu.simulate.simulate_drive`, and the measured IMU is the real velocities plus the simulation
+    noise. The real gyro's biases would make the "true" car climb and roll over, so the true angular velocity
+    is the real one minus its mean roll and pitch rates, which the measurement keeps as a constant gyro bias
+    (``config.gyro_bias``, ``extra["level_gyro_bias"]``).
 
-    Parameters
-    ----------
-    imu_only_path : str or Path
-        ``time_stamps`` (1, T) or (T,), ``linear_velocity`` and ``angular_velocity`` (3, T).
-    calibration_path : str or Path
-        A 2021+ course file of the same rig (``03.npz``): ``K``, ``b``, ``imu_T_cam``.
-    seed : int
-    imu_T_cam : array_like, shape (4, 4), optional
-        Instead of the file's (e.g. a corrected one).
-    extrinsic_note : str, optional
-        What the source line says of ``imu_T_cam`` (default: "imu_T_cam given by the caller").
-    **overrides
-        :class:`~visla_edu.simulate.SimulationConfig` fields (``K``, ``b`` too; ``num_landmarks``
-        defaults to :data:`STANDIN_NUM_LANDMARKS`); the file decides the motion and ``num_frames``.
-
-    Returns
-    -------
-    Dataset
-        Named ``"10-standin"``, labelled :data:`STANDIN_LABEL`, the file's time stamps, with
-        ``ground_truth``.
+    ``imu_only_path`` holds ``time_stamps`` (1, T) or (T,), ``linear_velocity`` and ``angular_velocity`` (3, T);
+    ``calibration_path`` is a 2021+ course file of the same rig (``03.npz``: ``K``, ``b``, ``imu_T_cam``);
+    ``imu_T_cam`` (4, 4) replaces the file's, ``extrinsic_note`` then saying what it is in the source line;
+    ``**overrides`` are :class:`~visla_edu.simulate.SimulationConfig` fields (``K``, ``b`` too; ``num_landmarks``
+    defaults to :data:`STANDIN_NUM_LANDMARKS`); the file decides the motion and ``num_frames``. The Dataset is
+    named ``"10-standin"``, labelled :data:`STANDIN_LABEL`, with the file's time stamps and ``ground_truth``.
     """
     from visla_edu import simulate  # lazy: loading course files needs no simulation (nor scipy.ndimage)
 

@@ -21,30 +21,14 @@ def _stats(values):
 
 
 def summarize(dataset):
-    """Facts about a dataset a student should know before running a filter on it.
+    """Facts (a dict) about a dataset a student should know before running a filter on it.
 
-    Parameters
-    ----------
-    dataset : Dataset
-
-    Returns
-    -------
-    dict
-        Keys: ``name, label, source, frames, duration_s, time_step_s`` (mean/min/max),
-        ``landmarks, landmarks_never_observed, observations, observations_per_frame``
-        (min/median/max), ``frames_without_observations, track_length_frames``
-        (min/median/max over observed landmarks), ``landmarks_seen_once,
-        nonpositive_disparity, nonpositive_disparity_share, tiny_disparity,
-        tiny_disparity_depth_m, repeated_frames, tracks_contiguous,
-        noncontiguous_landmarks, speed_m_s`` (mean/min/max), ``distance_m, ground_truth``
-        (bool), ``ground_truth_frames`` (frames its poses cover, or None),
-        ``ground_truth_simulated`` (bool), ``ground_truth_source`` (file, or ``""``),
-        ``ground_truth_rows`` (:attr:`~visla_edu.dataset.GroundTruth.rows_text`, ``""`` when the
-        file's rows are all used), ``K``, ``K_right`` (nested lists; None for one intrinsics),
-        ``baseline_m``, ``extrinsic_readings`` (for a 2025+ file: name -> ``{"offset",
-        "rotation_deg", "problem"}`` of each reading of its extrinsics, else None),
-        ``extrinsic_reading`` (the loader's reading, or None), ``no_features`` (why a file has no
-        feature tracks, or ``""``), ``ignored_keys`` (keys of a 2025+ file visla-edu does not read).
+    Its keys are built below, units in their names; ``time_step_s`` and ``speed_m_s`` are ``{"mean", "min",
+    "max"}``, ``observations_per_frame`` and ``track_length_frames`` (over observed landmarks) ``{"min",
+    "median", "max"}``. ``ground_truth_frames``: frames its poses cover, or None; ``ground_truth_rows``:
+    :attr:`~visla_edu.dataset.GroundTruth.rows_text`; ``K``, ``K_right``: nested lists (``K_right`` None for
+    one intrinsics); ``extrinsic_readings``: for a 2025+ file, name -> ``{"offset", "rotation_deg", "problem"}``
+    of each reading of its extrinsics, else None; ``no_features``: why a file has no feature tracks, or ``""``.
     """
     ds = dataset
     steps = ds.time_steps
@@ -121,16 +105,7 @@ def _shorten(text, limit=160):
 
 
 def format_summary(dataset):
-    """The readable text of :func:`summarize` (what ``visla-edu info DATASET`` prints).
-
-    Parameters
-    ----------
-    dataset : Dataset
-
-    Returns
-    -------
-    str
-    """
+    """The readable text (str) of :func:`summarize`, what ``visla-edu info DATASET`` prints."""
     s = summarize(dataset)
     lines = [f"{s['name']}: {s['label']}" if s["label"] else s["name"], f"  source        {_shorten(s['source'])}"]
     lines += _rig_lines(s) + _time_lines(s) + _observation_lines(s) + _track_lines(s) + _disparity_lines(s)

@@ -1,9 +1,8 @@
 """The archive layer of the ``.npz`` reader: zip members and ``.npy`` headers, read before any data.
 
-:func:`member_infos` lists the members and :func:`read_header` reads each ``.npy`` header (a few
-hundred bytes) and checks the size it declares against the zip directory's uncompressed size. So
-a header that declares a 7 TiB array, or a member whose entry inflates to 1 GB, is refused from
-the headers alone; the caller bounds the declared shapes
+:func:`member_infos` lists the members and :func:`read_header` reads each ``.npy`` header and checks the size
+it declares against the zip directory's uncompressed size, so a header that declares a huge array, or a member
+whose entry inflates far beyond it, is refused from the headers alone; the caller bounds the declared shapes
 (:func:`visla_edu.data._format.check_course_headers`) before reading.
 """
 
@@ -33,13 +32,7 @@ _ENCRYPTED = 0x1
 class NpyHeader:
     """What an ``.npy`` member declares, read from its header without its data.
 
-    Attributes
-    ----------
-    shape : tuple of int
-    dtype : numpy.dtype
-    fortran_order : bool
-    data_offset : int
-        Bytes of magic and header before the data.
+    ``data_offset`` is the bytes of magic and header before the data.
     """
 
     shape: tuple
