@@ -96,24 +96,19 @@ def fmt(x):
     return f"an array of shape {arr.shape}"
 
 
-def _split_first_line(text):
-    """``(first, rest)`` with ``first`` at most MAX_FIRST_LINE characters (wrapped at a space)."""
-    first, _, rest = text.partition("\n")
+def wrap_message(text, details=()):
+    """``text``, then the lines of ``details`` (empty ones skipped): the first line at most 79 characters (cut at
+    a space), every later line wrapped at 79 (unchanged if already so)."""
     limit = _hiding.MAX_FIRST_LINE
+    first, _, rest = text.partition("\n")
     if len(first) > limit:
         cut = first.rfind(" ", 0, limit + 1)
         cut = cut if cut > limit // 2 else limit
         first, rest = first[:cut].rstrip(), (first[cut:].strip() + ("\n" + rest if rest else ""))
-    return first, rest
-
-
-def wrap_message(text):
-    """``text`` with its first line at most 79 characters, every later line wrapped at 79 (unchanged if already so)."""
-    first, rest = _split_first_line(text)
     lines = [first]
-    for line in rest.split("\n") if rest else ():
-        short = len(line) <= _hiding.MAX_FIRST_LINE
-        lines.extend([line] if short else textwrap.wrap(line, _hiding.MAX_FIRST_LINE, break_on_hyphens=False))
+    for part in (rest, *details):
+        for line in part.split("\n") if part else ():
+            lines.extend([line] if len(line) <= limit else textwrap.wrap(line, limit, break_on_hyphens=False))
     return "\n".join(lines)
 
 
@@ -123,13 +118,7 @@ def fail(name, hint, *details):
     ``name``: the student's function ("" if ``hint`` names it); ``hint``: the mistake in a few words, then
     the explanation; ``details``: further lines (empty ones skipped). Wrapped as by :func:`wrap_message`.
     """
-    first, rest = _split_first_line(f"{name}: {hint}" if name else hint)
-    lines = [first]
-    for text in (rest, *details):
-        for line in text.split("\n") if text else ():
-            short = len(line) <= _hiding.MAX_FIRST_LINE
-            lines.extend([line] if short else textwrap.wrap(line, _hiding.MAX_FIRST_LINE, break_on_hyphens=False))
-    return AssertionError("\n".join(lines))
+    return AssertionError(wrap_message(f"{name}: {hint}" if name else hint, details))
 
 
 def _materialize(out, name):

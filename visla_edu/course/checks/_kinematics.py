@@ -49,18 +49,11 @@ def check_hat(hat, hidden=False):
     ok(f"{name}: skew-symmetric and hat(w) @ x == cross(w, x)", hidden)
 
 
-def _rodrigues_unnormalised(w):
-    """A mistake: Rodrigues with the unit axis replaced by the rotation vector itself."""
+def _rodrigues_with(w, normalised=True, sign=1.0):
+    """Rodrigues' ``I + sin(t) W + sign (1 - cos t) W^2``, ``W = hat(w / t)`` (a mistake: not ``normalised``)."""
     t = np.linalg.norm(w)
-    W = lie.hat(w)
-    return np.eye(3) + np.sin(t) * W + (1 - np.cos(t)) * W @ W
-
-
-def _rodrigues_minus(w):
-    """A mistake: the second-order term subtracted."""
-    t = np.linalg.norm(w)
-    W = lie.hat(w) / t
-    return np.eye(3) + np.sin(t) * W - (1 - np.cos(t)) * W @ W
+    W = lie.hat(w) / t if normalised else lie.hat(w)
+    return np.eye(3) + np.sin(t) * W + sign * (1 - np.cos(t)) * W @ W
 
 
 def _tiny_rotation_vectors(generator, hidden):
@@ -116,18 +109,14 @@ def check_so3_exp(so3_exp, hidden=False):
         compare(name, got, ref, f"for w = {fmt(w)} (angle {np.linalg.norm(w):.3g} rad)", [
             ("you returned R^T (the rotation by -w)\ncheck the sign of the hat(w) term", lambda: ref.T),
             ("the axis is not normalised\nRodrigues uses hat(w / theta), i.e. "
-             "I + sin(t)/t hat(w) + (1 - cos t)/t^2 hat(w)^2", lambda: _rodrigues_unnormalised(w)),
+             "I + sin(t)/t hat(w) + (1 - cos t)/t^2 hat(w)^2", lambda: _rodrigues_with(w, normalised=False)),
             ("the hat(w)^2 term has the wrong sign\nit is + (1 - cos t)/t^2 hat(w)^2",
-             lambda: _rodrigues_minus(w)),
+             lambda: _rodrigues_with(w, sign=-1.0)),
         ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_rotation)
     for w in _tiny_rotation_vectors(generator, hidden):
         compare(name, as_array(call(w), name, (3, 3)), lie.so3_exp(w),
                 f"for w = {fmt(w)} (angle {np.linalg.norm(w):.0e} rad)", atol=1e-15, nan_hint=NEAR_ZERO_HINT)
     ok(f"{name}: Rodrigues agrees with the library from 0 to pi, to full precision at 1e-7 rad", hidden)
-
-
-def _se3_no_jacobian(u):
-    return _se3_with_translation(u, u[:3])
 
 
 def _se3_with_translation(u, translation):
@@ -143,13 +132,6 @@ def _swapped_v(w):
     a, b = ((1 - np.cos(t)) / t**2, (t - np.sin(t)) / t**3) if t > 1e-3 else (0.5 - t**2 / 24, 1 / 6 - t**2 / 120)
     W = lie.hat(w)
     return np.eye(3) + b * W + a * W @ W
-
-
-def _se3_jacobian_transposed(u):
-    """The translation ``J_l^T v`` (the sign of J_l's hat(w) term flipped): ``J_l(w)^T = J_l(-w)``."""
-    T = lie.se3_exp(u)
-    T[:3, 3] = lie.se3_exp(np.concatenate([u[:3], -u[3:]]))[:3, 3]
-    return T
 
 
 def _check_tiny_twist(name, T, u):
@@ -187,13 +169,14 @@ def check_se3_exp(se3_exp, hidden=False):
              lambda: lie.se3_exp(swap_twist(u))),
             ("you returned the inverse pose exp(-u^)\ncheck the signs", lambda: lie.se3_exp(-u)),
             ("the translation is v, but it must be J_l v\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
-             "(t - sin t)/t^3 hat(w)^2 (the left Jacobian of SO(3))", lambda: _se3_no_jacobian(u)),
+             "(t - sin t)/t^3 hat(w)^2 (the left Jacobian of SO(3))", lambda: _se3_with_translation(u, u[:3])),
             ("the translation is R v, but it must be J_l v\nJ_l = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, ref[:3, :3] @ u[:3])),
             ("J_l's two coefficients are swapped\nJ_l = I + (1 - cos t)/t^2 hat(w) + (t - sin t)/t^3 hat(w)^2",
              lambda: _se3_with_translation(u, _swapped_v(u[3:]) @ u[:3])),
             ("J_l's hat(w) term has the wrong sign (you used J_l^T)\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
-             "(t - sin t)/t^3 hat(w)^2, with a plus before the hat(w) term", lambda: _se3_jacobian_transposed(u)),
+             "(t - sin t)/t^3 hat(w)^2, with a plus before the hat(w) term",  # J_l(w)^T v = J_l(-w) v
+             lambda: _se3_with_translation(u, lie.se3_exp(np.concatenate([u[:3], -u[3:]]))[:3, 3])),
             ("the rotation block is transposed (R^T instead of R)",
              lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
         ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_se3)
@@ -203,27 +186,12 @@ def check_se3_exp(se3_exp, hidden=False):
     ok(f"{name}: agrees with the library for twists [v; w] from rest to angles near pi", hidden)
 
 
-def _dead_reckon_left(time_stamps, twist_samples, lag):
-    steps = motion.select_twists(twist_samples, lag)
+def _dead_reckon_with(taus, steps, left=False):
+    """A mistake's poses from the identity: ``T_{t+1} = T_t exp(tau_t u_t^)`` (``left``: ``exp(tau_t u_t^) T_t``)."""
     poses = [np.eye(4)]
-    for t, tau in enumerate(np.diff(time_stamps)):
-        poses.append(lie.se3_exp(tau * steps[t]) @ poses[-1])
-    return np.array(poses)
-
-
-def _dead_reckon_no_tau(time_stamps, twist_samples, lag):
-    poses = [np.eye(4)]
-    for step in motion.select_twists(twist_samples, lag):
-        poses.append(poses[-1] @ lie.se3_exp(step))
-    return np.array(poses)
-
-
-def _dead_reckon_wrapped(time_stamps, twist_samples, lag):
-    """The mistake ``twists[(t + lag) % T]``: past an end the index wraps around instead of stopping."""
-    idx = (np.arange(len(time_stamps) - 1) + lag) % len(twist_samples)
-    poses = [np.eye(4)]
-    for tau, u in zip(np.diff(time_stamps), twist_samples[idx]):
-        poses.append(poses[-1] @ lie.se3_exp(tau * u))
+    for tau, u in zip(taus, steps):
+        step = lie.se3_exp(tau * u)
+        poses.append(step @ poses[-1] if left else poses[-1] @ step)
     return np.array(poses)
 
 
@@ -238,11 +206,11 @@ def _drive(generator, T, hidden):
 
 
 def _dead_reckon_variants(time_stamps, samples, lag, ref):
-    T = len(time_stamps)
+    T, taus, used = len(time_stamps), np.diff(time_stamps), motion.select_twists(samples, lag)
     return [
         ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
          "T_{t+1} = T_t exp(tau_t u_{t+lag}^) (multiply on the right)",
-         lambda: _dead_reckon_left(time_stamps, samples, lag)),
+         lambda: _dead_reckon_with(taus, used, left=True)),
         ("wrong twist order: u = [v; w] (linear first)",
          lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]], lag=lag)),
         (f"the lag was ignored: with lag {lag:+d} the step t -> t+1 uses u_(t{lag:+d})\n"
@@ -252,9 +220,9 @@ def _dead_reckon_variants(time_stamps, samples, lag, ref):
          "of the interval, u_(t+1)", lambda: motion.dead_reckon(time_stamps, samples, lag=-lag)),
         ("past an end the index wraps around: clip it\nt + lag must stay in 0 .. T-1 (the first or last sample "
          "is used again), as np.clip does; a negative index counts from the end in numpy",
-         lambda: _dead_reckon_wrapped(time_stamps, samples, lag)),
+         lambda: _dead_reckon_with(taus, samples[(np.arange(T - 1) + lag) % T])),  # twists[(t + lag) % T]
         ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u^)",
-         lambda: _dead_reckon_no_tau(time_stamps, samples, lag)),
+         lambda: _dead_reckon_with(np.ones(T - 1), used)),
         ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
          lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples,
                                     lag=lag)),
@@ -294,19 +262,11 @@ def check_dead_reckon(dead_reckon, hidden=False):
 # --------------------------------------------------------------------------- the logarithm
 
 
-def _log_arccos(R):
-    """The mistake: the angle from arccos((tr R - 1)/2), the axis from the antisymmetric part."""
-    s = 0.5 * lie.vee(R - R.T)
-    theta = np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))
-    norm = np.linalg.norm(s)
-    return np.zeros(3) if norm == 0 else theta / norm * s
-
-
-def _log_arcsin(R):
-    """The mistake: the angle from arcsin(|s|), which cannot exceed pi/2."""
+def _log_with_angle(R, angle):
+    """A mistake's log: the axis from ``s = vee(R - R^T) / 2``, the angle ``angle(|s|)`` (zeros if ``s = 0``)."""
     s = 0.5 * lie.vee(R - R.T)
     norm = np.linalg.norm(s)
-    return np.zeros(3) if norm == 0 else np.arcsin(min(norm, 1.0)) / norm * s
+    return np.zeros(3) if norm == 0 else angle(norm) / norm * s
 
 
 def _log_cases(generator, hidden):
@@ -323,9 +283,9 @@ def _log_variants(R, ref):
     return [
         ("the angle from arccos loses its digits near 0: use atan2\nat a small angle (tr R - 1)/2 = cos t is "
          "about 1 - t^2/2 and rounds away t: take t = atan2(|s|, (tr R - 1)/2) with s = vee(R - R^T)/2",
-         lambda: _log_arccos(R)),
+         lambda: _log_with_angle(R, lambda _: np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))),
         ("arcsin gives angles up to pi/2 only: use atan2\nt = atan2(|s|, (tr R - 1)/2) with s = vee(R - R^T)/2 "
-         "covers 0 to pi", lambda: _log_arcsin(R)),
+         "covers 0 to pi", lambda: _log_with_angle(R, lambda norm: np.arcsin(min(norm, 1.0)))),
         ("you returned -w: the log of R^T\nthe axis is vee(R - R^T) / 2 = sin(t) a, not vee(R^T - R)",
          lambda: -ref),
         ("twice the rotation vector: s = vee(R - R^T) / 2\nvee(R - R^T) is 2 sin(t) a", lambda: 2 * ref),
