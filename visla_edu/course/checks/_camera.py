@@ -7,7 +7,8 @@ from visla_edu import ekf, lie
 from visla_edu.course import capstone
 from visla_edu.course.checks._core import as_array, compare, exercise_check, fmt, ok, rng, student
 from visla_edu.course.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, project_with,
-                                      random_pose, rig, rotation_transposed, stereo_camera, wrong_inverses)
+                                      random_pose, rig, rotation_transposed, stereo_camera,
+                                      transposed_rotation_variants)
 
 __all__ = ["check_stereo_matrix", "check_project", "check_triangulate", "check_init_landmark"]
 
@@ -52,8 +53,6 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
     """The deliberate mistakes of ``project``: (hint, callable) pairs."""
     imu_T_world = lie.se3_inv(world_T_imu)
     p_h = np.c_[p_world, np.ones(len(p_world))]
-    transposed = [lambda W=W: project_with(Ks, cam_T_imu, W, p_world) for W in wrong_inverses(world_T_imu)]
-    transposed.append(lambda: project_with(Ks, rotation_transposed(cam_T_imu), imu_T_world, p_world))
     return [
         ("you used world_T_imu where its inverse is needed\nthe point in the IMU frame is "
          "inv(world_T_imu) @ m", lambda: project_with(Ks, cam_T_imu, world_T_imu, p_world)),
@@ -61,7 +60,7 @@ def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
          lambda: project_with(Ks, imu_T_cam, imu_T_world, p_world)),
         ("divide by the depth q3 (the third coordinate), not q4",
          lambda: (p_h @ (cam_T_imu @ imu_T_world).T) @ Ks.T),
-    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+    ] + transposed_rotation_variants(lambda C, W: project_with(Ks, C, W, p_world), cam_T_imu, world_T_imu)
 
 
 @exercise_check

@@ -7,9 +7,8 @@ from visla_edu import camera as cam
 from visla_edu import ekf, lie
 from visla_edu.course import capstone, kalman
 from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, ok, rng, student
-from visla_edu.course.checks._inputs import (TRANSPOSED_R_HINT, not_se3, notebook_rig_variant, points_in_view,
-                                      random_covariance, random_pose, rotation_transposed, stereo_camera,
-                                      wrong_inverses)
+from visla_edu.course.checks._inputs import (not_se3, notebook_rig_variant, points_in_view, random_covariance,
+                                      random_pose, stereo_camera, swap_twist, transposed_rotation_variants)
 
 __all__ = [
     "check_landmark_update",
@@ -46,17 +45,14 @@ _SQUARED_NOISE_HINT = ("noise_var is a variance: S gets noise_var I, not noise_v
 def _landmark_mean_variants(m, Sigma, z, T, camera, noise_var):
     flipped_z = 2 * camera.predict(T, m[None])[0] - z
     Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
-    transposed = [lambda W=W: _landmark_update_with(m, Sigma, z, W, Ks, cam_T_imu, noise_var)[0]
-                  for W in wrong_inverses(T)]
-    transposed.append(lambda: _landmark_update_with(m, Sigma, z, lie.se3_inv(T), Ks,
-                                                    rotation_transposed(cam_T_imu), noise_var)[0])
     return [
         ("the innovation must be z - z_pred (observed minus predicted)",
          lambda: _landmark_update_reference(m, Sigma, flipped_z, T, camera, noise_var)[0]),
         ("the mean did not move: add K (z - z_pred)", lambda: m),
         (_SQUARED_NOISE_HINT,
          lambda: _landmark_update_with(m, Sigma, z, lie.se3_inv(T), Ks, cam_T_imu, noise_var**2)[0]),
-    ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+    ] + transposed_rotation_variants(lambda C, W: _landmark_update_with(m, Sigma, z, W, Ks, C, noise_var)[0],
+                                     cam_T_imu, T)
 
 
 def _landmark_covariance_variants(m, Sigma, T, camera, noise_var):
@@ -121,8 +117,7 @@ def _pose_update_with(mu, Sigma, z, p_world, Ks, cam_T_imu, noise_var, imu_T_wor
     H = (-Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(s)).reshape(-1, _POSE_DIM)
     gain = Sigma @ H.T @ np.linalg.inv(H @ Sigma @ H.T + noise_var * np.eye(len(H)))
     delta = sign * gain @ (z - cam.projection(q) @ Ks.T).ravel(order=order)
-    if swap:  # the correction read as [w; v]
-        delta = np.r_[delta[3:], delta[:3]]
+    delta = swap_twist(delta) if swap else delta  # the correction read as [w; v]
     mu_new = mu @ lie.se3_exp(delta) if side == "right" else lie.se3_exp(delta) @ mu
     return mu_new, (np.eye(_POSE_DIM) - gain @ H) @ Sigma
 
@@ -136,9 +131,6 @@ _NOISE_HINT = ("the pixel noise is not the argument noise_var\nS = H Sigma H^T +
 
 def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
     args = (mu, Sigma, z, p_world, camera.Ks, camera.cam_T_imu, noise_var)
-    transposed = [lambda W=W: _pose_update_with(*args, imu_T_world=W)[0] for W in wrong_inverses(mu)]
-    transposed.append(lambda: _pose_update_with(mu, Sigma, z, p_world, camera.Ks,
-                                                rotation_transposed(camera.cam_T_imu), noise_var)[0])
     return [
         ("the correction is applied on the left; use mu_new = mu @ se3_exp(L r)\n"
          "with the right perturbation T = mu exp(delta^) the correction K (z - z_pred) multiplies mu "
@@ -156,7 +148,8 @@ def _pose_mean_variants(mu, Sigma, z, p_world, camera, noise_var):
          lambda: _pose_update_with(*args, order="F")[0]),
     ] + [(_NOISE_HINT, lambda r=r: _pose_update_with(*args[:-1], r)[0])
          for r in (noise_var ** 2, np.sqrt(noise_var), 4.0) if r != noise_var
-         ] + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+         ] + transposed_rotation_variants(
+        lambda C, W: _pose_update_with(*args[:5], C, noise_var, imu_T_world=W)[0], camera.cam_T_imu, mu)
 
 
 @exercise_check

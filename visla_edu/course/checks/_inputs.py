@@ -25,6 +25,7 @@ __all__ = [
     "not_se3",
     "rotation_transposed",
     "wrong_inverses",
+    "transposed_rotation_variants",
     "project_with",
 ]
 
@@ -177,6 +178,14 @@ def wrong_inverses(T):
         W[:3, :3], W[:3, 3] = block, shift
         out.append(W)
     return out
+
+
+def transposed_rotation_variants(with_transforms, cam_T_imu, world_T_imu):
+    """``(TRANSPOSED_R_HINT, variant)`` pairs: ``with_transforms(cam_T_imu, imu_T_world)`` with each of the
+    :func:`wrong_inverses` of ``world_T_imu`` for ``imu_T_world``, then with ``cam_T_imu``'s rotation transposed."""
+    variants = [lambda W=W: with_transforms(cam_T_imu, W) for W in wrong_inverses(world_T_imu)]
+    variants.append(lambda: with_transforms(rotation_transposed(cam_T_imu), lie.se3_inv(world_T_imu)))
+    return [(TRANSPOSED_R_HINT, variant) for variant in variants]
 
 
 def project_with(Ks, cam_T_imu, imu_T_world, p_world):

@@ -6,8 +6,8 @@ from visla_edu import camera as cam
 from visla_edu import lie
 from visla_edu.course import capstone, numdiff
 from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.course.checks._inputs import (TRANSPOSED_R_HINT, notebook_rig_variant, points_in_view, random_pose,
-                                      rotation_transposed, stereo_camera, wrong_inverses)
+from visla_edu.course.checks._inputs import (notebook_rig_variant, points_in_view, random_pose, stereo_camera,
+                                      transposed_rotation_variants)
 
 __all__ = [
     "reference_numerical_jacobian",
@@ -149,8 +149,6 @@ def _pose_jacobian_variants(camera, mu, m, ref):
     Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
     s = imu_T_world @ np.r_[m, 1.0]
     q = cam_T_imu @ s
-    transposed = [lambda W=W: _pose_jacobian_with(Ks, cam_T_imu, W, m) for W in wrong_inverses(mu)]
-    transposed.append(lambda: _pose_jacobian_with(Ks, rotation_transposed(cam_T_imu), imu_T_world, m))
     return [
         ("the minus sign is missing\nz = Ks pi(o_T_i exp(-delta^) mu^-1 m), so the Jacobian is "
          "-Ks dpi/dq o_T_i (mu^-1 m)^odot", lambda: -ref),
@@ -164,7 +162,8 @@ def _pose_jacobian_variants(camera, mu, m, ref):
          lambda: -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ lie.odot(np.r_[m, 1.0])),
         ("odot has the wrong sign of its hat block\ns^odot = [[I, -hat(s)], [0, 0]] for s = mu^-1 m",
          lambda: -Ks @ cam.projection_jacobian(q) @ cam_T_imu @ (lie.odot(s) * np.r_[1.0, 1, 1, -1, -1, -1])),
-    ] + _no_dpi_variants(-Ks, q, cam_T_imu @ lie.odot(s)) + [(TRANSPOSED_R_HINT, variant) for variant in transposed]
+    ] + _no_dpi_variants(-Ks, q, cam_T_imu @ lie.odot(s)) + transposed_rotation_variants(
+        lambda C, W: _pose_jacobian_with(Ks, C, W, m), cam_T_imu, mu)
 
 
 @exercise_check
@@ -204,15 +203,14 @@ def _landmark_jacobian_variants(camera, T, m, ref):
     imu_T_world = lie.se3_inv(T)
     Ks, cam_T_imu = camera.Ks, camera.cam_T_imu
     q = cam_T_imu @ imu_T_world @ np.r_[m, 1.0]
-    transposed = [lambda W=W: _landmark_jacobian_with(Ks, cam_T_imu, W, m) for W in wrong_inverses(T)]
-    transposed.append(lambda: _landmark_jacobian_with(Ks, rotation_transposed(cam_T_imu), imu_T_world, m))
     return [
         ("you used world_T_imu where inv(world_T_imu) is needed\nthe chain rule ends with "
          "inv(world_T_imu) P^T = [R^T; 0]", lambda: Ks @ cam.projection_jacobian(q) @ cam_T_imu @ T[:, :3]),
         ("Ks is missing: z = Ks pi(q), so the Jacobian starts with Ks dpi/dq",
          lambda: cam.projection_jacobian(q) @ cam_T_imu @ imu_T_world[:, :3]),
         ("the sign is flipped: the landmark enters with a plus sign", lambda: -ref),
-    ] + _no_dpi_variants(Ks, q, cam_T_imu @ imu_T_world[:, :3]) + [(TRANSPOSED_R_HINT, v) for v in transposed]
+    ] + _no_dpi_variants(Ks, q, cam_T_imu @ imu_T_world[:, :3]) + transposed_rotation_variants(
+        lambda C, W: _landmark_jacobian_with(Ks, C, W, m), cam_T_imu, T)
 
 
 @exercise_check
