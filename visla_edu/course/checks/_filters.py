@@ -239,15 +239,13 @@ def check_landmark_observation_noise(landmark_observation_noise, hidden=False):
 
 
 def _slam_jacobian_reference(J_pose, J_landmark, slots, n_landmarks, pose_first=True, offset=_POSE_DIM):
+    """``H`` (4k, 6 + 3n); mistakes put the pose columns last (not ``pose_first``) or the landmarks at ``offset``."""
     H = np.zeros((4 * len(slots), _POSE_DIM + 3 * n_landmarks))
+    pose_columns = slice(0, _POSE_DIM) if pose_first else slice(3 * n_landmarks, None)
+    offset = offset if pose_first else 0
     for i, s in enumerate(slots):
-        rows = slice(4 * i, 4 * i + 4)
-        if pose_first:
-            H[rows, :_POSE_DIM] = J_pose[i]
-            H[rows, offset + 3 * s: offset + 3 * s + 3] = J_landmark[i]
-        else:
-            H[rows, 3 * n_landmarks:] = J_pose[i]
-            H[rows, 3 * s: 3 * s + 3] = J_landmark[i]
+        H[4 * i:4 * i + 4, pose_columns] = J_pose[i]
+        H[4 * i:4 * i + 4, offset + 3 * s: offset + 3 * s + 3] = J_landmark[i]
     return H
 
 

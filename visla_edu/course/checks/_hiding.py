@@ -99,11 +99,10 @@ def hide(functions, exercise):
             fn.__code__, fn.__defaults__, fn.__kwdefaults__ = code, defaults, kwdefaults
 
 
-def _visla_modules(include_checks=True):
+def _visla_modules():
     """``(name, module)`` of every loaded ``visla_edu`` module."""
     return [(name, module) for name, module in list(sys.modules.items())
-            if (name == "visla_edu" or name.startswith("visla_edu.")) and isinstance(module, types.ModuleType)
-            and (include_checks or not name.startswith("visla_edu.course.checks"))]
+            if (name == "visla_edu" or name.startswith("visla_edu.")) and isinstance(module, types.ModuleType)]
 
 
 def _functions_of(module):
@@ -138,13 +137,8 @@ def _in_package(filename):
     return os.path.realpath(filename).startswith(PACKAGE_DIR + os.sep)
 
 
-def verify_library(modules=None):
-    """Fail, naming the first one, if a function of ``modules`` was replaced by notebook code.
-
-    ``modules`` default to all loaded ``visla_edu`` modules but the checks.
-    """
-    if modules is None:
-        modules = [module for _, module in _visla_modules(include_checks=False)]
+def verify_library(modules):
+    """Fail, naming the first one, if a function of ``modules`` was replaced by notebook code."""
     for module in modules:
         for name, fn in _functions_of(module):
             if _foreign(fn):

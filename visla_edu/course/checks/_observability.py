@@ -34,24 +34,26 @@ def reference_slam_null_space(world_T_imu, p_landmarks):
     ndarray, shape (6 + 3 n, 6)
     """
     p_landmarks = np.asarray(p_landmarks, dtype=float).reshape(-1, 3)
-    blocks = [lie.adjoint(lie.se3_inv(world_T_imu))]
-    blocks += [np.hstack([np.eye(3), -lie.hat(m)]) for m in p_landmarks]
-    return np.vstack(blocks)
+    return np.vstack([lie.adjoint(lie.se3_inv(world_T_imu))] + [_landmark_rows(m) for m in p_landmarks])
+
+
+def _landmark_rows(m):
+    """A landmark's rows ``[I, -hat(m)]`` (3, 6) of the null space."""
+    return np.hstack([np.eye(3), -lie.hat(m)])
 
 
 def _null_space_variants(T, p):
     """(hint, callable) pairs: the null space of each likely mistake."""
-    def with_blocks(pose_block, landmark_block):
+    def with_blocks(pose_block, landmark_block=_landmark_rows):
         return np.vstack([pose_block] + [landmark_block(m) for m in p])
 
     Ad_inv = lie.adjoint(lie.se3_inv(T))
     return [
         ("the pose block is Ad(inv(mu)), not Ad(mu)\nthe world moves on the left, the perturbation is on "
          "the right: exp(eps^) mu = mu exp((Ad(inv(mu)) eps)^)",
-         lambda: with_blocks(lie.adjoint(T), lambda m: np.hstack([np.eye(3), -lie.hat(m)]))),
+         lambda: with_blocks(lie.adjoint(T))),
         ("the pose block is not the identity\nthe right perturbation is in the body frame: moving the "
-         "world by eps moves it by Ad(inv(mu)) eps", lambda: with_blocks(np.eye(6), lambda m: np.hstack(
-             [np.eye(3), -lie.hat(m)]))),
+         "world by eps moves it by Ad(inv(mu)) eps", lambda: with_blocks(np.eye(6))),
         ("the landmark block's hat(m) has the wrong sign\nexp(eps^) m ~ m + eps_v + eps_w x m "
          "= m + [I, -hat(m)] eps", lambda: with_blocks(Ad_inv, lambda m: np.hstack([np.eye(3), lie.hat(m)]))),
         ("wrong twist order in the landmark block: eps = [eps_v; eps_w]\nits columns are [I, -hat(m)]",
@@ -59,8 +61,8 @@ def _null_space_variants(T, p):
         ("the landmarks move with the world too\neach landmark's rows are [I, -hat(m_j)], not zero",
          lambda: with_blocks(Ad_inv, lambda m: np.zeros((3, 6)))),
         ("the landmark rows use the point in the IMU frame\nthe landmarks are in the world frame: "
-         "[I, -hat(m_j)] with m_j itself", lambda: with_blocks(
-             Ad_inv, lambda m: np.hstack([np.eye(3), -lie.hat((lie.se3_inv(T) @ np.r_[m, 1.0])[:3])]))),
+         "[I, -hat(m_j)] with m_j itself",
+         lambda: with_blocks(Ad_inv, lambda m: _landmark_rows((lie.se3_inv(T) @ np.r_[m, 1.0])[:3]))),
     ]
 
 

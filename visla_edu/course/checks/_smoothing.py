@@ -5,6 +5,7 @@ Conventions: :mod:`visla_edu.lie`'s; the Gauss-Newton system is ``H dx = -g``.
 """
 
 import numpy as np
+import scipy.linalg
 
 from visla_edu import lie
 from visla_edu.course import numdiff
@@ -148,9 +149,7 @@ def _schur_variants(H_pp, H_pm, H_mm, g_p, g_m):
     """Deliberate mistakes: ``(S variants, b variants)``."""
     S, b = reference_schur_reduce(H_pp, H_pm, H_mm, g_p, g_m)
     C = H_pp - S  # H_pm H_mm^-1 H_pm^T
-    blocks = np.zeros((3 * len(H_mm),) * 2)
-    for j, block in enumerate(H_mm):
-        blocks[3 * j:3 * j + 3, 3 * j:3 * j + 3] = block
+    blocks = scipy.linalg.block_diag(*H_mm)
     S_variants = [
         ("S = H_pp - H_pm H_mm^-1 H_pm^T: you added the correction", lambda: H_pp + C),
         ("use the inverse of H_mm between H_pm and H_pm^T, not H_mm itself",
