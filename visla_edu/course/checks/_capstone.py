@@ -26,12 +26,17 @@ LOOP_TOLERANCE = 1e-6
 
 
 # ---------------------------------------------------------------- the reference assembly
-def _reference_predict(parts, world_T_imu, Sigma, u, tau, W):
-    F = parts.pose_transition(u, tau)
+def _propagated(Sigma, F, W):
+    """``Sigma`` with its pose rows and columns moved by ``F`` and ``W`` added to the pose block."""
     Sigma = np.array(Sigma, dtype=float)
     Sigma[:6, :] = F @ Sigma[:6, :]
     Sigma[:, :6] = Sigma[:, :6] @ F.T
     Sigma[:6, :6] += W
+    return Sigma
+
+
+def _reference_predict(parts, world_T_imu, Sigma, u, tau, W):
+    Sigma = _propagated(Sigma, parts.pose_transition(u, tau), W)
     return world_T_imu @ parts.se3_exp(tau * np.asarray(u, dtype=float)), Sigma
 
 
@@ -151,25 +156,20 @@ def _predict_variants(parts, T, Sigma, u, tau, W):
     F = parts.pose_transition(u, tau)
     pose_only = np.array(Sigma)
     pose_only[:6, :6] = F @ Sigma[:6, :6] @ F.T + W
-    transposed = np.array(Sigma)
-    transposed[:6, :] = F.T @ transposed[:6, :]
-    transposed[:, :6] = transposed[:, :6] @ F
-    transposed[:6, :6] += W
     step = parts.se3_exp(tau * u)
     return [
         ("the mean moves on the right: world_T_imu @ se3_exp(tau u)", lambda: step @ T),
         ("the step is se3_exp(tau u): multiply the twist by tau", lambda: T @ parts.se3_exp(u)),
     ], [
-        ("the motion noise W is missing from the pose block",
-         lambda: _reference_predict(parts, T, Sigma, u, tau, 0 * W)[1]),
+        ("the motion noise W is missing from the pose block", lambda: _propagated(Sigma, F, 0 * W)),
         ("the cross-covariance must move too: Sigma_pl <- F Sigma_pl\n(the landmark columns of the pose "
          "rows, and their transpose)", lambda: pose_only),
-        ("F is on the wrong side: Sigma_pp <- F Sigma_pp F^T + W", lambda: transposed),
+        ("F is on the wrong side: Sigma_pp <- F Sigma_pp F^T + W", lambda: _propagated(Sigma, F.T, W)),
     ]
 
 
 _PREDICT_HIDDEN = (motion.predict_pose, motion.predict_pose_covariance, motion.predict_joint_covariance,
-                   motion.imu_step, _reference_predict)
+                   motion.imu_step, _reference_predict, _propagated)
 
 
 @exercise_check

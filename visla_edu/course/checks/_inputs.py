@@ -63,9 +63,7 @@ def rotation_vectors(rng, hidden=False):
 def twists(rng, hidden=False):
     """Twists ``[v; w]`` (6,): each :func:`rotation_vectors` ``w`` with ``v`` of std 3, then rest and a translation."""
     out = [np.concatenate([rng.normal(scale=3.0, size=3), w]) for w in rotation_vectors(rng, hidden)]
-    out.append(np.zeros(6))
-    out.append(np.array([2.0, -1.0, 0.5, 0.0, 0.0, 0.0]))
-    return out
+    return out + [np.zeros(6), np.array([2.0, -1.0, 0.5, 0.0, 0.0, 0.0])]
 
 
 def random_pose(rng, scale=10.0):
@@ -153,13 +151,7 @@ def not_se3(T):
     T = np.asarray(T)
     if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
         return "the bottom row of a pose must be [0, 0, 0, 1]: the result is not in SE(3)"
-    hint = _not_rotation_block(T[:3, :3])
-    return hint
-
-
-def _not_rotation_block(R):
-    hint = not_rotation(R)
-    return hint.replace("the result is not a rotation", "the rotation block is not a rotation")
+    return not_rotation(T[:3, :3]).replace("the result is not a rotation", "the rotation block is not a rotation")
 
 
 def rotation_transposed(T):
