@@ -83,13 +83,12 @@ def check_landmark_update(landmark_update, hidden=False):
     """
     name = "landmark_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
-    imu_T_cam = camera.imu_T_cam
     call = student(landmark_update, name, hide=[ekf.landmark_update, ekf.joint_update, ekf.cholesky_update,
                                                                  kalman.update])
     noise_var = 1.0 if hidden else 4.0
     for trial in range(6 if hidden else 4):
         T = random_pose(generator)
-        m_true = points_in_view(generator, T, imu_T_cam, 1, depth=(4.0, 40.0))[0]
+        m_true = points_in_view(generator, T, camera.imu_T_cam, 1, depth=(4.0, 40.0))[0]
         z = camera.predict(T, m_true[None])[0] + generator.normal(scale=2.0, size=4)
         m = m_true + generator.normal(scale=1.0, size=3)
         A = generator.normal(size=(3, 3))
@@ -165,13 +164,12 @@ def check_pose_update(pose_update, hidden=False):
     """
     name = "pose_update"
     generator, camera = rng(hidden), stereo_camera(hidden)
-    imu_T_cam = camera.imu_T_cam
     call = student(pose_update, name, hide=[ekf.pose_update, ekf.joint_update, ekf.cholesky_update,
                                             kalman.update, capstone._pose_update])
     for trial, noise_var in enumerate(_POSE_NOISE_VARS[:5 if hidden else 3]):
         k = 1 if hidden and trial == 0 else 8
         T_true = random_pose(generator)
-        p_world = points_in_view(generator, T_true, imu_T_cam, k, depth=(4.0, 40.0))
+        p_world = points_in_view(generator, T_true, camera.imu_T_cam, k, depth=(4.0, 40.0))
         z = camera.predict(T_true, p_world) + generator.normal(scale=1.0, size=(k, 4))
         A = generator.normal(size=(6, 6)) * 0.05
         Sigma = A @ A.T + 1e-3 * np.eye(6)

@@ -178,13 +178,12 @@ def check_pose_jacobian(pose_jacobian, hidden=False):
     """
     name = "pose_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
-    imu_T_cam = camera.imu_T_cam
     call = student(pose_jacobian, name, hide=[cam.StereoCamera.jacobian_pose, cam.StereoCamera.predict_with_jacobians,
                                               capstone._pose_jacobian, cam.stereo_projection,
                                               cam.project_points])
     for trial in range(6 if hidden else 4):
         mu = np.eye(4) if trial == 0 else random_pose(generator)
-        m = points_in_view(generator, mu, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
+        m = points_in_view(generator, mu, camera.imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
         got = as_array(call(camera.Ks, camera.cam_T_imu, mu, m), name, (4, 6))
         ref = camera.jacobian_pose(mu, m[None])[0]
         compare(name, got, ref, f"for a random pose and m = {fmt(m)}", _pose_jacobian_variants(camera, mu, m, ref)
@@ -225,14 +224,13 @@ def check_landmark_jacobian(landmark_jacobian, hidden=False):
     """
     name = "landmark_jacobian"
     generator, camera = rng(hidden), stereo_camera(hidden)
-    imu_T_cam = camera.imu_T_cam
     call = student(landmark_jacobian, name, hide=[cam.StereoCamera.jacobian_landmark,
                                                   cam.StereoCamera.predict_with_jacobians,
                                                   capstone._landmark_jacobian, cam.stereo_projection,
                                                   cam.project_points])
     for trial in range(6 if hidden else 4):
         T = np.eye(4) if trial == 0 else random_pose(generator)
-        m = points_in_view(generator, T, imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
+        m = points_in_view(generator, T, camera.imu_T_cam, 1, depth=(2.0, 200.0 if hidden else 60.0))[0]
         out = call(camera.Ks, camera.cam_T_imu, T, m)
         if np.shape(out) == (4, 4):
             raise fail(name, "got a 4x4 matrix; multiply by P^T = [I; 0] (4x3) on the right",

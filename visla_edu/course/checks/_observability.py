@@ -80,9 +80,8 @@ def check_slam_null_space(slam_null_space, hidden=False):
     identity and random poses; ``lie.adjoint``, ``lie.hat`` and ``lie.se3_inv`` stay.
     """
     name = "slam_null_space"
-    generator = rng(hidden)
     call = student(slam_null_space, name, hide=[reference_slam_null_space])
-    cases = _null_space_cases(generator, hidden)
+    cases = _null_space_cases(rng(hidden), hidden)
     if not hidden:
         cases.insert(0, (np.eye(4), np.array([[4.0, -2.0, 10.0], [1.0, 3.0, 25.0]])))
     for T, p in cases:
