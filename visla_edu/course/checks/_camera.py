@@ -82,8 +82,7 @@ def check_project(project, hidden=False):
     for trial in range(6 if hidden else 4):
         world_T_imu = np.eye(4) if trial == 0 else random_pose(generator)
         M = 1 if hidden and trial == 1 else 12
-        far = trial == 3
-        p_world = points_in_view(generator, world_T_imu, imu_T_cam, M, depth=(2.0, 300.0 if far else 60.0))
+        p_world = points_in_view(generator, world_T_imu, imu_T_cam, M, depth=(2.0, 300.0 if trial == 3 else 60.0))
         got = as_array(call(camera.Ks, camera.cam_T_imu, world_T_imu, p_world), name, (M, 4))
         compare(name, got, camera.predict(world_T_imu, p_world), f"for a random pose and {M} points in view",
                 _project_variants(camera.Ks, camera.cam_T_imu, imu_T_cam, world_T_imu, p_world)

@@ -341,8 +341,7 @@ def _check_slam_loop(name, call, hidden):
     ds, config = _drive(hidden)
     steps = replace(REFERENCE, slam_update=lambda *args: call(*args))
     got, covs = _run_loop(ds, config, steps, joint=True)
-    library = run.run_filter(ds, "slam", config, progress=False)
-    _compare_loops(name, got, library.world_T_imu, "SLAM")
+    _compare_loops(name, got, run.run_filter(ds, "slam", config, progress=False).world_T_imu, "SLAM")
     ok(f"{name}: agrees; SLAM with it matches the library's (slam_error='right'): {_loop_summary(ds, got, covs)}",
        hidden)
 

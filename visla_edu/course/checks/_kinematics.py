@@ -5,8 +5,8 @@ import scipy.linalg
 
 from visla_edu import lie, motion
 from visla_edu.course.checks._core import as_array, compare, exercise_check, fail, fmt, ok, rng, student
-from visla_edu.course.checks._inputs import (NEAR_ZERO_HINT, not_rotation, not_se3, rotation_vectors, swap_twist,
-                                      twists, unit)
+from visla_edu.course.checks._inputs import (NEAR_ZERO_HINT, not_rotation, not_se3, rotation_transposed,
+                                      rotation_vectors, swap_twist, twists, unit)
 
 __all__ = [
     "check_hat",
@@ -177,8 +177,7 @@ def check_se3_exp(se3_exp, hidden=False):
             ("J_l's hat(w) term has the wrong sign (you used J_l^T)\nJ_l = I + (1 - cos t)/t^2 hat(w) + "
              "(t - sin t)/t^3 hat(w)^2, with a plus before the hat(w) term",  # J_l(w)^T v = J_l(-w) v
              lambda: _se3_with_translation(u, lie.se3_exp(np.concatenate([u[:3], -u[3:]]))[:3, 3])),
-            ("the rotation block is transposed (R^T instead of R)",
-             lambda: np.block([[ref[:3, :3].T, ref[:3, 3:]], [ref[3:]]])),
+            ("the rotation block is transposed (R^T instead of R)", lambda: rotation_transposed(ref)),
         ], atol=1e-9, nan_hint=NEAR_ZERO_HINT, extra=not_se3)
     for w in _tiny_rotation_vectors(generator, hidden):
         u = np.concatenate([generator.normal(scale=3.0, size=3), w])
@@ -206,11 +205,11 @@ def _drive(generator, T, hidden):
 
 
 def _dead_reckon_variants(time_stamps, samples, lag, ref):
-    T, taus, used = len(time_stamps), np.diff(time_stamps), motion.select_twists(samples, lag)
+    T, taus, lagged = len(time_stamps), np.diff(time_stamps), motion.select_twists(samples, lag)
     return [
         ("you multiplied on the left, exp(tau u^) T_t\nthe IMU measures body-frame velocities, so "
          "T_{t+1} = T_t exp(tau_t u_{t+lag}^) (multiply on the right)",
-         lambda: _dead_reckon_with(taus, used, left=True)),
+         lambda: _dead_reckon_with(taus, lagged, left=True)),
         ("wrong twist order: u = [v; w] (linear first)",
          lambda: motion.dead_reckon(time_stamps, samples[:, [3, 4, 5, 0, 1, 2]], lag=lag)),
         (f"the lag was ignored: with lag {lag:+d} the step t -> t+1 uses u_(t{lag:+d})\n"
@@ -222,7 +221,7 @@ def _dead_reckon_variants(time_stamps, samples, lag, ref):
          "is used again), as np.clip does; a negative index counts from the end in numpy",
          lambda: _dead_reckon_with(taus, samples[(np.arange(T - 1) + lag) % T])),  # twists[(t + lag) % T]
         ("the twist must be scaled by the time step tau_t = t_{t+1} - t_t\nuse exp(tau_t u^)",
-         lambda: _dead_reckon_with(np.ones(T - 1), used)),
+         lambda: _dead_reckon_with(np.ones(T - 1), lagged)),
         ("use each step's own tau_t = t_{t+1} - t_t, not one constant step\nthe time stamps are not uniform",
          lambda: motion.dead_reckon(time_stamps[0] + np.mean(np.diff(time_stamps)) * np.arange(T), samples,
                                     lag=lag)),
