@@ -202,8 +202,7 @@ def check_capstone_predict(predict, hidden=False):
                 cov_variants, rtol=1e-9, atol=1e-12)
     spy.require(name, ["pose_transition", "se3_exp"])
     ds, config = _drive(hidden)
-    steps = replace(REFERENCE, predict=lambda *args: call(*args))
-    got, covs = _run_loop(ds, config, steps, joint=False)
+    got, covs = _run_loop(ds, config, replace(REFERENCE, predict=call), joint=False)
     _compare_loops(name, got, _run_loop(ds, config, REFERENCE, joint=False)[0], "VIO")
     ok(f"{name}: agrees; VIO with it: {_loop_summary(ds, got, covs)}", hidden)
 
@@ -339,8 +338,7 @@ def check_capstone_slam(slam_update, hidden=False):
 def _check_slam_loop(name, call, hidden):
     """The joint loop with the student's update against the library's right-perturbation filter."""
     ds, config = _drive(hidden)
-    steps = replace(REFERENCE, slam_update=lambda *args: call(*args))
-    got, covs = _run_loop(ds, config, steps, joint=True)
+    got, covs = _run_loop(ds, config, replace(REFERENCE, slam_update=call), joint=True)
     _compare_loops(name, got, run.run_filter(ds, "slam", config, progress=False).world_T_imu, "SLAM")
     ok(f"{name}: agrees; SLAM with it matches the library's (slam_error='right'): {_loop_summary(ds, got, covs)}",
        hidden)
