@@ -52,14 +52,13 @@ def check_stereo_matrix(stereo_matrix, hidden=False):
 def _project_variants(Ks, cam_T_imu, imu_T_cam, world_T_imu, p_world):
     """The deliberate mistakes of ``project``: (hint, callable) pairs."""
     imu_T_world = lie.se3_inv(world_T_imu)
-    p_h = np.c_[p_world, np.ones(len(p_world))]
     return [
         ("you used world_T_imu where its inverse is needed\nthe point in the IMU frame is "
          "inv(world_T_imu) @ m", lambda: project_with(Ks, cam_T_imu, world_T_imu, p_world)),
         ("you used imu_T_cam where cam_T_imu is needed\ncam_T_imu = inv(imu_T_cam), written o_T_i",
          lambda: project_with(Ks, imu_T_cam, imu_T_world, p_world)),
         ("divide by the depth q3 (the third coordinate), not q4",
-         lambda: (p_h @ (cam_T_imu @ imu_T_world).T) @ Ks.T),
+         lambda: (np.c_[p_world, np.ones(len(p_world))] @ (cam_T_imu @ imu_T_world).T) @ Ks.T),
     ] + transposed_rotation_variants(lambda C, W: project_with(Ks, C, W, p_world), cam_T_imu, world_T_imu)
 
 

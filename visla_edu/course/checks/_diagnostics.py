@@ -18,7 +18,6 @@ def _mad_sigma(x):
 
 def _white_variants(twists):
     second = np.diff(twists, n=2, axis=0)
-    first = np.diff(twists, axis=0)
     return [
         ("use a robust spread (the MAD), not the standard deviation\nthe velocities have glitches: one "
          "sample far off moves np.std but not the median absolute deviation",
@@ -31,7 +30,7 @@ def _white_variants(twists):
          "0.6745 sigma", lambda: _mad_sigma(second) / _MAD_TO_SIGMA / np.sqrt(6)),
         ("use second differences: first differences keep the motion\nx[t+1] - x[t] is the change of a "
          "smooth velocity plus noise; x[t+1] - 2 x[t] + x[t-1] removes a smoothly changing velocity",
-         lambda: _mad_sigma(first) / np.sqrt(2)),
+         lambda: _mad_sigma(np.diff(twists, axis=0)) / np.sqrt(2)),
     ]
 
 
