@@ -263,8 +263,7 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     dof = np.asarray(dof, dtype=float)
     x = np.arange(len(nis)) if time is None else np.asarray(time)
     ok = dof > 0
-    ratio = np.full(len(nis), np.nan)
-    ratio[ok] = nis[ok] / dof[ok]
+    ratio = np.divide(nis, dof, out=np.full(len(nis), np.nan), where=ok)
     lo, hi = nis_band(dof, probability)
     ax.fill_between(x, lo, hi, color=PALETTE["bluish_green"], alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
     ax.plot(x, ratio, ".-", color=PALETTE["blue"], ms=3, lw=0.8, label="NIS / dof")

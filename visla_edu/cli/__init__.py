@@ -155,8 +155,6 @@ def _add_frames_option(parser):
                              "frame START); either end may be left out, e.g. 0:300 or 500:")
 
 
-
-
 def _select_frames(dataset, frames, truth_option=None):
     """``dataset`` cut to ``frames``, ``--frames (start, stop)`` (stop None: the end), or unchanged.
 
@@ -193,13 +191,6 @@ def _segment_truth_checked(dataset, segment, start, stop, truth_option):
                          f"{covered - MIN_POSES} and STOP >= START + {MIN_POSES}, or leave out --ground-truth")
     print(f"note: --frames {start}:{stop}: {what}; running without ground truth (no ATE)")
     return dataclasses.replace(segment, ground_truth=None)
-
-
-
-
-
-
-
 
 
 def _cmd_info(args):
@@ -437,8 +428,7 @@ def _cmd_book(args):
 
 
 _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release,
-             "student": _cmd_student, "book": _cmd_book}
-_HANDLERS["project"] = _project_commands.run
+             "student": _cmd_student, "book": _cmd_book, "project": _project_commands.run}
 
 
 def main(argv=None):

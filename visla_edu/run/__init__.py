@@ -138,7 +138,6 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
         The filter failed; the exception's ``frame`` is the frame it failed at (for :func:`.workload.divergence_hint`).
     """
     _check_blas_threads(blas_threads)
-    config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense, verbose=verbose)
     config = flt.config
     flt.record_landmarks = False  # a whole run keeps no per-frame landmarks

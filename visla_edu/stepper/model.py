@@ -19,14 +19,7 @@ from visla_edu import metrics, motion, run
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig, StepRecord
 
-__all__ = [
-    "MODE_LABELS",
-    "NOISE_FIELDS",
-    "SteppableFilter",
-    "Stepper",
-    "dataset_choices",
-    "world_position_covariance",
-]
+__all__ = ["MODE_LABELS", "NOISE_FIELDS", "SteppableFilter", "Stepper", "dataset_choices", "world_position_covariance"]
 
 #: Human-readable names of the filter modes (keys: :data:`visla_edu.codes.MODES`).
 MODE_LABELS = {
