@@ -291,13 +291,10 @@ class _NoBar:
         pass
 
 
-@contextlib.contextmanager
 def _progress_bar(total, show, desc):
     if not show:
-        yield _NoBar()
-        return
+        return contextlib.nullcontext(_NoBar())
     from tqdm.auto import tqdm
 
-    with tqdm(total=total, desc=desc, unit="frame") as bar:
-        yield bar
+    return tqdm(total=total, desc=desc, unit="frame")
 

@@ -29,12 +29,9 @@ MODE_LABELS = {
     SLAM: "SLAM (joint EKF)",
 }
 
-#: The FilterConfig fields the stepper's noise and initialisation controls change (those
-#: this version of FilterConfig has).
-NOISE_FIELDS = tuple(
-    name for name in ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity",
-                      "landmark_prior_sigma", "landmark_prior_inflation", "gate_probability")
-    if name in {f.name for f in fields(FilterConfig)})
+#: The FilterConfig fields the stepper's noise and initialisation controls change.
+NOISE_FIELDS = ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity", "landmark_prior_sigma",
+                "landmark_prior_inflation", "gate_probability")
 
 #: Simulated drives offered besides what :func:`visla_edu.data.available` lists.
 _EXTRA_SIMULATED = ("sim-small", "sim-tiny")
