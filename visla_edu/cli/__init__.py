@@ -74,10 +74,10 @@ def build_parser():
     """
     parser = _Parser(prog="visla-edu",
                      description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
-    parser.add_argument("--debug", action="store_true", help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
+    debug_help = f"print tracebacks of errors (also {DEBUG_ENV}=1)"
+    parser.add_argument("--debug", action="store_true", help=debug_help)
     debug = _Parser(add_help=False)
-    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                       help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
     common = _Parser(add_help=False, parents=[debug])
     common.add_argument("--data-dir", default=None, type=_options.path,
                         help="folder with the course files (default: $VISLA_EDU_DATA, else ./data)")

@@ -216,8 +216,7 @@ class StepperFigure:
         self.captions["frame"] = (f"frame {t}: {len(rec.ids)} observations, {counts[OBS_USED]} used, "
                                   f"{counts[OBS_NEW]} new, {counts[OBS_GATED]} gated")
         self._update_nis(stepper, rec, t)
-        ds = stepper.dataset
-        self.title.set_text(f"{ds.name}: {MODE_LABELS[stepper.mode]}\nt = {t} / {ds.num_frames - 1}"
+        self.title.set_text(f"{stepper.dataset.name}: {MODE_LABELS[stepper.mode]}\nt = {t} / {stepper.num_frames - 1}"
                             f"   ({stepper.time_stamps[t]:.2f} s)")
         if self.annotate:
             for artist, key in ((self.image_text, "frame"), (self.map_text, "map"), (self.nis_text, "nis")):
