@@ -73,10 +73,9 @@ class WorkEstimate:
 
     def summary(self):
         """One line: the largest state and update, memory and time."""
-        what = f"{self.mode}{' (dense)' if self.dense else ''}"
-        return (f"{what}: states up to {self.state_dim} dimensions, updates up to {self.max_rows} rows: about "
-                f"{format_bytes(self.peak_bytes)} of memory and {_duration(self.seconds)} for {self.frames} frames "
-                "(estimate)")
+        return (f"{self.mode}{' (dense)' if self.dense else ''}: states up to {self.state_dim} dimensions, updates up "
+                f"to {self.max_rows} rows: about {format_bytes(self.peak_bytes)} of memory and "
+                f"{_duration(self.seconds)} for {self.frames} frames (estimate)")
 
 
 def estimate_work(dataset, mode=SLAM, config=None, dense=False):

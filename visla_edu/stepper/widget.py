@@ -143,12 +143,9 @@ class StepperWidget(w.VBox):
     def _build_noise_box(self):
         """One slider per noise setting and a defaults button, in a closed accordion."""
         in_use = self.stepper.config_in_use  # resolved: "auto" settings carry the measured values
-        self.noise_sliders = {}
-        for name in NOISE_FIELDS:
-            value = _slider_value(getattr(in_use, name))
-            slider = _noise_slider(name, value)
+        self.noise_sliders = {name: _noise_slider(name, _slider_value(getattr(in_use, name))) for name in NOISE_FIELDS}
+        for slider in self.noise_sliders.values():
             slider.observe(self._on_noise, names="value")
-            self.noise_sliders[name] = slider
         self.defaults_button = w.Button(description="defaults", tooltip="restore the default noise settings",
                                         layout=w.Layout(width="7em"))
         self.defaults_button.on_click(self._on_defaults)
