@@ -166,8 +166,7 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
 
 def _truth_poses(ground_truth):
     """The ``(n, 4, 4)`` true poses of a :class:`~visla_edu.dataset.GroundTruth` or of an array."""
-    poses = getattr(ground_truth, "world_T_imu", ground_truth)
-    poses = np.asarray(poses, dtype=float)
+    poses = np.asarray(getattr(ground_truth, "world_T_imu", ground_truth), dtype=float)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4):
         raise ValueError(f"ground_truth: expected a GroundTruth or poses of shape (n, 4, 4), got shape {poses.shape}")
     return poses

@@ -317,12 +317,11 @@ class StepperFigure:
         inside = f"; {100 * np.mean((ratio[ok] >= lo) & (ratio[ok] <= hi)):.0f}% of updates so far in the band" \
             if len(f) else ""
         if rec.nis_dof:
-            text = f"NIS/dof = {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof}){inside}"
+            self.captions["nis"] = f"NIS/dof = {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof}){inside}"
         elif stepper.mode == DEADRECKON:
-            text = "dead reckoning: no updates, no NIS"
+            self.captions["nis"] = "dead reckoning: no updates, no NIS"
         else:
-            text = f"no update at frame {t}{inside}"
-        self.captions["nis"] = text
+            self.captions["nis"] = f"no update at frame {t}{inside}"
 
     # ---------------------------------------------------------------- output
     @contextlib.contextmanager
