@@ -166,8 +166,7 @@ def plot_trajectory_map(world_T_imu, landmarks=None, ax=None, label="estimate", 
 
 def _truth_poses(ground_truth):
     """The ``(n, 4, 4)`` true poses of a :class:`~visla_edu.dataset.GroundTruth` or of an array."""
-    poses = getattr(ground_truth, "world_T_imu", ground_truth)
-    poses = np.asarray(poses, dtype=float)
+    poses = np.asarray(getattr(ground_truth, "world_T_imu", ground_truth), dtype=float)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4):
         raise ValueError(f"ground_truth: expected a GroundTruth or poses of shape (n, 4, 4), got shape {poses.shape}")
     return poses
@@ -263,8 +262,7 @@ def plot_nis(nis, dof, time=None, probability=0.95, ax=None):
     dof = np.asarray(dof, dtype=float)
     x = np.arange(len(nis)) if time is None else np.asarray(time)
     ok = dof > 0
-    ratio = np.full(len(nis), np.nan)
-    ratio[ok] = nis[ok] / dof[ok]
+    ratio = np.divide(nis, dof, out=np.full(len(nis), np.nan), where=ok)
     lo, hi = nis_band(dof, probability)
     ax.fill_between(x, lo, hi, color=PALETTE["bluish_green"], alpha=0.25, lw=0, label=f"{100 * probability:.0f}% band of chi2(dof)/dof")
     ax.plot(x, ratio, ".-", color=PALETTE["blue"], ms=3, lw=0.8, label="NIS / dof")

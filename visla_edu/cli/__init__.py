@@ -74,10 +74,10 @@ def build_parser():
     """
     parser = _Parser(prog="visla-edu",
                      description="Visual-inertial SLAM with an EKF: datasets, filters, course tools.")
-    parser.add_argument("--debug", action="store_true", help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
+    debug_help = f"print tracebacks of errors (also {DEBUG_ENV}=1)"
+    parser.add_argument("--debug", action="store_true", help=debug_help)
     debug = _Parser(add_help=False)
-    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                       help=f"print tracebacks of errors (also {DEBUG_ENV}=1)")
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
     common = _Parser(add_help=False, parents=[debug])
     common.add_argument("--data-dir", default=None, type=_options.path,
                         help="folder with the course files (default: $VISLA_EDU_DATA, else ./data)")
@@ -155,8 +155,6 @@ def _add_frames_option(parser):
                              "frame START); either end may be left out, e.g. 0:300 or 500:")
 
 
-
-
 def _select_frames(dataset, frames, truth_option=None):
     """``dataset`` cut to ``frames``, ``--frames (start, stop)`` (stop None: the end), or unchanged.
 
@@ -193,13 +191,6 @@ def _segment_truth_checked(dataset, segment, start, stop, truth_option):
                          f"{covered - MIN_POSES} and STOP >= START + {MIN_POSES}, or leave out --ground-truth")
     print(f"note: --frames {start}:{stop}: {what}; running without ground truth (no ATE)")
     return dataclasses.replace(segment, ground_truth=None)
-
-
-
-
-
-
-
 
 
 def _cmd_info(args):
@@ -437,8 +428,7 @@ def _cmd_book(args):
 
 
 _HANDLERS = {"info": _cmd_info, "run": _cmd_run, "stepper": _cmd_stepper, "release": _cmd_release,
-             "student": _cmd_student, "book": _cmd_book}
-_HANDLERS["project"] = _project_commands.run
+             "student": _cmd_student, "book": _cmd_book, "project": _project_commands.run}
 
 
 def main(argv=None):

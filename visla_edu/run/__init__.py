@@ -138,7 +138,6 @@ def run_filter(dataset, mode=SLAM, config=None, dense=False, progress=None, verb
         The filter failed; the exception's ``frame`` is the frame it failed at (for :func:`.workload.divergence_hint`).
     """
     _check_blas_threads(blas_threads)
-    config = config or FilterConfig()
     flt = make_filter(dataset, mode, config, dense, verbose=verbose)
     config = flt.config
     flt.record_landmarks = False  # a whole run keeps no per-frame landmarks
@@ -292,13 +291,10 @@ class _NoBar:
         pass
 
 
-@contextlib.contextmanager
 def _progress_bar(total, show, desc):
     if not show:
-        yield _NoBar()
-        return
+        return contextlib.nullcontext(_NoBar())
     from tqdm.auto import tqdm
 
-    with tqdm(total=total, desc=desc, unit="frame") as bar:
-        yield bar
+    return tqdm(total=total, desc=desc, unit="frame")
 

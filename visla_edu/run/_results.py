@@ -105,13 +105,9 @@ class RunResult:
         camera = self._camera_line()
         if camera:
             lines.append(camera)
-        if self.notes:
-            lines.append(self.notes)
-        else:
-            lines.append(f"time: {self.step_seconds.sum():.2f} s, median step "
-                         f"{1e3 * np.median(self.step_seconds):.2f} ms")
+        lines.append(self.notes or f"time: {self.step_seconds.sum():.2f} s, median step "
+                                   f"{1e3 * np.median(self.step_seconds):.2f} ms")
         return "\n".join(lines)
-
 
     def _camera_line(self):
         """How far the run trusted the camera (resolved ``pixel_noise_inflation``, in slam the clones), or None."""

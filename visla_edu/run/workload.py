@@ -3,7 +3,7 @@
 The command line refuses a run past :data:`WORK_LIMIT_BYTES` or :data:`WORK_LIMIT_SECONDS` unless given ``--force``.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -73,10 +73,9 @@ class WorkEstimate:
 
     def summary(self):
         """One line: the largest state and update, memory and time."""
-        what = f"{self.mode}{' (dense)' if self.dense else ''}"
-        return (f"{what}: states up to {self.state_dim} dimensions, updates up to {self.max_rows} rows: about "
-                f"{format_bytes(self.peak_bytes)} of memory and {_duration(self.seconds)} for {self.frames} frames "
-                "(estimate)")
+        return (f"{self.mode}{' (dense)' if self.dense else ''}: states up to {self.state_dim} dimensions, updates up "
+                f"to {self.max_rows} rows: about {format_bytes(self.peak_bytes)} of memory and "
+                f"{_duration(self.seconds)} for {self.frames} frames (estimate)")
 
 
 def estimate_work(dataset, mode=SLAM, config=None, dense=False):
@@ -90,10 +89,9 @@ def estimate_work(dataset, mode=SLAM, config=None, dense=False):
     config = config or FilterConfig()
     if mode in SMOOTHER_MODES:  # the smoothers start from the joint EKF and cost a few times as much
         estimate = estimate_work(dataset, SLAM, config, False)
-        return WorkEstimate(mode=mode, dense=False, state_dim=estimate.state_dim, frames=estimate.frames,
-                            max_rows=estimate.max_rows,
-                            peak_bytes=estimate.peak_bytes + SMOOTHER_BYTES_PER_OBSERVATION * dataset.num_observations,
-                            seconds=SMOOTHER_FACTOR * estimate.seconds)
+        return replace(estimate, mode=mode,
+                       peak_bytes=estimate.peak_bytes + SMOOTHER_BYTES_PER_OBSERVATION * dataset.num_observations,
+                       seconds=SMOOTHER_FACTOR * estimate.seconds)
     T = max(1, dataset.num_frames)
     in_stride = dataset.obs_ids % config.landmark_stride == 0
     per_frame = np.bincount(dataset.observation_frames()[in_stride], minlength=T).astype(float)

@@ -48,10 +48,9 @@ def serve(port=8866, open_browser=False, data_dir=None, dataset=None, mode=None,
         from visla_edu._files import expand_user
 
         env[data.ENV_VAR] = str(expand_user(data_dir).resolve())
-    if dataset is not None:
-        env["VISLA_EDU_STEPPER_DATASET"] = str(dataset)
-    if mode is not None:
-        env["VISLA_EDU_STEPPER_MODE"] = str(mode)
+    for name, value in (("VISLA_EDU_STEPPER_DATASET", dataset), ("VISLA_EDU_STEPPER_MODE", mode)):
+        if value is not None:
+            env[name] = str(value)
     if importlib.util.find_spec("voila") is None:
         raise RuntimeError("the stepper page needs Voila: pip install voila")
     proc = subprocess.Popen(cmd, env=env, cwd=str(notebook.parent), **popen_options)

@@ -5,17 +5,8 @@ import io
 
 import numpy as np
 
-from visla_edu.codes import (
-    DEADRECKON,
-    OBS_FAR,
-    OBS_DELAYED,
-    OBS_GATED,
-    OBS_IGNORED,
-    OBS_NEW,
-    OBS_NO_DEPTH,
-    OBS_USED,
-    STATUS_NAMES,
-)
+from visla_edu.codes import (DEADRECKON, OBS_DELAYED, OBS_FAR, OBS_GATED, OBS_IGNORED, OBS_NEW, OBS_NO_DEPTH, OBS_USED,
+                              STATUS_NAMES)
 from visla_edu.plotting import GROUND_TRUTH_STYLE, PALETTE, STYLES
 from visla_edu.stepper.model import MODE_LABELS, world_position_covariance
 
@@ -87,9 +78,7 @@ class StepperFigure:
         self._image = {ax: self._build_image(ax, side) for ax, side in
                        ((self.ax_left, "left"), (self.ax_right, "right"))}
         self._build_nis()
-        handles = [self._image[self.ax_left][k] for k in
-                   (OBS_USED, "pred", OBS_NEW, OBS_GATED, OBS_NO_DEPTH,
-                    OBS_FAR)]
+        handles = [self._image[self.ax_left][k] for k in (OBS_USED, "pred", OBS_NEW, OBS_GATED, OBS_NO_DEPTH, OBS_FAR)]
         self.fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.99, 0.985), ncol=3,
                         fontsize="small", frameon=False, handletextpad=0.3, columnspacing=1.0,
                         title="stereo frame: observed by status, predicted (lines: innovations)",
@@ -137,10 +126,7 @@ class StepperFigure:
         arts = {"innov": self._dyn(LineCollection([], colors=PALETTE["orange"], linewidths=1.0, zorder=2))}
         ax.add_collection(arts["innov"])
         for code, (marker, color, label) in _STATUS_STYLE.items():
-            if marker in ("x", "."):
-                style = dict(c=color)
-            else:
-                style = dict(facecolors="none", edgecolors=color)
+            style = dict(c=color) if marker in ("x", ".") else dict(facecolors="none", edgecolors=color)
             arts[code] = self._dyn(ax.scatter(np.zeros(0), np.zeros(0), s=18 if marker != "." else 8,
                                               marker=marker, linewidths=1.0, label=label, zorder=3, **style))
         arts["pred"] = self._dyn(ax.scatter(np.zeros(0), np.zeros(0), s=5, c=PALETTE["orange"], label="predicted", zorder=4))
@@ -160,10 +146,8 @@ class StepperFigure:
         self.nis_band = self._dyn(Polygon(np.zeros((0, 2)), closed=True, fc=PALETTE["bluish_green"], alpha=0.3, ec="none",
                                           label="95% band of χ²(dof)/dof"))
         ax.add_patch(self.nis_band)
-        self.nis_line, = ax.plot([], [], ".-", color=PALETTE["blue"], ms=2.5, lw=0.7, label="NIS / dof")
-        self.nis_now = ax.axvline(0, color="k", lw=0.8, alpha=0.6)
-        self._dyn(self.nis_line)
-        self._dyn(self.nis_now)
+        self.nis_line = self._dyn(ax.plot([], [], ".-", color=PALETTE["blue"], ms=2.5, lw=0.7, label="NIS / dof")[0])
+        self.nis_now = self._dyn(ax.axvline(0, color="k", lw=0.8, alpha=0.6))
         ax.axhline(1.0, color="0.4", lw=0.8, ls=":")
         ax.set_yscale("log")
         ax.set_ylim(0.02, 50)
@@ -232,8 +216,7 @@ class StepperFigure:
         self.captions["frame"] = (f"frame {t}: {len(rec.ids)} observations, {counts[OBS_USED]} used, "
                                   f"{counts[OBS_NEW]} new, {counts[OBS_GATED]} gated")
         self._update_nis(stepper, rec, t)
-        ds = stepper.dataset
-        self.title.set_text(f"{ds.name}: {MODE_LABELS[stepper.mode]}\nt = {t} / {ds.num_frames - 1}"
+        self.title.set_text(f"{stepper.dataset.name}: {MODE_LABELS[stepper.mode]}\nt = {t} / {stepper.num_frames - 1}"
                             f"   ({stepper.time_stamps[t]:.2f} s)")
         if self.annotate:
             for artist, key in ((self.image_text, "frame"), (self.map_text, "map"), (self.nis_text, "nis")):
@@ -324,8 +307,7 @@ class StepperFigure:
         nis, dof = stepper.nis, stepper.nis_dof
         frames = np.arange(t + 1)
         ok = dof > 0
-        ratio = np.full(t + 1, np.nan)
-        ratio[ok] = nis[ok] / dof[ok]
+        ratio = np.divide(nis, dof, out=np.full(t + 1, np.nan), where=ok)
         self.nis_line.set_data(frames, ratio)
         lo, hi = stepper.nis_band_series()
         f, lo, hi = frames[ok], lo[ok], hi[ok]
@@ -335,12 +317,11 @@ class StepperFigure:
         inside = f"; {100 * np.mean((ratio[ok] >= lo) & (ratio[ok] <= hi)):.0f}% of updates so far in the band" \
             if len(f) else ""
         if rec.nis_dof:
-            text = f"NIS/dof = {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof}){inside}"
+            self.captions["nis"] = f"NIS/dof = {rec.nis / rec.nis_dof:.2f} (dof {rec.nis_dof}){inside}"
         elif stepper.mode == DEADRECKON:
-            text = "dead reckoning: no updates, no NIS"
+            self.captions["nis"] = "dead reckoning: no updates, no NIS"
         else:
-            text = f"no update at frame {t}{inside}"
-        self.captions["nis"] = text
+            self.captions["nis"] = f"no update at frame {t}{inside}"
 
     # ---------------------------------------------------------------- output
     @contextlib.contextmanager
@@ -378,10 +359,7 @@ class StepperFigure:
         else:
             canvas.restore_region(self._map_bg)
         for a in self._dynamic:
-            if a is self.title:
-                self.fig.draw_artist(a)
-            else:
-                a.axes.draw_artist(a)
+            self.fig.draw_artist(a)
 
     def render_png(self):
         """The figure as PNG bytes (fast zlib setting: the image is shown once)."""

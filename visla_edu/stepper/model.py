@@ -19,14 +19,7 @@ from visla_edu import metrics, motion, run
 from visla_edu.codes import DEADRECKON, MAPPING, MODES, SLAM, STATUS_NAMES, VIO
 from visla_edu.filters import FilterConfig, StepRecord
 
-__all__ = [
-    "MODE_LABELS",
-    "NOISE_FIELDS",
-    "SteppableFilter",
-    "Stepper",
-    "dataset_choices",
-    "world_position_covariance",
-]
+__all__ = ["MODE_LABELS", "NOISE_FIELDS", "SteppableFilter", "Stepper", "dataset_choices", "world_position_covariance"]
 
 #: Human-readable names of the filter modes (keys: :data:`visla_edu.codes.MODES`).
 MODE_LABELS = {
@@ -36,12 +29,9 @@ MODE_LABELS = {
     SLAM: "SLAM (joint EKF)",
 }
 
-#: The FilterConfig fields the stepper's noise and initialisation controls change (those
-#: this version of FilterConfig has).
-NOISE_FIELDS = tuple(
-    name for name in ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity",
-                      "landmark_prior_sigma", "landmark_prior_inflation", "gate_probability")
-    if name in {f.name for f in fields(FilterConfig)})
+#: The FilterConfig fields the stepper's noise and initialisation controls change.
+NOISE_FIELDS = ("sigma_pixel", "sigma_linear_velocity", "sigma_angular_velocity", "landmark_prior_sigma",
+                "landmark_prior_inflation", "gate_probability")
 
 #: Simulated drives offered besides what :func:`visla_edu.data.available` lists.
 _EXTRA_SIMULATED = ("sim-small", "sim-tiny")

@@ -143,12 +143,9 @@ class StepperWidget(w.VBox):
     def _build_noise_box(self):
         """One slider per noise setting and a defaults button, in a closed accordion."""
         in_use = self.stepper.config_in_use  # resolved: "auto" settings carry the measured values
-        self.noise_sliders = {}
-        for name in NOISE_FIELDS:
-            value = _slider_value(getattr(in_use, name))
-            slider = _noise_slider(name, value, value)
+        self.noise_sliders = {name: _noise_slider(name, _slider_value(getattr(in_use, name))) for name in NOISE_FIELDS}
+        for slider in self.noise_sliders.values():
             slider.observe(self._on_noise, names="value")
-            self.noise_sliders[name] = slider
         self.defaults_button = w.Button(description="defaults", tooltip="restore the default noise settings",
                                         layout=w.Layout(width="7em"))
         self.defaults_button.on_click(self._on_defaults)
@@ -186,23 +183,17 @@ class StepperWidget(w.VBox):
         self.redraw(error=error)
 
     def _on_dataset(self, change):
-        if self._busy:
-            return
-        self._reconfigure(dict(dataset=change["new"]), keep_time=False,
-                          revert=lambda: setattr(self.dataset_dropdown, "value", change["old"]))
+        if not self._busy:
+            self._reconfigure({"dataset": change["new"]}, keep_time=False, change=change)
 
     def _on_mode(self, change):
-        if self._busy:
-            return
-        self._reconfigure(dict(mode=change["new"]), keep_time=True,
-                          revert=lambda: setattr(self.mode_dropdown, "value", change["old"]))
+        if not self._busy:
+            self._reconfigure({"mode": change["new"]}, keep_time=True, change=change)
 
     def _on_noise(self, change):
-        if self._busy:
-            return
-        name = next(k for k, v in self.noise_sliders.items() if v is change["owner"])
-        self._reconfigure({name: float(change["new"])}, keep_time=True,
-                          revert=lambda: setattr(change["owner"], "value", change["old"]))
+        if not self._busy:
+            name = next(k for k, v in self.noise_sliders.items() if v is change["owner"])
+            self._reconfigure({name: float(change["new"])}, keep_time=True, change=change)
 
     def _on_defaults(self, _):
         defaults = FilterConfig()
@@ -216,17 +207,18 @@ class StepperWidget(w.VBox):
         self.figure.follow = bool(change["new"])
         self.redraw()
 
-    def _reconfigure(self, settings, keep_time, revert=None):
-        """Re-configure the stepper (it restarts at frame 0), then go back to the same frame."""
+    def _reconfigure(self, settings, keep_time, change=None):
+        """Re-configure the stepper (it restarts at frame 0), then go back to the same frame; a refused ``change``
+        (the control's) is reverted."""
         t = self.stepper.t
         self.play.playing = False
         self._show_status("<i>re-running the filter...</i>")
         try:
             self.stepper.configure(**settings)
         except (ValueError, FileNotFoundError, TypeError) as err:
-            if revert is not None:
+            if change is not None:
                 with self._busy():
-                    revert()
+                    change["owner"].value = change["old"]
             self.redraw(error=err)
             return
         T = self.stepper.num_frames
@@ -282,15 +274,15 @@ def _slider_value(value):
     return float(np.max(value))
 
 
-def _noise_slider(name, value, default):
-    """Slider over :data:`NOISE_RANGES`, widened to hold ``value`` and ``default``: the gate's linear, sigmas' log."""
+def _noise_slider(name, value):
+    """Slider over :data:`NOISE_RANGES`, widened to hold ``value``: the gate's linear, sigmas' log."""
     lo, hi = NOISE_RANGES[name]
     label, tip = _NOISE_DESCRIPTIONS[name]
     common = dict(description=label, tooltip=tip, continuous_update=False,
                   style={"description_width": "8em"}, layout=w.Layout(width="24em"))
     if name == "gate_probability":
         return w.FloatSlider(value=value, min=min(lo, value), max=hi, step=0.0005, readout_format=".4f", **common)
-    lo, hi = min(lo, value, default), max(hi, value, default)
+    lo, hi = min(lo, value), max(hi, value)
     return w.FloatLogSlider(value=value, base=10, min=np.log10(lo), max=np.log10(hi), step=0.05,
                             readout_format=".3g", **common)
 
