@@ -165,15 +165,12 @@ class Dataset:
     def track_spans(self):
         """First and last frame each landmark is observed at, shape (M, 2); -1 if never."""
         frames = self.observation_frames()
-        spans = np.full((self.num_landmarks, 2), -1, dtype=np.int64)
         first = np.full(self.num_landmarks, np.iinfo(np.int64).max)
         last = np.full(self.num_landmarks, -1, dtype=np.int64)
         np.minimum.at(first, self.obs_ids, frames)
         np.maximum.at(last, self.obs_ids, frames)
-        seen = last >= 0
-        spans[seen, 0] = first[seen]
-        spans[seen, 1] = last[seen]
-        return spans
+        first[last < 0] = -1
+        return np.stack([first, last], axis=1)
 
     def track_lengths(self):
         """Number of observations of each landmark, shape (M,)."""
