@@ -20,7 +20,6 @@ __all__ = [
     "data_dir",
     "resolve_dir",
     "available",
-    "has_standin_inputs",
     "missing_standin_inputs",
     "identify",
     "ground_truth_files",
@@ -114,7 +113,7 @@ def available(data_dir=None):
     directory, _ = resolve_dir(data_dir)
     names = []
     for name in COURSE_NAMES:
-        if (directory / f"{name}.npz").is_file() or (name == "10" and has_standin_inputs(directory)):
+        if (directory / f"{name}.npz").is_file() or (name == "10" and not missing_standin_inputs(directory)):
             names.append(name)
     candidates = [*directory.glob("dataset*/dataset*.npy"), *directory.glob("dataset*.npy")] if directory.is_dir() \
         else []
@@ -131,11 +130,6 @@ def course2025_files(name, directory):
 def missing_standin_inputs(directory):
     """The :data:`STANDIN_INPUTS` that are not regular files (links followed) in ``directory``, in order."""
     return [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
-
-
-def has_standin_inputs(directory):
-    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path)."""
-    return not missing_standin_inputs(directory)
 
 
 def identify(path, sha, stored_name=None, stored_label=None):
