@@ -136,9 +136,8 @@ def _detect_format(members, path):
     if len(candidates) == 1:
         fmt = candidates[0]
         missing = [k for k in FORMAT_KEYS[fmt] if k not in present]
-        hint = ""
-        if path.stem == "10_imu_only":
-            hint = " This is dataset 10's IMU-only file: load('10') builds the stand-in from it."
+        hint = " This is dataset 10's IMU-only file: load('10') builds the stand-in from it." \
+            if path.stem == "10_imu_only" else ""
         raise ValueError(f"{path}: looks like the {fmt} course format but is missing key(s) {missing}; {found}.{hint}")
     needs = "; ".join(
         f"{fmt} needs {list(req)} (missing {[k for k in req if k not in present]})" for fmt, req in FORMAT_KEYS.items()

@@ -24,7 +24,6 @@ __all__ = ["ArrayUnpickler", "read_pickled_dict", "MAX_PICKLE_BYTES"]
 MAX_PICKLE_BYTES = 2 * 2**30
 #: dtype specs a pickled plain array may use: booleans, (un)signed integers, floats, objects.
 _DTYPE_SPEC = re.compile(r"^(b1|[iu][1248]|f[248]|O[48])$")
-_NUMPY_MODULES = ("numpy.core.multiarray", "numpy._core.multiarray")
 
 
 class _NdarrayMarker:
@@ -66,11 +65,9 @@ def _frombuffer(buffer, dtype, shape, order):
 
 
 _ALLOWED = {("numpy", "ndarray"): _NDARRAY, ("numpy", "dtype"): _dtype}
-for _module in _NUMPY_MODULES:
-    _ALLOWED[(_module, "_reconstruct")] = _reconstruct
-    _ALLOWED[(_module, "scalar")] = _scalar
-for _module in ("numpy.core.numeric", "numpy._core.numeric"):
-    _ALLOWED[(_module, "_frombuffer")] = _frombuffer
+for _core in ("numpy.core", "numpy._core"):  # numpy 1 and 2
+    _ALLOWED.update({(f"{_core}.multiarray", "_reconstruct"): _reconstruct, (f"{_core}.multiarray", "scalar"): _scalar,
+                     (f"{_core}.numeric", "_frombuffer"): _frombuffer})
 
 
 class ArrayUnpickler(pickle.Unpickler):
