@@ -27,14 +27,10 @@ def features_streamed(fp, header, path):
     checked :class:`~visla_edu.data._zip.NpyHeader` (``(4, M, T)``, float or signed integer).
     """
     _, M, T = header.shape
-    if header.fortran_order:
-        chunks = _stream_frame_chunks(fp, header.dtype, M, T, path)
-        collect = _collect_frame_blocks
-    else:
-        chunks = _stream_chunks(fp, header.dtype, M, T, path)
-        collect = _collect_observations
+    stream, collect = ((_stream_frame_chunks, _collect_frame_blocks) if header.fortran_order
+                       else (_stream_chunks, _collect_observations))
     try:
-        sparse = collect(chunks, T, path)
+        sparse = collect(stream(fp, header.dtype, M, T, path), T, path)
     except ValueError:
         _drain(fp)  # a damaged archive shows only at the end (CRC): report that instead
         raise
@@ -87,14 +83,11 @@ def _array_chunks(features, M, T):
 
 
 def _read_exact(fp, size, path):
-    parts, remaining = [], size
-    while remaining:
-        part = fp.read(remaining)
-        if not part:
-            raise ValueError(f"{path}: key 'features' is truncated: its array data ends {remaining} bytes early")
-        parts.append(part)
-        remaining -= len(part)
-    return parts[0] if len(parts) == 1 else b"".join(parts)
+    """``size`` bytes of the zip member ``fp`` (whose ``read`` returns fewer only at its end)."""
+    data = fp.read(size)
+    if len(data) < size:
+        raise ValueError(f"{path}: key 'features' is truncated: its array data ends {size - len(data)} bytes early")
+    return data
 
 
 def _collect_observations(chunks, T, path):
