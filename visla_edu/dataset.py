@@ -253,9 +253,7 @@ def _segment_ground_truth(truth, start, stop, kept):
     if truth is None or truth.num_frames <= start:
         return None
     seg_T_world = lie.se3_inv(truth.world_T_imu[start])
-    landmarks = None
-    if truth.landmarks is not None:
-        landmarks = truth.landmarks[kept] @ seg_T_world[:3, :3].T + seg_T_world[:3, 3]
+    landmarks = None if truth.landmarks is None else truth.landmarks[kept] @ seg_T_world[:3, :3].T + seg_T_world[:3, 3]
     frames = slice(start, stop)
     return GroundTruth(
         world_T_imu=seg_T_world @ truth.world_T_imu[frames],

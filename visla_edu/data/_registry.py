@@ -111,10 +111,8 @@ def available(data_dir=None):
     found (either place of :func:`course2025_files`), then ``"sim"``.
     """
     directory, _ = resolve_dir(data_dir)
-    names = []
-    for name in COURSE_NAMES:
-        if (directory / f"{name}.npz").is_file() or (name == "10" and not missing_standin_inputs(directory)):
-            names.append(name)
+    names = [name for name in COURSE_NAMES
+             if (directory / f"{name}.npz").is_file() or (name == "10" and not missing_standin_inputs(directory))]
     candidates = [*directory.glob("dataset*/dataset*.npy"), *directory.glob("dataset*.npy")] if directory.is_dir() \
         else []
     found = {p.stem for p in candidates if COURSE2025_NAME.match(p.stem) and p in course2025_files(p.stem, directory)
