@@ -165,15 +165,12 @@ class Dataset:
     def track_spans(self):
         """First and last frame each landmark is observed at, shape (M, 2); -1 if never."""
         frames = self.observation_frames()
-        spans = np.full((self.num_landmarks, 2), -1, dtype=np.int64)
         first = np.full(self.num_landmarks, np.iinfo(np.int64).max)
         last = np.full(self.num_landmarks, -1, dtype=np.int64)
         np.minimum.at(first, self.obs_ids, frames)
         np.maximum.at(last, self.obs_ids, frames)
-        seen = last >= 0
-        spans[seen, 0] = first[seen]
-        spans[seen, 1] = last[seen]
-        return spans
+        first[last < 0] = -1
+        return np.stack([first, last], axis=1)
 
     def track_lengths(self):
         """Number of observations of each landmark, shape (M,)."""
@@ -256,9 +253,7 @@ def _segment_ground_truth(truth, start, stop, kept):
     if truth is None or truth.num_frames <= start:
         return None
     seg_T_world = lie.se3_inv(truth.world_T_imu[start])
-    landmarks = None
-    if truth.landmarks is not None:
-        landmarks = truth.landmarks[kept] @ seg_T_world[:3, :3].T + seg_T_world[:3, 3]
+    landmarks = None if truth.landmarks is None else truth.landmarks[kept] @ seg_T_world[:3, :3].T + seg_T_world[:3, 3]
     frames = slice(start, stop)
     return GroundTruth(
         world_T_imu=seg_T_world @ truth.world_T_imu[frames],

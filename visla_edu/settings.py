@@ -216,7 +216,7 @@ def _coerce(kind, value):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return False, value
     if kind is int:
-        integral = float(value).is_integer() if math.isfinite(float(value)) else False
+        integral = float(value).is_integer()  # False for nan and inf
         return integral, int(value) if integral else value
     return True, float(value)
 

@@ -192,9 +192,7 @@ def check_rigid(T, subject, tolerance=RIGID_TOL):
     Else a ``ValueError`` for the first that fails, in this order (a small excess of ``R^T R - I`` suggests
     rounded entries).
     """
-    if not nonrigid_frames(T[None], tolerance, last_row_tolerance=0.0)[0][0]:
-        return
-    orthogonality, _, det = (float(e[0]) for e in _rigid_errors(T[None]))
+    orthogonality, bottom, det = (float(e[0]) for e in _rigid_errors(T[None]))
     if orthogonality > tolerance:
         raise ValueError(
             f"{subject} is not a rigid transform: max |R^T R - I| = {orthogonality:.3g} > {tolerance:g}"
@@ -203,7 +201,8 @@ def check_rigid(T, subject, tolerance=RIGID_TOL):
         )
     if det < 0:
         raise ValueError(f"{subject} is not a rigid transform: det(R) = {det:.6g}, expected +1 (a reflection?)")
-    raise ValueError(f"{subject} is not a rigid transform: last row is {T[3].tolist()}, expected [0, 0, 0, 1]")
+    if bottom > 0:
+        raise ValueError(f"{subject} is not a rigid transform: last row is {T[3].tolist()}, expected [0, 0, 0, 1]")
 
 
 def check_rigid_poses(poses, subject, tolerance=POSE_RIGID_TOL):

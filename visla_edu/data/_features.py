@@ -27,14 +27,10 @@ def features_streamed(fp, header, path):
     checked :class:`~visla_edu.data._zip.NpyHeader` (``(4, M, T)``, float or signed integer).
     """
     _, M, T = header.shape
-    if header.fortran_order:
-        chunks = _stream_frame_chunks(fp, header.dtype, M, T, path)
-        collect = _collect_frame_blocks
-    else:
-        chunks = _stream_chunks(fp, header.dtype, M, T, path)
-        collect = _collect_observations
+    stream, collect = ((_stream_frame_chunks, _collect_frame_blocks) if header.fortran_order
+                       else (_stream_chunks, _collect_observations))
     try:
-        sparse = collect(chunks, T, path)
+        sparse = collect(stream(fp, header.dtype, M, T, path), T, path)
     except ValueError:
         _drain(fp)  # a damaged archive shows only at the end (CRC): report that instead
         raise
@@ -87,14 +83,11 @@ def _array_chunks(features, M, T):
 
 
 def _read_exact(fp, size, path):
-    parts, remaining = [], size
-    while remaining:
-        part = fp.read(remaining)
-        if not part:
-            raise ValueError(f"{path}: key 'features' is truncated: its array data ends {remaining} bytes early")
-        parts.append(part)
-        remaining -= len(part)
-    return parts[0] if len(parts) == 1 else b"".join(parts)
+    """``size`` bytes of the zip member ``fp`` (whose ``read`` returns fewer only at its end)."""
+    data = fp.read(size)
+    if len(data) < size:
+        raise ValueError(f"{path}: key 'features' is truncated: its array data ends {size - len(data)} bytes early")
+    return data
 
 
 def _collect_observations(chunks, T, path):
@@ -121,24 +114,20 @@ def _collect_observations(chunks, T, path):
 
 def _collect_frame_blocks(chunks, T, path):
     """Like :func:`_collect_observations` for Fortran-order blocks ``(first_frame, (frames, M, 4))``."""
-    ids, frames, values = [], [], []
+    found = []
     for first, block in chunks:
         for plane in range(4):
             _check_finite_block(block[:, :, plane].T, plane, 0, path, first_frame=first)
         observed = block[:, :, 0] != -1
         for plane in range(1, 4):
-            unobserved = block[:, :, plane] == -1
-            if np.any(unobserved == observed):
-                t, m = (int(i) for i in np.argwhere(unobserved == observed)[0])
+            partial = (block[:, :, plane] == -1) == observed
+            if partial.any():
+                t, m = (int(i) for i in np.argwhere(partial)[0])
                 raise ValueError(_partial_message(path, plane, m, first + t, block[t, m, plane], observed[t, m]))
         t, m = np.nonzero(observed)
-        _check_count(sum(len(i) for i in ids) + len(m), path)
-        ids.append(m)
-        frames.append(t + first)
-        values.append(block[t, m].astype(float))
-    ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, dtype=np.int64)
-    frames = np.concatenate(frames).astype(np.int64) if frames else np.zeros(0, dtype=np.int64)
-    z = np.concatenate(values) if values else np.zeros((0, 4))
+        _check_count(sum(len(f[0]) for f in found) + len(m), path)
+        found.append((m, t + first, block[t, m]))
+    ids, frames, z = _concatenate(found, (4,))
     order, frame_ptr = frame_major_order(ids, frames, T)
     return frame_ptr, ids[order], z[order]
 
@@ -151,11 +140,16 @@ def _check_count(count, path):
 
 def _start_observations(found):
     """Concatenate plane-0 findings: landmark ids (sorted), frames, and z with uL filled."""
-    ids = np.concatenate([f[0] for f in found]) if found else np.zeros(0, dtype=np.int64)
-    frames = np.concatenate([f[1] for f in found]) if found else np.zeros(0, dtype=np.int64)
+    ids, frames, uL = _concatenate(found, ())
     z = np.empty((len(ids), 4))
-    z[:, 0] = np.concatenate([f[2] for f in found]) if found else 0.0
-    return ids.astype(np.int64), frames.astype(np.int64), z
+    z[:, 0] = uL
+    return ids, frames, z
+
+
+def _concatenate(found, value_shape):
+    """The ``(ids, frames, values)`` found, each concatenated: int64 ids and frames, float values."""
+    empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, *value_shape)))
+    return (np.concatenate(parts) for parts in zip(empty, *found))
 
 
 def _check_finite_block(block, plane, first, path, first_frame=0):

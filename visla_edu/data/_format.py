@@ -20,6 +20,7 @@ __all__ = [
     "FORMAT_KEYS",
     "FORMAT_SPECIFIC_KEYS",
     "GROUND_TRUTH_KEYS",
+    "GROUND_TRUTH_FIELDS",
     "TEXT_KEYS",
     "MAX_FRAMES",
     "MAX_FEATURES_BYTES",
@@ -55,6 +56,9 @@ GROUND_TRUTH_KEYS = (
     "ground_truth_angular_velocity",
     "ground_truth_outlier",
 )
+#: The :class:`~visla_edu.dataset.GroundTruth` field and dtype of each ground-truth key.
+GROUND_TRUTH_FIELDS = {key: (key.removeprefix("ground_truth_"), bool if key.endswith("outlier") else float)
+                       for key in GROUND_TRUTH_KEYS}
 #: Extra string keys written by :func:`~visla_edu.data.save`.
 TEXT_KEYS = ("name", "label")
 #: Most frames a course file may have: 28 hours at 10 Hz. Every per-frame array (and the
@@ -69,14 +73,7 @@ _MAX_TEXT = 10_000
 
 def check_course_headers(headers, fmt, path):
     """Check every key's dtype and shape from its ``.npy`` header (key -> NpyHeader); return ``(T, M)``."""
-    velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
-    for key in ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key):
-        check_numeric(headers[key], key, path)
-    T = _frame_count(headers["time_stamps"], path)
-    for key in ("linear_velocity", velocity_key):
-        check_shape(headers[key], (3, T), key, path, T)
-    for key, shape in (("K", (3, 3)), ("b", ()), (pose_key, (4, 4))):
-        check_shape(headers[key], shape, key, path)
+    T = _check_layout(headers, fmt, path)
     M = check_features_header(headers["features"], T, path)
     _check_extras_layout(headers, T, M, path)
     return T, M
@@ -89,15 +86,8 @@ def check_course_arrays(arrays, fmt, path):
     camera's rate, plausible velocities (:mod:`~._plausible`), :func:`check_calibration_keys`.
     """
     velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
-    keys = ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key)
-    for key in keys:
-        check_numeric(arrays[key], key, path)
-    T = _frame_count(arrays["time_stamps"], path)
-    for key in ("linear_velocity", velocity_key):
-        check_shape(arrays[key], (3, T), key, path, T)
-    for key, shape in (("K", (3, 3)), ("b", ()), (pose_key, (4, 4))):
-        check_shape(arrays[key], shape, key, path)
-    for key in keys:
+    T = _check_layout(arrays, fmt, path)
+    for key in ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key):
         check_finite(arrays[key], key, path)
     check_increasing(arrays["time_stamps"][0], path)
     check_time_stamps(arrays["time_stamps"][0], path)
@@ -105,6 +95,18 @@ def check_course_arrays(arrays, fmt, path):
     check_calibration_keys(arrays, path, pose_key)
     return T
 
+
+def _check_layout(items, fmt, path):
+    """Dtypes and shapes of the keys but ``features`` in ``items`` (arrays or headers); return T."""
+    velocity_key, pose_key = FORMAT_SPECIFIC_KEYS[fmt]
+    for key in ("time_stamps", "linear_velocity", velocity_key, "K", "b", pose_key):
+        check_numeric(items[key], key, path)
+    T = _frame_count(items["time_stamps"], path)
+    for key in ("linear_velocity", velocity_key):
+        check_shape(items[key], (3, T), key, path, T)
+    for key, shape in (("K", (3, 3)), ("b", ()), (pose_key, (4, 4))):
+        check_shape(items[key], shape, key, path)
+    return T
 
 def check_calibration_keys(arrays, path, pose_key=None):
     """``K`` (3, 3), ``b`` () and, unless ``pose_key`` is None, the extrinsics (4, 4): valid, then plausible.

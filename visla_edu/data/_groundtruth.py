@@ -82,7 +82,7 @@ def check_times(times, time_stamps, path, tolerance=TIME_TOLERANCE, allow_longer
     if not (np.isfinite(tolerance) and tolerance >= 0):
         raise ValueError(f"check_times: tolerance must be a finite number of seconds >= 0, got {tolerance!r}")
     relative = time_stamps[: len(times)] - time_stamps[0]
-    error = np.abs(np.asarray(times, dtype=float) - relative)
+    error = np.abs(times - relative)
     bad = np.flatnonzero(error > tolerance)
     if len(bad) and np.all(np.abs(times - times[0] - relative) <= tolerance):
         raise ValueError(f"{path}: the times start at {times[0]:.6f} s, not 0, and match the dataset's after "
@@ -129,8 +129,7 @@ def load_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLER
     cam0_T_cam = np.linalg.inv(cam0_T_cam[0]) @ cam0_T_cam
     world_T_imu = imu_poses_from_kitti(cam0_T_cam, dataset.imu_T_cam)
     check_ground_truth_reach(world_T_imu, dataset.time_stamps, "KITTI poses", poses_path)
-    source = str(expand_user(poses_path).resolve())
-    return GroundTruth(world_T_imu=world_T_imu, source=source, file_rows=file_rows)
+    return GroundTruth(world_T_imu=world_T_imu, source=str(expand_user(poses_path).resolve()), file_rows=file_rows)
 
 
 def attach_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOLERANCE):
@@ -138,8 +137,7 @@ def attach_ground_truth(dataset, poses_path, times_path=None, tolerance=TIME_TOL
 
     Replaces any ground truth; ``dataset`` is not modified, and its arrays are shared with the copy, not copied.
     """
-    truth = load_ground_truth(dataset, poses_path, times_path, tolerance)
-    return dataclasses.replace(dataset, ground_truth=truth)
+    return dataclasses.replace(dataset, ground_truth=load_ground_truth(dataset, poses_path, times_path, tolerance))
 
 
 def attach_registered_ground_truth(dataset):

@@ -97,10 +97,7 @@ def input_files(name_or_path, data_dir=None):
 
 def _registered_ground_truth_beside(npz):
     """Every registered ground-truth file beside ``npz`` (a drive is recognised by content, not name)."""
-    found = []
-    for name in REGISTRY:
-        found.extend(f for f in ground_truth_files(name, npz.parent) or () if f is not None)
-    return found
+    return [f for name in REGISTRY for f in ground_truth_files(name, npz.parent) or () if f is not None]
 
 
 def _looks_like_path(value):

@@ -21,6 +21,8 @@ from visla_edu.data._format import (
     FORMAT_2019,
     FORMAT_2021,
     FORMAT_KEYS,
+    FORMAT_SPECIFIC_KEYS,
+    GROUND_TRUTH_FIELDS,
     GROUND_TRUTH_KEYS,
     TEXT_KEYS,
     check_course_arrays,
@@ -129,15 +131,13 @@ def _detect_format(members, path):
         raise ValueError(f"{path}: is a result file of 'visla-edu run --out' (keys world_T_imu, landmarks, mode, "
                          "...), not a course file; give the course file the run read, or read this one with "
                          "visla_edu.run.load_result")
-    markers = {FORMAT_2021: {"angular_velocity", "imu_T_cam"}, FORMAT_2019: {"rotational_velocity", "cam_T_imu"}}
-    candidates = [fmt for fmt, keys in markers.items() if keys & present]
+    candidates = [fmt for fmt, keys in FORMAT_SPECIFIC_KEYS.items() if present.intersection(keys)]
     found = f"found keys {sorted(present)}"
     if len(candidates) == 1:
         fmt = candidates[0]
         missing = [k for k in FORMAT_KEYS[fmt] if k not in present]
-        hint = ""
-        if path.stem == "10_imu_only":
-            hint = " This is dataset 10's IMU-only file: load('10') builds the stand-in from it."
+        hint = " This is dataset 10's IMU-only file: load('10') builds the stand-in from it." \
+            if path.stem == "10_imu_only" else ""
         raise ValueError(f"{path}: looks like the {fmt} course format but is missing key(s) {missing}; {found}.{hint}")
     needs = "; ".join(
         f"{fmt} needs {list(req)} (missing {[k for k in req if k not in present]})" for fmt, req in FORMAT_KEYS.items()
@@ -190,11 +190,5 @@ def _ground_truth(arrays):
     """The :class:`GroundTruth` of a file written by :func:`~visla_edu.data.save`, or None."""
     if GROUND_TRUTH_KEYS[0] not in arrays:
         return None
-    world_T_imu, landmarks, linear, angular, outlier = (arrays[k] for k in GROUND_TRUTH_KEYS)
-    return GroundTruth(
-        world_T_imu=np.array(world_T_imu, dtype=float),
-        landmarks=np.array(landmarks, dtype=float),
-        linear_velocity=np.array(linear, dtype=float),
-        angular_velocity=np.array(angular, dtype=float),
-        outlier=np.array(outlier, dtype=bool),
-    )
+    fields = {field: np.array(arrays[key], dtype=dtype) for key, (field, dtype) in GROUND_TRUTH_FIELDS.items()}
+    return GroundTruth(**fields)

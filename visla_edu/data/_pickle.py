@@ -15,17 +15,15 @@ import re
 import numpy as np
 
 from visla_edu._files import check_input_file, format_bytes
+from visla_edu.data._zip import read_npy_header
 
 __all__ = ["ArrayUnpickler", "read_pickled_dict", "MAX_PICKLE_BYTES"]
 
 #: Largest file read (a pickle is read whole, not streamed): 2 GiB, 1.5 times dataset 10's dense
 #: features as float64.
 MAX_PICKLE_BYTES = 2 * 2**30
-#: Largest ``.npy`` header read (numpy's own default limit).
-_MAX_HEADER_BYTES = 10_000
 #: dtype specs a pickled plain array may use: booleans, (un)signed integers, floats, objects.
 _DTYPE_SPEC = re.compile(r"^(b1|[iu][1248]|f[248]|O[48])$")
-_NUMPY_MODULES = ("numpy.core.multiarray", "numpy._core.multiarray")
 
 
 class _NdarrayMarker:
@@ -67,11 +65,9 @@ def _frombuffer(buffer, dtype, shape, order):
 
 
 _ALLOWED = {("numpy", "ndarray"): _NDARRAY, ("numpy", "dtype"): _dtype}
-for _module in _NUMPY_MODULES:
-    _ALLOWED[(_module, "_reconstruct")] = _reconstruct
-    _ALLOWED[(_module, "scalar")] = _scalar
-for _module in ("numpy.core.numeric", "numpy._core.numeric"):
-    _ALLOWED[(_module, "_frombuffer")] = _frombuffer
+for _core in ("numpy.core", "numpy._core"):  # numpy 1 and 2
+    _ALLOWED.update({(f"{_core}.multiarray", "_reconstruct"): _reconstruct, (f"{_core}.multiarray", "scalar"): _scalar,
+                     (f"{_core}.numeric", "_frombuffer"): _frombuffer})
 
 
 class ArrayUnpickler(pickle.Unpickler):
@@ -117,11 +113,7 @@ def read_pickled_dict(path):
 def _check_header(fp, path):
     """Read the magic string and header: a 0-d (or 1-element) object array, else ValueError."""
     try:
-        version = np.lib.format.read_magic(fp)
-        if version not in ((1, 0), (2, 0)):
-            raise ValueError(f".npy format version {version[0]}.{version[1]}")
-        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, _, dtype = read(fp, max_header_size=_MAX_HEADER_BYTES)
+        shape, _, dtype = read_npy_header(fp)
     except Exception as exc:  # noqa: BLE001 - numpy parses untrusted bytes (literal_eval...)
         raise ValueError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc}); the 2025+ course files "
                          "are written with np.save(path, dict)") from None

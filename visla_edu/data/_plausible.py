@@ -97,9 +97,8 @@ def check_time_stamps(stamps, path, key="time_stamps", index="[0, {}]"):
         raise ValueError(
             f"{path}: key '{key}' has a gap of {steps[i]:.6g} s between frames {i} and {i + 1} "
             f"({key}{index.format(i)} = {float(stamps[i])!r}, {key}{index.format(i + 1)} = {float(stamps[i + 1])!r}; "
-            f"the median step "
-            f"is {median:.4g} s, the most allowed {limit:.4g} s): dead reckoning would carry one velocity sample "
-            f"across it. Split the drive at frame {i + 1}, or fix the stamp")
+            f"the median step is {median:.4g} s, the most allowed {limit:.4g} s): dead reckoning would carry one "
+            f"velocity sample across it. Split the drive at frame {i + 1}, or fix the stamp")
 
 
 def check_velocities(linear, angular, keys, path):
@@ -167,8 +166,7 @@ def check_observations(K, obs_z, path, K_right=None, K_key="K"):
         if not low[axis] - margin[axis] <= c[axis] <= high[axis] + margin[axis]:
             raise ValueError(
                 f"{path}: key '{K_key}': the principal point {name} = {c[axis]:.6g} px lies outside the observed "
-                "pixels "
-                f"({low[axis]:.6g} to {high[axis]:.6g} px, {len(obs_z)} observations); it should be near the "
+                f"pixels ({low[axis]:.6g} to {high[axis]:.6g} px, {len(obs_z)} observations); it should be near the "
                 "image centre. Are cu and cv swapped, or K from another camera?")
 
 
@@ -211,13 +209,11 @@ def check_track_layout(frame_ptr, obs_ids, num_landmarks, path):
     T = len(frame_ptr) - 1
     if num_landmarks != T or len(obs_ids) == 0:
         return
-    frames = np.repeat(np.arange(T), np.diff(frame_ptr))
     per_frame = np.diff(frame_ptr)
+    frames = np.repeat(np.arange(T), per_frame)
     seen = per_frame > 0
-    id_span = np.zeros(T, dtype=np.int64)
-    first = frame_ptr[:-1][seen]
-    id_span[seen] = obs_ids[frame_ptr[1:][seen] - 1] - obs_ids[first] + 1
-    frames_contiguous = np.all(id_span[seen] == per_frame[seen]) and np.any(per_frame > 1)
+    id_span = obs_ids[frame_ptr[1:][seen] - 1] - obs_ids[frame_ptr[:-1][seen]] + 1
+    frames_contiguous = np.all(id_span == per_frame[seen]) and np.any(per_frame > 1)
     count = np.bincount(obs_ids, minlength=T)
     lo = np.full(T, T)
     hi = np.full(T, -1)

@@ -20,7 +20,6 @@ __all__ = [
     "data_dir",
     "resolve_dir",
     "available",
-    "has_standin_inputs",
     "missing_standin_inputs",
     "identify",
     "ground_truth_files",
@@ -112,10 +111,8 @@ def available(data_dir=None):
     found (either place of :func:`course2025_files`), then ``"sim"``.
     """
     directory, _ = resolve_dir(data_dir)
-    names = []
-    for name in COURSE_NAMES:
-        if (directory / f"{name}.npz").is_file() or (name == "10" and has_standin_inputs(directory)):
-            names.append(name)
+    names = [name for name in COURSE_NAMES
+             if (directory / f"{name}.npz").is_file() or (name == "10" and not missing_standin_inputs(directory))]
     candidates = [*directory.glob("dataset*/dataset*.npy"), *directory.glob("dataset*.npy")] if directory.is_dir() \
         else []
     found = {p.stem for p in candidates if COURSE2025_NAME.match(p.stem) and p in course2025_files(p.stem, directory)
@@ -131,11 +128,6 @@ def course2025_files(name, directory):
 def missing_standin_inputs(directory):
     """The :data:`STANDIN_INPUTS` that are not regular files (links followed) in ``directory``, in order."""
     return [f for f in STANDIN_INPUTS if not (directory / f).is_file()]
-
-
-def has_standin_inputs(directory):
-    """Whether both :data:`STANDIN_INPUTS` are files in ``directory`` (a pathlib.Path)."""
-    return not missing_standin_inputs(directory)
 
 
 def identify(path, sha, stored_name=None, stored_label=None):

@@ -5,7 +5,7 @@ import numpy as np
 
 from visla_edu._files import atomic_write, expand_user
 from visla_edu.camera import same_intrinsics
-from visla_edu.data._format import GROUND_TRUTH_KEYS
+from visla_edu.data._format import GROUND_TRUTH_FIELDS
 
 __all__ = ["save"]
 
@@ -25,8 +25,7 @@ def save(dataset, path):
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
     arrays = _course_arrays(dataset)
-    if _saved_ground_truth(dataset) is not None:
-        arrays.update(_ground_truth_arrays(dataset.ground_truth))
+    arrays.update(_ground_truth_arrays(dataset))
     arrays["name"] = np.array(str(dataset.name))
     arrays["label"] = np.array(str(dataset.label))
     with atomic_write(path, "wb") as f:
@@ -47,21 +46,9 @@ def _course_arrays(dataset):
     }
 
 
-def _saved_ground_truth(dataset):
-    """The ground truth :func:`save` writes: a simulated drive's, complete for every frame; else None."""
+def _ground_truth_arrays(dataset):
+    """The ground-truth keys :func:`save` writes: a simulated drive's, complete for every frame; else none."""
     gt = dataset.ground_truth
     if gt is None or not gt.simulated or gt.num_frames != dataset.num_frames:
-        return None
-    return gt
-
-
-def _ground_truth_arrays(gt):
-    """The ground-truth keys of :data:`~visla_edu.data._format.GROUND_TRUTH_KEYS`, time-major."""
-    values = (
-        np.asarray(gt.world_T_imu, dtype=float),
-        np.asarray(gt.landmarks, dtype=float),
-        np.asarray(gt.linear_velocity, dtype=float),
-        np.asarray(gt.angular_velocity, dtype=float),
-        np.asarray(gt.outlier, dtype=bool),
-    )
-    return dict(zip(GROUND_TRUTH_KEYS, values))
+        return {}
+    return {key: np.asarray(getattr(gt, field), dtype=dtype) for key, (field, dtype) in GROUND_TRUTH_FIELDS.items()}

@@ -164,8 +164,8 @@ def _observation_lines(s):
     lines = [f"  landmarks     {s['landmarks']}" + (f" ({never} never observed)" if never else " (every one observed)")]
     lines.append(f"  observations  {s['observations']} in total; per frame {_fmt_stats(s['observations_per_frame'])}")
     if s["frames_without_observations"]:
-        count = s["frames_without_observations"]
-        lines.append(f"                {count} frames have no observations (prediction only)")
+        lines.append(f"                {s['frames_without_observations']} frames have no observations "
+                     "(prediction only)")
     return lines
 
 
@@ -201,11 +201,11 @@ def _disparity_lines(s):
 
 def _motion_lines(s):
     speed = s["speed_m_s"]
-    lines = [
+    return [
         f"  speed         mean {speed['mean']:.2f} m/s (min {speed['min']:.2f}, max {speed['max']:.2f}); "
-        f"about {s['distance_m']:.0f} m driven"
+        f"about {s['distance_m']:.0f} m driven",
+        f"  ground truth  {_truth_text(s)}",
     ]
-    return lines + [f"  ground truth  {_truth_text(s)}"]
 
 
 def _truth_text(s):

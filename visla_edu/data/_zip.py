@@ -16,7 +16,7 @@ import numpy as np
 
 from visla_edu._files import format_bytes
 
-__all__ = ["ZIP_ERRORS", "NpyHeader", "member_infos", "read_header", "read_member"]
+__all__ = ["ZIP_ERRORS", "NpyHeader", "member_infos", "read_header", "read_member", "read_npy_header"]
 
 #: Errors of ``zipfile`` and ``zlib`` that mean the archive is damaged.
 ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError)
@@ -93,14 +93,22 @@ def read_header(zf, info, key, path):
     return header
 
 
+def read_npy_header(fp, version_note=""):
+    """``(shape, fortran_order, dtype)`` of the ``.npy`` header at ``fp``, as numpy reads it (at most 10,000 bytes).
+
+    A version other than 1.0 or 2.0 is a ValueError, ``version_note`` ending its message.
+    """
+    version = np.lib.format.read_magic(fp)
+    if version not in ((1, 0), (2, 0)):
+        raise ValueError(f".npy format version {version[0]}.{version[1]}{version_note}")
+    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    return read(fp, max_header_size=_MAX_HEADER_BYTES)
+
+
 def _parse_header(fp, key, path):
     try:
-        version = np.lib.format.read_magic(fp)
-        if version not in ((1, 0), (2, 0)):
-            raise ValueError(f".npy format version {version[0]}.{version[1]}; numpy writes plain arrays as "
-                             "1.0 or 2.0 (3.0 only for structured dtypes with non-Latin-1 field names)")
-        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, fortran_order, dtype = read(fp, max_header_size=_MAX_HEADER_BYTES)
+        shape, fortran_order, dtype = read_npy_header(fp, "; numpy writes plain arrays as 1.0 or 2.0 (3.0 only "
+                                                          "for structured dtypes with non-Latin-1 field names)")
         offset = fp.tell()
     except (zipfile.BadZipFile, zlib.error):
         raise  # the archive itself is damaged: the caller says so
