@@ -108,6 +108,7 @@ def _check_layout(items, fmt, path):
         check_shape(items[key], shape, key, path)
     return T
 
+
 def check_calibration_keys(arrays, path, pose_key=None):
     """``K`` (3, 3), ``b`` () and, unless ``pose_key`` is None, the extrinsics (4, 4): valid, then plausible.
 
