@@ -36,12 +36,9 @@ def projection_jacobian(q):
     q = lie._as_vectors(q, 4, "projection_jacobian")
     inv_q3 = 1.0 / q[..., 2]
     J = np.zeros(q.shape[:-1] + (4, 4))
-    J[..., 0, 0] = inv_q3
-    J[..., 1, 1] = inv_q3
-    J[..., 3, 3] = inv_q3
-    J[..., 0, 2] = -q[..., 0] * inv_q3**2
-    J[..., 1, 2] = -q[..., 1] * inv_q3**2
-    J[..., 3, 2] = -q[..., 3] * inv_q3**2
+    for i in (0, 1, 3):
+        J[..., i, i] = inv_q3
+        J[..., i, 2] = -q[..., i] * inv_q3**2
     return J
 
 

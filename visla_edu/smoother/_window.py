@@ -127,8 +127,8 @@ class _WindowState:
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v], ds.frame_ptr[v + 1])
         idx = idx[self.status[idx] == OBS_USED]
+        idx = idx[np.isfinite(self.landmarks[ds.obs_ids[idx], 0])]
         ids = ds.obs_ids[idx]
-        idx, ids = idx[np.isfinite(self.landmarks[ids, 0])], ids[np.isfinite(self.landmarks[ids, 0])]
         if not len(idx):
             return
         m0 = self.landmarks[ids]
