@@ -215,8 +215,7 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
         newly = reject_outliers(problem, world_T_imu, m, config.rejection_probability)
         outlier |= newly
         dropped = drop_landmarks(problem, world_T_imu, m, config.min_observations)
-        for key, value in dropped.items():
-            rejected[key] += value
+        rejected.update({k: rejected[k] + v for k, v in dropped.items()})
         round_index += 1
         final = round_index == config.rejection_rounds or not (newly.any() or any(dropped.values()))
     rejected["outliers"] = int(outlier.sum())
