@@ -128,8 +128,7 @@ def twist_vee(U):
     Only ``U[..., :3, 3]`` and ``U32, U13, U21`` are read; the rest of ``U`` is not checked.
     """
     U = _as_matrices(U, 4, 4, "twist_vee")
-    w = np.stack([U[..., 2, 1], U[..., 0, 2], U[..., 1, 0]], axis=-1)
-    return np.concatenate([U[..., :3, 3], w], axis=-1)
+    return np.concatenate([U[..., :3, 3], vee(U[..., :3, :3])], axis=-1)
 
 
 def _angle(w):
@@ -237,10 +236,7 @@ def so3_log(R):
     symmetric part ``(R + R^T) / 2 - c I = (1 - c) a a^T`` instead of ``s``.
     """
     R = _as_matrices(R, 3, 3, "so3_log")
-    s = 0.5 * np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
+    s = 0.5 * vee(R - np.swapaxes(R, -1, -2))
     c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1)
     sin_t = np.linalg.norm(s, axis=-1)
     theta = np.arctan2(sin_t, c)
@@ -274,16 +270,9 @@ def se3_exp(u):
     """
     u = _as_vectors(u, 6, "se3_exp")
     v, w = u[..., :3], u[..., 3:]
-    theta, theta2 = _angle(w)
-    A = _sin_over_theta(theta, theta2)[..., None, None]
-    B = _one_minus_cos_over_theta2(theta, theta2)[..., None, None]
-    C = _theta_minus_sin_over_theta3(theta, theta2)[..., None, None]
-    W = hat(w)
-    W2 = W @ W
     T = np.zeros(u.shape[:-1] + (4, 4))
-    T[..., :3, :3] = np.eye(3) + A * W + B * W2
-    V = np.eye(3) + B * W + C * W2
-    T[..., :3, 3] = np.einsum("...ij,...j->...i", V, v)
+    T[..., :3, :3] = so3_exp(w)
+    T[..., :3, 3] = np.einsum("...ij,...j->...i", so3_left_jacobian(w), v)
     T[..., 3, 3] = 1.0
     return T
 
@@ -291,17 +280,21 @@ def se3_exp(u):
 def se3_log(T):
     """SE(3) logarithm: the twist ``u = [v; w]`` with ``se3_exp(u) == T``, (..., 4, 4) -> (..., 6).
 
-    ``w = so3_log(R)`` and ``v = V^{-1} p`` with ``V^{-1} = I - hat(w)/2 + D hat(w)^2`` (``D`` as in
-    the module docstring).
+    ``w = so3_log(R)`` and ``v = V^{-1} p`` with ``V^{-1} = J_r(-w)^{-1} = I - hat(w)/2 + D hat(w)^2`` (``D`` as
+    in the module docstring).
     """
     T = _as_matrices(T, 4, 4, "se3_log")
     w = so3_log(T[..., :3, :3])
-    theta, theta2 = _angle(w)
-    D = _inverse_jacobian_coefficient(theta, theta2)[..., None, None]
-    W = hat(w)
-    V_inv = np.eye(3) - 0.5 * W + D * (W @ W)
-    v = np.einsum("...ij,...j->...i", V_inv, T[..., :3, 3])
+    v = np.einsum("...ij,...j->...i", so3_right_jacobian_inv(-w), T[..., :3, 3])
     return np.concatenate([v, w], axis=-1)
+
+
+def _upper_6x6(diagonal, upper):
+    """The 6x6 matrix ``[[diagonal, upper], [0, diagonal]]`` of 3x3 blocks (..., 3, 3) -> (..., 6, 6)."""
+    out = np.zeros(diagonal.shape[:-2] + (6, 6))
+    out[..., :3, :3] = out[..., 3:, 3:] = diagonal
+    out[..., :3, 3:] = upper
+    return out
 
 
 def _q_right(x):
@@ -321,11 +314,7 @@ def se3_right_jacobian(x):
     (..., 6) -> (..., 6, 6).
     """
     x = _as_vectors(x, 6, "se3_right_jacobian")
-    A = so3_right_jacobian(x[..., 3:])
-    J = np.zeros(x.shape[:-1] + (6, 6))
-    J[..., :3, :3] = J[..., 3:, 3:] = A
-    J[..., :3, 3:] = _q_right(x)
-    return J
+    return _upper_6x6(so3_right_jacobian(x[..., 3:]), _q_right(x))
 
 
 def se3_right_jacobian_inv(x):
@@ -335,10 +324,7 @@ def se3_right_jacobian_inv(x):
     """
     x = _as_vectors(x, 6, "se3_right_jacobian_inv")
     A_inv = so3_right_jacobian_inv(x[..., 3:])
-    J = np.zeros(x.shape[:-1] + (6, 6))
-    J[..., :3, :3] = J[..., 3:, 3:] = A_inv
-    J[..., :3, 3:] = -A_inv @ _q_right(x) @ A_inv
-    return J
+    return _upper_6x6(A_inv, -A_inv @ _q_right(x) @ A_inv)
 
 
 def se3_inv(T):
@@ -359,22 +345,13 @@ def adjoint(T):
     """
     T = _as_matrices(T, 4, 4, "adjoint")
     R = T[..., :3, :3]
-    Ad = np.zeros(T.shape[:-2] + (6, 6))
-    Ad[..., :3, :3] = R
-    Ad[..., :3, 3:] = hat(T[..., :3, 3]) @ R
-    Ad[..., 3:, 3:] = R
-    return Ad
+    return _upper_6x6(R, hat(T[..., :3, 3]) @ R)
 
 
 def curly_hat(u):
     """The 6x6 ``ad`` matrix of a twist ``u = [v; w]``, (..., 6) -> (..., 6, 6): ``[[hat(w), hat(v)], [0, hat(w)]]``."""
     u = _as_vectors(u, 6, "curly_hat")
-    out = np.zeros(u.shape[:-1] + (6, 6))
-    W = hat(u[..., 3:])
-    out[..., :3, :3] = W
-    out[..., :3, 3:] = hat(u[..., :3])
-    out[..., 3:, 3:] = W
-    return out
+    return _upper_6x6(hat(u[..., 3:]), hat(u[..., :3]))
 
 
 def odot(s):

@@ -107,6 +107,4 @@ def disparity(z, K, K_right=None):
     ``K_right`` None (or equal to ``K``): the course's ``uL - uR``, bit for bit.
     """
     z = np.asarray(z, dtype=float)
-    if same_intrinsics(K, K_right):
-        return z[..., 0] - z[..., 2]
-    return z[..., 0] - right_in_left_pixels(z[..., :4], K, K_right)[..., 2]
+    return z[..., 0] - right_in_left_pixels(z, K, K_right)[..., 2]

@@ -24,9 +24,7 @@ __all__ = ["projection", "projection_jacobian", "project_points", "stereo_projec
 
 def projection(q):
     """Perspective division ``pi(q) = q / q3`` of homogeneous camera points, (..., 4) -> (..., 4)."""
-    q = np.asarray(q, dtype=float)
-    if q.ndim == 0 or q.shape[-1] != 4:
-        raise ValueError(f"projection: expected shape (..., 4), got {q.shape}")
+    q = lie._as_vectors(q, 4, "projection")
     return q / q[..., 2:3]
 
 
@@ -35,17 +33,12 @@ def projection_jacobian(q):
 
     ``dpi/dq = (1/q3) [[1, 0, -q1/q3, 0], [0, 1, -q2/q3, 0], [0, 0, 0, 0], [0, 0, -q4/q3, 1]]``
     """
-    q = np.asarray(q, dtype=float)
-    if q.ndim == 0 or q.shape[-1] != 4:
-        raise ValueError(f"projection_jacobian: expected shape (..., 4), got {q.shape}")
+    q = lie._as_vectors(q, 4, "projection_jacobian")
     inv_q3 = 1.0 / q[..., 2]
     J = np.zeros(q.shape[:-1] + (4, 4))
-    J[..., 0, 0] = inv_q3
-    J[..., 1, 1] = inv_q3
-    J[..., 3, 3] = inv_q3
-    J[..., 0, 2] = -q[..., 0] * inv_q3**2
-    J[..., 1, 2] = -q[..., 1] * inv_q3**2
-    J[..., 3, 2] = -q[..., 3] * inv_q3**2
+    for i in (0, 1, 3):
+        J[..., i, i] = inv_q3
+        J[..., i, 2] = -q[..., i] * inv_q3**2
     return J
 
 

@@ -79,7 +79,7 @@ class StereoCamera:
 
     def disparity(self, z):
         """Disparity ``uL - uR`` in the left camera's pixels, (..., 4) -> (...): :func:`~visla_edu.camera.disparity`."""
-        return disparity(z, self.K, None if self.same_intrinsics else self.K_right)
+        return disparity(z, self.K, self._right())
 
     def points_in_camera(self, world_T_imu, p_world):
         """Homogeneous landmark coordinates in the left camera, ``q = cam_T_imu inv(T) m``, shape (M, 4)."""
@@ -121,12 +121,10 @@ class StereoCamera:
         In the world frame if ``world_T_imu`` is given, else in the left camera frame; NaN rows where the
         disparity is not positive. ``method``: ``"disparity"`` or ``"bearing"``.
         """
-        if method == "disparity":
-            p_cam = triangulate_disparity(z, self.K, self.b, self._right())
-        elif method == "bearing":
-            p_cam = triangulate_bearing(z, self.K, self.b, self._right())
-        else:
+        if method not in ("disparity", "bearing"):
             raise ValueError(f"triangulate: method must be 'disparity' or 'bearing', got {method!r}")
+        triangulate = triangulate_disparity if method == "disparity" else triangulate_bearing
+        p_cam = triangulate(z, self.K, self.b, self._right())
         if world_T_imu is None:
             return p_cam
         world_T_cam = np.asarray(world_T_imu, dtype=float) @ self.imu_T_cam

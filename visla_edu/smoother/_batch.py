@@ -24,7 +24,7 @@ from visla_edu.smoother._config import as_smoother_config
 from visla_edu.smoother._factors import motion_steps, robust_loss
 from visla_edu.smoother._problem import (build_problem, far_landmarks, observation_status, rig_camera,
                                          triangulate_landmarks)
-from visla_edu.smoother._result import (CONVERGED, ITERATION_CAP, NO_DESCENT, SmootherResult,
+from visla_edu.smoother._result import (CONVERGED, HISTORY_FIELDS, ITERATION_CAP, NO_DESCENT, SmootherResult,
                                         check_landmarks, check_trajectory, empty_history, finish_history)
 
 __all__ = ["smooth", "levenberg_marquardt", "reject_outliers", "drop_landmarks", "motion_information",
@@ -103,9 +103,9 @@ def levenberg_marquardt(problem, world_T_imu, landmarks, config, history, round_
     return world_T_imu, landmarks, lin, factor
 
 
-def _record(history, round_index, cost, step_norm, accepted, damping):
-    for key, value in zip(("round", "cost", "step_norm", "accepted", "damping"),
-                          (round_index, cost, step_norm, accepted, damping)):
+def _record(history, *values):
+    """Append one iteration's ``values``, in the order of :data:`~._result.HISTORY_FIELDS`."""
+    for key, value in zip(HISTORY_FIELDS, values):
         history[key].append(value)
 
 
@@ -215,8 +215,7 @@ def _smooth(dataset, world_T_imu, landmarks, imu_T_cam, config):
         newly = reject_outliers(problem, world_T_imu, m, config.rejection_probability)
         outlier |= newly
         dropped = drop_landmarks(problem, world_T_imu, m, config.min_observations)
-        for key, value in dropped.items():
-            rejected[key] += value
+        rejected.update({k: rejected[k] + v for k, v in dropped.items()})
         round_index += 1
         final = round_index == config.rejection_rounds or not (newly.any() or any(dropped.values()))
     rejected["outliers"] = int(outlier.sum())

@@ -110,8 +110,7 @@ class _Front:
         b = self.b
         old = slice(b * (keep_lo - self.base), b * (keep_hi - self.base + 1))
         new = slice(b * (keep_lo - new_base), b * (keep_hi - new_base + 1))
-        live = self.M[old, old].copy()
-        self.M[new, new] = live
+        self.M[new, new] = self.M[old, old].copy()
         self.base = new_base
 
     def span(self, lo, hi):
@@ -154,15 +153,16 @@ def _add_corrections(front, system, plan, first_row, last_row):
         return
     ks = plan.order[a:b]
     lo, hi = system.lo[ks], system.hi[ks]
+    by_lo = np.argsort(lo, kind="stable")
     rank = np.empty(b - a, dtype=np.int64)
-    rank[np.argsort(lo, kind="stable")] = np.arange(b - a)
+    rank[by_lo] = np.arange(b - a)
     top = lo.min()
     rows = slice(plan.offset[a], plan.offset[b])
     r = system.rows.shape[-1]
     packed = np.zeros((last_row - top + 1, system.rows.shape[1], b - a, r))
     packed[plan.row[rows] - top, :, rank[plan.owner[rows] - a], :] = system.rows[plan.slot[rows]]
     packed = packed.reshape(-1, (b - a) * r)
-    lo_sorted, hi_sorted = np.sort(lo), hi[np.argsort(lo, kind="stable")]
+    lo_sorted, hi_sorted = lo[by_lo], hi[by_lo]
     cuts = np.flatnonzero(np.diff((lo_sorted - top) // BUCKET)) + 1
     bs = front.b
     for j0, j1 in zip(np.r_[0, cuts], np.r_[cuts, b - a]):

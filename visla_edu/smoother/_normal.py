@@ -273,7 +273,7 @@ def _add_motion(problem, world_T_imu, Hpp, sub, g_p):
 def linearize(problem, world_T_imu, landmarks):
     """The :class:`Linearization` (Gauss-Newton blocks and cost) at a state."""
     obs, cost = _observation_blocks(problem, world_T_imu, landmarks)
-    n, N = problem.num_vars, len(problem.obs_frame)
+    n = problem.num_vars
     upper = np.asarray(problem.frame_sum @ np.ascontiguousarray(obs["Hpp"].T))
     Hpp = np.empty((n, 6, 6))
     Hpp[:, _UPPER[0], _UPPER[1]] = upper

@@ -123,16 +123,13 @@ def build_problem(obs_frame, obs_landmark_ids, obs_z, obs_source, *, camera, con
     motion_from, step_inv, sqrt_info = motion
     problem = Problem(
         Ks=camera.Ks, cam_T_imu=camera.cam_T_imu, fsu_b=camera.fsu_b, sigma_pixel=float(config.sigma_pixel),
-        loss=config.loss,
-        loss_scale=float(config.loss_scale), min_depth=float(config.min_depth),
-        min_disparity=float(config.min_disparity), first_frame=first_frame,
-        first_var=first_var, last_frame=last_frame, motion_from=motion_from, step_inv=step_inv,
-        motion_sqrt_information=sqrt_info, obs_frame=obs_frame[order], obs_landmark=obs_landmark,
-        obs_z=np.asarray(obs_z, dtype=float)[order], obs_source=np.asarray(obs_source)[order],
-        landmark_ids=landmark_ids,
+        loss=config.loss, loss_scale=float(config.loss_scale), min_depth=float(config.min_depth),
+        min_disparity=float(config.min_disparity), first_frame=first_frame, first_var=first_var,
+        last_frame=last_frame, motion_from=motion_from, step_inv=step_inv, motion_sqrt_information=sqrt_info,
+        obs_frame=obs_frame[order], obs_landmark=obs_landmark, obs_z=np.asarray(obs_z, dtype=float)[order],
+        obs_source=np.asarray(obs_source)[order], landmark_ids=landmark_ids,
         landmark_start=np.searchsorted(obs_landmark, np.arange(len(landmark_ids) + 1)),
-        active=np.ones(len(order), dtype=bool), landmark_active=np.ones(len(landmark_ids), dtype=bool),
-        prior=prior,
+        active=np.ones(len(order), dtype=bool), landmark_active=np.ones(len(landmark_ids), dtype=bool), prior=prior,
     )
     if landmark_prior is not None:
         problem.landmark_prior = tuple(part[landmark_ids] for part in landmark_prior)

@@ -62,7 +62,6 @@ class _WindowState:
         self.prior_eta = np.zeros((M, 3))
         self.prior_const = np.zeros(M)
         self.held_count = np.zeros(M, dtype=np.int64)
-        self.held_frames = HELD_FRAMES
         self.pose_cov = np.full((T, 6, 6), np.nan)
         self.pose_cov[0] = 0.0
         self.prior = None
@@ -75,8 +74,7 @@ class _WindowState:
         seen at ``k`` with a disparity of at least ``min_disparity`` (their earlier observations count too).
         """
         self.world_T_imu[k] = self.world_T_imu[k - 1] @ lie.se3_inv(self.step_inv[k - 1])
-        lo, hi = self.dataset.frame_ptr[k], self.dataset.frame_ptr[k + 1]
-        idx = np.arange(lo, hi)
+        idx = np.arange(self.dataset.frame_ptr[k], self.dataset.frame_ptr[k + 1])
         ids = self.dataset.obs_ids[idx]
         disparity = self.camera.disparity(self.dataset.obs_z[idx])
         new = idx[(self.status[idx] == OBS_USED) & np.isnan(self.landmarks[ids, 0])
@@ -108,7 +106,7 @@ class _WindowState:
         """
         if self.config.window_mode == "marginalize":
             return 0 if v0 == 1 else v0
-        return max(0, v0 - self.held_frames)
+        return max(0, v0 - HELD_FRAMES)
 
     def problem(self, k, v0):
         """The window problem at frame ``k`` (pose variables ``v0 .. k``)."""
@@ -129,8 +127,8 @@ class _WindowState:
         ds = self.dataset
         idx = np.arange(ds.frame_ptr[v], ds.frame_ptr[v + 1])
         idx = idx[self.status[idx] == OBS_USED]
+        idx = idx[np.isfinite(self.landmarks[ds.obs_ids[idx], 0])]
         ids = ds.obs_ids[idx]
-        idx, ids = idx[np.isfinite(self.landmarks[ids, 0])], ids[np.isfinite(self.landmarks[ids, 0])]
         if not len(idx):
             return
         m0 = self.landmarks[ids]
@@ -203,8 +201,8 @@ def _process_frame(state, k, history):
         state.pose_cov[v0] = cov[0]
         if marginalize:
             state.prior = _next_prior(state, cov[0], v0)
-    if leaving and config.window_mode == "fix" and v0 - state.held_frames >= 0:
-        state.hold(v0 - state.held_frames)
+    if leaving and config.window_mode == "fix" and v0 - HELD_FRAMES >= 0:
+        state.hold(v0 - HELD_FRAMES)
 
 
 def smooth_window(dataset, world_T_imu0=None, imu_T_cam=None, config=None, blas_threads=1):
