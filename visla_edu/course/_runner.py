@@ -130,13 +130,9 @@ def _child_environment():
 
 def _where(progress, num_frames):
     """Where a time limit struck, from the child's ``progress`` text."""
-    if progress == "import":
-        return "while importing it"
-    if progress == "make_filter":
-        return "in make_filter"
     if progress.startswith("frame "):
         return f"at about frame {progress.split()[1]} of {num_frames}"
-    return "in step()"
+    return {"import": "while importing it", "make_filter": "in make_filter"}.get(progress, "in step()")
 
 
 def _ended_without_outcome(returncode, timed_out, progress, time_limit, num_frames):
