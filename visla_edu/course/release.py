@@ -319,12 +319,6 @@ def update_points_table(src_dir=SOLUTIONS, teaching="TEACHING.md", check=False):
     return True
 
 
-def _teaching_next_to(src_dir):
-    """TEACHING.md in the folder above ``src_dir`` (the project root), or None."""
-    path = Path(src_dir).resolve().parent / "TEACHING.md"
-    return path if path.is_file() else None
-
-
 def main(argv=None):
     """``python -m visla_edu.course.release [--src DIR] [--dst DIR] [--check] [--clean-sources] [--force]``.
 
@@ -350,10 +344,10 @@ def main(argv=None):
         parser.error("--check and --clean-sources cannot be combined: --check writes nothing, "
                      "--clean-sources rewrites the solution notebooks; run them one after the other")
     try:
-        teaching = _teaching_next_to(args.src)
+        teaching = Path(args.src).resolve().parent / "TEACHING.md"  # in the project root, if there is one
         if args.check:
             drifted = check_in_sync(args.src, args.dst)
-            if teaching is not None and update_points_table(args.src, teaching, check=True):
+            if teaching.is_file() and update_points_table(args.src, teaching, check=True):
                 drifted.append(teaching.name)
             if drifted:
                 print(f"out of date in {args.dst}: {', '.join(drifted)}\n"
@@ -365,7 +359,7 @@ def main(argv=None):
         if args.clean_sources:
             for path in clean_sources(args.src):
                 print(f"cleaned {path}")
-        if teaching is not None and update_points_table(args.src, teaching):
+        if teaching.is_file() and update_points_table(args.src, teaching):
             written.append(teaching)
     except (FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
