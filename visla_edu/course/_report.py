@@ -27,6 +27,8 @@ CSV_COLUMNS = ("submission", "file", "status", "message", "frames", "seconds", "
                "points_completes", "points_accuracy", "points_consistency", "points_measured", "marks")
 #: Bytes of a submission's output kept in its report folder (the end of it).
 OUTPUT_LIMIT = 2**20
+#: The fields of a TrajectoryEvaluation in the tables, in column order.
+_EVALUATION_FIELDS = ("ate_raw", "ate_aligned", "drift_translation", "drift_rotation")
 _REFERENCE_LABELS = {SLAM: "library slam", VIO: "library vio", DEADRECKON: "dead reckoning"}
 _STYLES = {SLAM: {"color": plotting.PALETTE["reddish_purple"], "linestyle": ":", "linewidth": 2.0},
            VIO: {"color": plotting.PALETTE["orange"], "linestyle": (0, (6, 2, 1, 2)), "linewidth": 1.4},
@@ -171,20 +173,18 @@ def _measure_row(label, measures):
     if measures is None:
         return f"| {label} | — | — | — | — | — | — | — |"
     ev = measures.evaluation
-    cells = [None, None, None, None] if ev is None else [ev.ate_raw, ev.ate_aligned, ev.drift_translation,
-                                                          ev.drift_rotation]
-    cells = [_number(c) for c in cells] + [_number(measures.nees_per_dof, 2), _number(measures.nis_per_dof, 2),
-                                           _number(measures.seconds, 2)]
+    cells = [_number(None if ev is None else getattr(ev, key)) for key in _EVALUATION_FIELDS]
+    cells += [_number(measures.nees_per_dof, 2), _number(measures.nis_per_dof, 2), _number(measures.seconds, 2)]
     return f"| {label} | " + " | ".join(cells) + " |"
 
 
 def _comparison(grade, prepared):
-    """The table of the submission and the references against the ground truth."""
+    """The table of the submission (none: ``grade`` None) and the references against the ground truth."""
     rows = ["| | ATE raw (m) | ATE aligned (m) | drift (%) | drift (deg/100 m) | NEES/dof | NIS/dof | time (s) |",
-            "|---|---|---|---|---|---|---|---|",
-            _measure_row(f"**{grade.name}**", grade.measures if grade.ok else None)]
-    rows += [_measure_row(_REFERENCE_LABELS[m], prepared.reference_measures[m]) for m in prepared.references]
-    return rows
+            "|---|---|---|---|---|---|---|---|"]
+    if grade is not None:
+        rows.append(_measure_row(f"**{grade.name}**", grade.measures if grade.ok else None))
+    return rows + [_measure_row(_REFERENCE_LABELS[m], prepared.reference_measures[m]) for m in prepared.references]
 
 
 def _report_text(grade, prepared, figures, has_traceback):
@@ -241,8 +241,7 @@ def _csv_row(grade):
     m = grade.measures if grade.ok else None  # a run that stopped early is not measured
     ev = None if m is None else m.evaluation
     values = [grade.name, str(grade.path), grade.outcome.status, grade.outcome.message, grade.outcome.frames,
-              grade.outcome.seconds, *(None if ev is None else getattr(ev, k) for k in (
-                  "ate_raw", "ate_aligned", "drift_translation", "drift_rotation")),
+              grade.outcome.seconds, *(None if ev is None else getattr(ev, k) for k in _EVALUATION_FIELDS),
               None if m is None else m.nees_per_dof, None if m is None else m.nis_per_dof,
               grade.points["completes"], grade.points["accuracy"], grade.points["consistency"], grade.measured,
               "; ".join(grade.outcome.hidden_calls[:3] + grade.marks)]
@@ -261,20 +260,16 @@ def _summary_row(grade):
 
 
 def _summary_text(grades, prepared, time_limit):
-    refs = [_measure_row(_REFERENCE_LABELS[m], prepared.reference_measures[m]) for m in prepared.references]
-    rows = [_summary_row(g) for g in grades]
     seen = dict.fromkeys(g.outcome.status for g in grades)
     return "\n".join([
         f"# Project grades on {prepared.name}", "",
         drive_line(prepared, len(grades)) + ".", "",
         f"Time limit {time_limit:g} s per submission; graded {datetime.datetime.now().astimezone():%Y-%m-%d %H:%M %Z} "
         f"by visla-edu {__version__}.", *[f"Calibration: {note}" for note in prepared.notes], "",
-        "## The library on the same inputs", "",
-        "| | ATE raw (m) | ATE aligned (m) | drift (%) | drift (deg/100 m) | NEES/dof | NIS/dof | time (s) |",
-        "|---|---|---|---|---|---|---|---|", *refs, "",
+        "## The library on the same inputs", "", *_comparison(None, prepared), "",
         "## Submissions", "",
         "| submission | status | frames | time (s) | ATE aligned (m) | NEES/dof | measured points | marks |",
-        "|---|---|---|---|---|---|---|---|", *rows, "",
+        "|---|---|---|---|---|---|---|---|", *(_summary_row(g) for g in grades), "",
         *[f"- **{status}**: {STATUSES[status]}" for status in seen], "",
         "Measured points are the grader's part of the rubric (PROJECT.md); a human grades the report and looks at "
         "every submission with marks.", ""])

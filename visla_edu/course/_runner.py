@@ -10,6 +10,7 @@ from the child's first ``progress``; then the whole group is killed); CPU second
 threads. The child sets all but the first on itself (:func:`visla_edu.course._grader_child.limit_resources`).
 """
 
+import contextlib
 import json
 import os
 import signal
@@ -82,13 +83,11 @@ def write_request(folder, submission, drive_file, config, time_limit, memory_lim
 
 def _kill_group(proc):
     """Kill the child and everything it started (its own process group)."""
-    try:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
         if hasattr(os, "killpg"):
             os.killpg(proc.pid, signal.SIGKILL)
         else:  # pragma: no cover - Windows
             proc.kill()
-    except (ProcessLookupError, PermissionError):
-        pass
 
 
 def wait_with_time_limit(proc, progress_file, time_limit):
@@ -130,13 +129,9 @@ def _child_environment():
 
 def _where(progress, num_frames):
     """Where a time limit struck, from the child's ``progress`` text."""
-    if progress == "import":
-        return "while importing it"
-    if progress == "make_filter":
-        return "in make_filter"
     if progress.startswith("frame "):
         return f"at about frame {progress.split()[1]} of {num_frames}"
-    return "in step()"
+    return {"import": "while importing it", "make_filter": "in make_filter"}.get(progress, "in step()")
 
 
 def _ended_without_outcome(returncode, timed_out, progress, time_limit, num_frames):
@@ -184,11 +179,8 @@ def read_outcome(folder, returncode, timed_out, time_limit, num_frames):
                                f"its last line: {last}")
         outcome = ChildOutcome(status, message)
     outcome.output = output
-    try:
-        with np.load(folder / "estimate.npz") as saved:
-            outcome.arrays = {key: saved[key] for key in saved.files}
-    except (OSError, ValueError):
-        outcome.arrays = {}
+    with contextlib.suppress(OSError, ValueError), np.load(folder / "estimate.npz") as saved:
+        outcome.arrays = {key: saved[key] for key in saved.files}  # else the default, {}
     outcome.frames = len(outcome.arrays.get("world_T_imu", ()))
     return outcome
 

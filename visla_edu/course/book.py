@@ -110,13 +110,6 @@ def _staging(out_dir):
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _move_into_place(site, out_dir, staging):
-    """Replace ``out_dir`` by the folder ``site``; an old one goes into ``staging``."""
-    if out_dir.is_dir():
-        out_dir.rename(staging / "previous-site")
-    site.rename(out_dir)
-
-
 def _kernel_env(course_data):
     """The environment of the notebook kernels: figures inline, course data as asked."""
     env = dict(os.environ)
@@ -178,9 +171,7 @@ def _freeze_widgets(nb):
             view = output.get("data", {}).get(_WIDGET_VIEW)
             if view is None:
                 outputs.append(output)
-                continue
-            images = _widget_images(view.get("model_id", ""), state)
-            if images:
+            elif images := _widget_images(view.get("model_id", ""), state):
                 outputs.append(nbformat.v4.new_output("display_data", data={"text/markdown": _WIDGET_NOTE,
                                                                             "text/plain": _WIDGET_NOTE}))
                 outputs += [nbformat.v4.new_output("display_data", data={"image/png": png}) for png in images]
@@ -345,5 +336,7 @@ def build_book(out_dir, src_dir=None, course_data=True, repository=None, branch=
         site = staging / "site"
         for warning in _run_sphinx(src, site, staging / "doctrees", _sphinx_settings(repository, branch)):
             log(f"sphinx: {warning}")
-        _move_into_place(site, out_dir, staging)
+        if out_dir.is_dir():  # the old site goes into the staging folder, removed with it
+            out_dir.rename(staging / "previous-site")
+        site.rename(out_dir)
     return out_dir / "index.html"

@@ -20,9 +20,6 @@ def central_jacobian(f, x, eps=1e-6):
         ``(f(x + eps e_i) - f(x - eps e_i)) / (2 eps)`` in column ``i``.
     """
     x = np.asarray(x, dtype=float)
-    cols = []
-    for i in range(x.size):
-        dx = np.zeros_like(x)
-        dx[i] = eps
-        cols.append((np.asarray(f(x + dx), dtype=float) - np.asarray(f(x - dx), dtype=float)) / (2 * eps))
+    cols = [(np.asarray(f(x + dx), dtype=float) - np.asarray(f(x - dx), dtype=float)) / (2 * eps)
+            for dx in eps * np.eye(x.size)]
     return np.stack(cols, axis=-1)

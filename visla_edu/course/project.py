@@ -260,11 +260,10 @@ def grade(submissions, drive, out_dir, ground_truth=None, ground_truth_times=Non
         for path, name in zip(paths, _names(paths)):
             result = _grade_one(path, name, prepared, drive_file, work, time_limit, memory_limit)
             _report.write_submission(out / name, result, prepared, work / name)
-            line = _report.grade_line(result)
             if result.ok:
-                print(line)
+                print(_report.grade_line(result))
             else:
-                print(f"visla-edu project grade: {line}", file=sys.stderr)
+                print(f"visla-edu project grade: {_report.grade_line(result)}", file=sys.stderr)
             grades.append(result)
     print(f"wrote {_report.write_summary(out, grades, prepared, time_limit)} and {out / 'grades.csv'}")
     return grades

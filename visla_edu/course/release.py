@@ -105,11 +105,8 @@ def stub_source(source, cell_type="code", what="exercise", where="cell", markers
     ``where``: named in the ValueError for unbalanced markers; ``markers``: the region's first and last line.
     """
     lines = source.split("\n")
-    regions = list(_marker_regions(lines, *markers, where))
-    if not regions:
-        return source
     out, prev = [], 0
-    for start, stop in regions:
+    for start, stop in _marker_regions(lines, *markers, where):
         out.extend(lines[prev:start])
         indent = re.match(r"\s*", lines[start]).group(0)
         if cell_type == "code":
@@ -117,8 +114,7 @@ def stub_source(source, cell_type="code", what="exercise", where="cell", markers
         else:
             out.append(indent + _MARKDOWN_STUB)
         prev = stop + 1
-    out.extend(lines[prev:])
-    return "\n".join(out)
+    return "\n".join(out + lines[prev:])
 
 
 def _enclosing_function(lines_before, indent):
@@ -137,15 +133,12 @@ def strip_hidden_tests(source, where="cell"):
     for unbalanced markers.
     """
     lines = source.split("\n")
-    regions = list(_marker_regions(lines, BEGIN_HIDDEN, END_HIDDEN, where))
-    if not regions:
-        return source
     out, prev = [], 0
-    for start, stop in regions:
+    for start, stop in _marker_regions(lines, BEGIN_HIDDEN, END_HIDDEN, where):
         out.extend(lines[prev:start])
         prev = stop + 1
     rest = lines[prev:]
-    if any(line.strip() for line in rest):  # the last region is in the middle: keep the cell's end
+    if prev == 0 or any(line.strip() for line in rest):  # no region, or the last is in the middle: keep the end
         return "\n".join(out + rest)
     while out and not out[-1].strip():  # no trailing blank lines where the tests were
         out.pop()
@@ -164,7 +157,6 @@ def clean_notebook(nb):
             cell.execution_count = None
         for key in _RUN_METADATA:
             cell.metadata.pop(key, None)
-        # attachments of markdown cells are content and stay
     return nb
 
 
@@ -193,8 +185,7 @@ def student_notebook(nb, name="notebook"):
 
 def notebook_text(nb):
     """The exact text the NotebookNode ``nb`` is stored as: ``nbformat.writes(nb, version=4)`` ending with a newline."""
-    nbformat = _nbformat()
-    text = nbformat.writes(nb, version=4)
+    text = _nbformat().writes(nb, version=4)
     return text if text.endswith("\n") else text + "\n"
 
 
@@ -234,12 +225,10 @@ def make_student_notebooks(src_dir=SOLUTIONS, dst_dir=_DEFAULT_DST, force=False)
                          f"notebook (the single source) or keep a copy elsewhere, then run release with --force to "
                          f"replace {'it' if len(edited) == 1 else 'them'}")
     dst_dir.mkdir(parents=True, exist_ok=True)
-    written = []
     for name, text in changed.items():
         _write_text(dst_dir / name, text)
-        written.append(dst_dir / name)
     manifest.write_manifest(dst_dir, expected)
-    return written
+    return [dst_dir / name for name in changed]
 
 
 def _holds(path, text):
@@ -289,16 +278,8 @@ def is_reference_page(nb):
 
 def _graded_cells(nb):
     """``(grade_id, points)`` of each graded cell, in order."""
-    out = []
-    for cell in nb.cells:
-        meta = cell.metadata.get("nbgrader", {})
-        if meta.get("grade"):
-            out.append((meta["grade_id"], meta.get("points", 0)))
-    return out
-
-
-def _number(points):
-    return f"{points:g}"
+    graded = [cell.metadata["nbgrader"] for cell in nb.cells if cell.metadata.get("nbgrader", {}).get("grade")]
+    return [(meta["grade_id"], meta.get("points", 0)) for meta in graded]
 
 
 def points_table(src_dir=SOLUTIONS):
@@ -307,11 +288,11 @@ def points_table(src_dir=SOLUTIONS):
     cells = total = 0
     for path in _sources(src_dir):
         graded = _graded_cells(_read(path))
-        listed = ", ".join(f"`{grade_id.removeprefix('check_')}` ({_number(points)})" for grade_id, points in graded)
+        listed = ", ".join(f"`{grade_id.removeprefix('check_')}` ({points:g})" for grade_id, points in graded)
         subtotal = sum(points for _, points in graded)
-        rows.append(f"| `{path.stem}` | {listed or 'none'} | {_number(subtotal)} |")
+        rows.append(f"| `{path.stem}` | {listed or 'none'} | {subtotal:g} |")
         cells, total = cells + len(graded), total + subtotal
-    rows.append(f"| **total** | {cells} graded cells | **{_number(total)}** |")
+    rows.append(f"| **total** | {cells} graded cells | **{total:g}** |")
     return "\n".join(rows)
 
 
@@ -330,18 +311,12 @@ def update_points_table(src_dir=SOLUTIONS, teaching="TEACHING.md", check=False):
     """
     teaching = Path(teaching)
     text = teaching.read_text(encoding="utf-8")
-    new = _with_points(text, points_table(src_dir), str(teaching))
+    new = _with_points(text, points_table(src_dir), teaching)
     if new == text:
         return False
     if not check:
         _write_text(teaching, new)
     return True
-
-
-def _teaching_next_to(src_dir):
-    """TEACHING.md in the folder above ``src_dir`` (the project root), or None."""
-    path = Path(src_dir).resolve().parent / "TEACHING.md"
-    return path if path.is_file() else None
 
 
 def main(argv=None):
@@ -369,10 +344,10 @@ def main(argv=None):
         parser.error("--check and --clean-sources cannot be combined: --check writes nothing, "
                      "--clean-sources rewrites the solution notebooks; run them one after the other")
     try:
-        teaching = _teaching_next_to(args.src)
+        teaching = Path(args.src).resolve().parent / "TEACHING.md"  # in the project root, if there is one
         if args.check:
             drifted = check_in_sync(args.src, args.dst)
-            if teaching is not None and update_points_table(args.src, teaching, check=True):
+            if teaching.is_file() and update_points_table(args.src, teaching, check=True):
                 drifted.append(teaching.name)
             if drifted:
                 print(f"out of date in {args.dst}: {', '.join(drifted)}\n"
@@ -384,7 +359,7 @@ def main(argv=None):
         if args.clean_sources:
             for path in clean_sources(args.src):
                 print(f"cleaned {path}")
-        if teaching is not None and update_points_table(args.src, teaching):
+        if teaching.is_file() and update_points_table(args.src, teaching):
             written.append(teaching)
     except (FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
