@@ -26,7 +26,7 @@ from visla_edu.diagnostics._correlation import track_correlation
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR,
                                           UNMEASURED_SIGMA_ANGULAR, UNMEASURED_SIGMA_LINEAR, imu_noise)
-from visla_edu.diagnostics._readings import ReadingEvidence, choose_reading
+from visla_edu.diagnostics._readings import ReadingEvidence, _finite_or_none, choose_reading
 from visla_edu.diagnostics._report import calibration_report
 from visla_edu.diagnostics._tracks import NOT_ENOUGH, TrackEvidence, TrackScorer
 from visla_edu.diagnostics._vo import (
@@ -50,12 +50,6 @@ CALIBRATION_VERSION = 6
 #: cameras, ``extrinsic_readings``, when the dataset has them).
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
                  "obs_ids", "obs_z")
-
-
-def _finite_or_none(x):
-    """A float, or None for NaN and infinity (JSON has neither)."""
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 @dataclass
