@@ -13,6 +13,7 @@ The rules (one setting for every drive, never per-drive tuning):
 The result is kept in ``dataset.extra["calibration"]`` and in the user cache (:func:`cache_path`).
 """
 
+import contextlib
 import time
 from dataclasses import asdict, dataclass
 
@@ -328,14 +329,6 @@ def cache_path(dataset):
     return user_cache.cache_dir() / f"calibration-{key}.json"
 
 
-def _cache_path_or_none(dataset):
-    """:func:`cache_path`, or None when the cache folder's name cannot be expanded (the cache never fails a run)."""
-    try:
-        return cache_path(dataset)
-    except ValueError:
-        return None
-
-
 def _load(path):
     """The calibration cached at ``path``, or None (missing, corrupt, unreportable, another version)."""
     stored = user_cache.load_json(path)
@@ -366,7 +359,10 @@ def calibrate(dataset, cache=True):
     _check_inputs(dataset)
     if "calibration" in dataset.extra:
         return dataset.extra["calibration"]
-    path = _cache_path_or_none(dataset) if cache else None
+    path = None
+    if cache:
+        with contextlib.suppress(ValueError):  # a cache folder whose name cannot be expanded: no cache, never an error
+            path = cache_path(dataset)
     calibration = _load(path) if path is not None else None
     if calibration is None:
         calibration = _compute(dataset)
