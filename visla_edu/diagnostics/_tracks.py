@@ -128,9 +128,8 @@ def track_pairs(dataset):
     first_anchor = np.full(int(track[-1]) + 1 if big else 0, big)
     np.minimum.at(first_anchor, track[can_anchor], np.flatnonzero(can_anchor))
     anchor_pos = first_anchor[track]
-    has_anchor = anchor_pos < big
     gap = frames_sorted - frames_sorted[np.minimum(anchor_pos, big - 1)] if big else np.zeros(0, np.int64)
-    keep = has_anchor & (gap >= 1) & (gap <= MAX_GAP) & ~stale & (disparity > 0)
+    keep = (anchor_pos < big) & (gap >= 1) & (gap <= MAX_GAP) & ~stale & (disparity > 0)
     return order[anchor_pos[keep]], order[keep], gap[keep]
 
 
