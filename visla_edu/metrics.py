@@ -315,8 +315,7 @@ class TrajectoryEvaluation:
 
     def as_dict(self, prefix=""):
         """``{prefix + name: value}`` of every field; an unavailable drift is NaN, ``drift_note`` says why."""
-        values = {k: (np.nan if v is None else v) for k, v in vars(self).items()}
-        return {prefix + k: v for k, v in values.items()}
+        return {prefix + k: (np.nan if v is None else v) for k, v in vars(self).items()}
 
 
 def evaluate(est_world_T_imu, gt_world_T_imu):

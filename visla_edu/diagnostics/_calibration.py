@@ -13,6 +13,7 @@ The rules (one setting for every drive, never per-drive tuning):
 The result is kept in ``dataset.extra["calibration"]`` and in the user cache (:func:`cache_path`).
 """
 
+import contextlib
 import time
 from dataclasses import asdict, dataclass
 
@@ -26,7 +27,7 @@ from visla_edu.diagnostics._correlation import track_correlation
 from visla_edu.diagnostics._motion import gyro_bias, velocity_scale
 from visla_edu.diagnostics._noise import (MIN_NOISE_SAMPLES, MIN_SIGMA_ANGULAR, MIN_SIGMA_LINEAR,
                                           UNMEASURED_SIGMA_ANGULAR, UNMEASURED_SIGMA_LINEAR, imu_noise)
-from visla_edu.diagnostics._readings import ReadingEvidence, choose_reading
+from visla_edu.diagnostics._readings import ReadingEvidence, _finite_or_none, choose_reading
 from visla_edu.diagnostics._report import calibration_report
 from visla_edu.diagnostics._tracks import NOT_ENOUGH, TrackEvidence, TrackScorer
 from visla_edu.diagnostics._vo import (
@@ -50,12 +51,6 @@ CALIBRATION_VERSION = 6
 #: cameras, ``extrinsic_readings``, when the dataset has them).
 CACHED_ARRAYS = ("time_stamps", "linear_velocity", "angular_velocity", "K", "b", "imu_T_cam", "frame_ptr",
                  "obs_ids", "obs_z")
-
-
-def _finite_or_none(x):
-    """A float, or None for NaN and infinity (JSON has neither)."""
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 @dataclass
@@ -334,14 +329,6 @@ def cache_path(dataset):
     return user_cache.cache_dir() / f"calibration-{key}.json"
 
 
-def _cache_path_or_none(dataset):
-    """:func:`cache_path`, or None when the cache folder's name cannot be expanded (the cache never fails a run)."""
-    try:
-        return cache_path(dataset)
-    except ValueError:
-        return None
-
-
 def _load(path):
     """The calibration cached at ``path``, or None (missing, corrupt, unreportable, another version)."""
     stored = user_cache.load_json(path)
@@ -372,7 +359,10 @@ def calibrate(dataset, cache=True):
     _check_inputs(dataset)
     if "calibration" in dataset.extra:
         return dataset.extra["calibration"]
-    path = _cache_path_or_none(dataset) if cache else None
+    path = None
+    if cache:
+        with contextlib.suppress(ValueError):  # a cache folder whose name cannot be expanded: no cache, never an error
+            path = cache_path(dataset)
     calibration = _load(path) if path is not None else None
     if calibration is None:
         calibration = _compute(dataset)

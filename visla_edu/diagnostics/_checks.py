@@ -30,10 +30,8 @@ def resolve_extrinsics(dataset, correction="auto"):
         calibration = calibrate(dataset)
         reading = _reading_lines(calibration)
         if calibration.extrinsic_correction == "none":
-            if calibration.reading is not None:
-                warning = _unexplained_extrinsic_warning(calibration)
-                return calibration.imu_T_cam, "\n".join(filter(None, [reading, warning]))
-            return dataset.imu_T_cam, _unexplained_extrinsic_warning(calibration)
+            imu_T_cam = dataset.imu_T_cam if calibration.reading is None else calibration.imu_T_cam
+            return imu_T_cam, "\n".join(filter(None, [reading, _unexplained_extrinsic_warning(calibration)]))
         return calibration.imu_T_cam, "\n".join(filter(None, [reading, (
             f"applied extrinsic correction {calibration.extrinsic_correction!r} (extrinsic_correction='auto'): "
             f"{calibration.reasons['extrinsic_correction']}")]))

@@ -46,6 +46,14 @@ def _used_motion(dataset, imu_T_cam, lag):
             dataset.time_steps[used])
 
 
+def _evidence(key, value, stderr, pairs, verdict):
+    """``{key: value, "stderr", "pairs", "verdict"}``: floats or lists, None without pairs; "not enough evidence"
+    replaces the verdict with fewer than ``MIN_VO_PAIRS`` pairs."""
+    known = pairs > 0
+    return {key: value.tolist() if known else None, "stderr": stderr.tolist() if known else None, "pairs": pairs,
+            "verdict": NOT_ENOUGH if pairs < MIN_VO_PAIRS else verdict}
+
+
 def gyro_bias(dataset, imu_T_cam, lag=0):
     """Gyro bias: the robust mean of ``w_imu[t + lag] - log(R_vo) / tau_t`` over the usable pairs.
 
@@ -59,16 +67,8 @@ def gyro_bias(dataset, imu_T_cam, lag=0):
     vo_motion, imu_twist, tau = _used_motion(dataset, imu_T_cam, lag)
     w_vo = lie.so3_log(vo_motion[:, :3, :3]) / tau[:, None]
     bias, stderr = robust_location(imu_twist[:, 3:] - w_vo)
-    pairs = len(tau)
-    if pairs < MIN_VO_PAIRS:
-        verdict = NOT_ENOUGH
-    elif np.all(np.abs(bias) < SIGNIFICANCE * stderr):
-        verdict = "consistent with zero"
-    else:
-        verdict = "nonzero"
-    known = pairs > 0
-    return {"bias": bias.tolist() if known else None, "stderr": stderr.tolist() if known else None,
-            "pairs": pairs, "verdict": verdict}
+    consistent = np.all(np.abs(bias) < SIGNIFICANCE * stderr)
+    return _evidence("bias", bias, stderr, len(tau), "consistent with zero" if consistent else "nonzero")
 
 
 def velocity_scale(dataset, imu_T_cam, lag=0):
@@ -87,13 +87,6 @@ def velocity_scale(dataset, imu_T_cam, lag=0):
     moving = step > MIN_STEP
     ratio = np.linalg.norm(vo_motion[moving, :3, 3], axis=1) / step[moving]
     scale, stderr = robust_location(ratio)
-    pairs = int(moving.sum())
-    if pairs < MIN_VO_PAIRS:
-        verdict = NOT_ENOUGH
-    elif abs(scale - 1) < SIGNIFICANCE * stderr:
-        verdict = "consistent with 1"
-    else:
-        verdict = f"differs from 1 by {100 * (scale - 1):+.1f}%"
-    known = pairs > 0
-    return {"scale": float(scale) if known else None, "stderr": float(stderr) if known else None,
-            "pairs": pairs, "verdict": verdict}
+    consistent = abs(scale - 1) < SIGNIFICANCE * stderr
+    return _evidence("scale", scale, stderr, int(moving.sum()),
+                     "consistent with 1" if consistent else f"differs from 1 by {100 * (scale - 1):+.1f}%")

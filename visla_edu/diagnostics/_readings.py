@@ -73,6 +73,7 @@ class ReadingEvidence:
 
 
 def _finite_or_none(x):
+    """A float, or None for NaN and infinity (JSON has neither)."""
     x = float(x)
     return x if np.isfinite(x) else None
 

@@ -21,8 +21,7 @@ import numpy as np
 from visla_edu import lie
 from visla_edu.dataset import stale_copies
 from visla_edu.diagnostics._bootstrap import cluster_resamples, resampled_medians
-from visla_edu.diagnostics._vo import LAGS, corrections_of
-from visla_edu.motion import select_twists
+from visla_edu.diagnostics._vo import LAGS, corrections_of, imu_step_twists
 
 __all__ = ["TrackChoice", "TrackEvidence", "TrackScorer", "track_pairs", "reprojection_errors", "MIN_DISPARITY",
            "MAX_GAP", "RESAMPLES", "BLOCK", "CONFIDENCE", "MIN_LANDMARKS", "MIN_GROUPS"]
@@ -129,15 +128,14 @@ def track_pairs(dataset):
     first_anchor = np.full(int(track[-1]) + 1 if big else 0, big)
     np.minimum.at(first_anchor, track[can_anchor], np.flatnonzero(can_anchor))
     anchor_pos = first_anchor[track]
-    has_anchor = anchor_pos < big
     gap = frames_sorted - frames_sorted[np.minimum(anchor_pos, big - 1)] if big else np.zeros(0, np.int64)
-    keep = has_anchor & (gap >= 1) & (gap <= MAX_GAP) & ~stale & (disparity > 0)
+    keep = (anchor_pos < big) & (gap >= 1) & (gap <= MAX_GAP) & ~stale & (disparity > 0)
     return order[anchor_pos[keep]], order[keep], gap[keep]
 
 
 def _relative_motions(dataset, lag):
     """``inv(S_a ... S_(a+g-1))`` for gaps ``g = 1..MAX_GAP``, anchors ``a``: (MAX_GAP, T-1, 4, 4), identity past T."""
-    steps_inv = lie.se3_inv(lie.se3_exp(dataset.time_steps[:, None] * select_twists(dataset.twists, lag)))
+    steps_inv = lie.se3_inv(lie.se3_exp(imu_step_twists(dataset, lag)))
     n = len(steps_inv)
     out = np.broadcast_to(np.eye(4), (MAX_GAP, n, 4, 4)).copy()
     out[0] = steps_inv

@@ -124,35 +124,29 @@ class SimulationConfig:
             _require(getattr(self, name) >= 0, name, getattr(self, name), ">= 0")
         for name in ("far_share", "outlier_share", "nonpositive_disparity_share"):
             _require(0 <= getattr(self, name) <= 1, name, getattr(self, name), "in [0, 1]")
-        _require(0 < self.track_loss_probability <= 1, "track_loss_probability",
-                 self.track_loss_probability, "in (0, 1]")
-        _require(self.min_track_length >= 1, "min_track_length", self.min_track_length, ">= 1")
-        _require(self.max_observations_per_frame >= 1, "max_observations_per_frame",
-                 self.max_observations_per_frame, ">= 1")
-        _require(self.candidate_factor >= 1, "candidate_factor", self.candidate_factor, ">= 1")
+        _require(0 < self.track_loss_probability <= 1, "track_loss_probability", self.track_loss_probability,
+                 "in (0, 1]")
+        for name in ("min_track_length", "max_observations_per_frame", "candidate_factor"):
+            _require(getattr(self, name) >= 1, name, getattr(self, name), ">= 1")
         _require(isinstance(self.imu_lag, (int, np.integer)) and abs(self.imu_lag) < self.num_frames,
                  "imu_lag", self.imu_lag, "an integer smaller in size than num_frames")
         _require(self.outlier_kind in OUTLIER_KINDS, "outlier_kind", self.outlier_kind, f"one of {OUTLIER_KINDS}")
         _require(self.reported_imu_T_cam is None or np.shape(self.reported_imu_T_cam) == (4, 4),
                  "reported_imu_T_cam", None if self.reported_imu_T_cam is None else np.shape(self.reported_imu_T_cam),
                  "None or a (4, 4) pose (shape shown)")
-        _require(0 < self.depth_range[0] < self.depth_range[1], "depth_range",
-                 self.depth_range, "0 < near < far")
-        for name in ("speed_range", "turn_angle_range", "turn_duration_range", "ahead_range",
-                     "lateral_range", "height_range", "far_range", "far_height_range",
-                     "outlier_offset_range"):
+        _require(0 < self.depth_range[0] < self.depth_range[1], "depth_range", self.depth_range, "0 < near < far")
+        for name in ("speed_range", "turn_angle_range", "turn_duration_range", "ahead_range", "lateral_range",
+                     "height_range", "far_range", "far_height_range", "outlier_offset_range"):
             lo, hi = getattr(self, name)
             _require(lo <= hi, name, getattr(self, name), "(lo, hi) with lo <= hi")
         return self
 
     def describe(self):
         """One line ``name=value, ...``; arrays are shown by shape."""
-        parts = []
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, np.ndarray):
-                value = f"array{value.shape}"
-            parts.append(f"{f.name}={value}")
+        def shown(value):
+            return f"array{value.shape}" if isinstance(value, np.ndarray) else value
+
+        parts = [f"{f.name}={shown(getattr(self, f.name))}" for f in dataclasses.fields(self)]
         return "SimulationConfig(" + ", ".join(parts) + ")"
 
 

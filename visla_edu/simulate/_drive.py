@@ -71,7 +71,6 @@ def simulate_drive(preset="course", seed=0, **overrides):
     )
 
 
-
 def simulate_along_drive(time_stamps, linear_velocity, angular_velocity, config, calibration, seed=0,
                          **fields):
     """A drive with ground truth (a Dataset) simulated along given true body velocities (dead-reckoned poses).

@@ -56,8 +56,7 @@ def _far_points(world_T_imu, anchor, config, rng):
         distance * np.sin(bearing),
         rng.uniform(*config.far_height_range, n) - config.imu_height,
     ], axis=1)
-    pose = world_T_imu[anchor]
-    return np.einsum("nij,nj->ni", pose[:, :3, :3], offset) + pose[:, :3, 3]
+    return np.einsum("nij,nj->ni", world_T_imu[anchor, :3, :3], offset) + world_T_imu[anchor, :3, 3]
 
 
 def place_landmarks(world_T_imu, num_landmarks, config, rng, time_stamps=None):

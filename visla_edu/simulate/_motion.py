@@ -55,8 +55,7 @@ def simulate_motion(config, rng):
     t = _time_stamps(config, rng)
     lo, hi = config.speed_range
     speed = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.tanh(_smooth_noise(rng, n, step, config.speed_timescale))
-    lateral = config.side_velocity_sigma * _smooth_noise(rng, n, step, 1.0)
-    vertical = config.side_velocity_sigma * _smooth_noise(rng, n, step, 1.0)
+    lateral, vertical = (config.side_velocity_sigma * _smooth_noise(rng, n, step, 1.0) for _ in range(2))
     roll, pitch = (config.roll_pitch_amplitude * _smooth_noise(rng, n, step, config.roll_pitch_timescale)
                    for _ in range(2))
     yaw_rate = config.yaw_rate_sigma * _smooth_noise(rng, n, step, config.yaw_timescale)

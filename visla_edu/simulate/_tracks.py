@@ -45,10 +45,10 @@ def _visible(q, Ks, config):
     vL = Ks[1, 1] * q[:, 1] / safe + Ks[1, 2]
     width, height = config.image_size
     if single_intrinsics(Ks):
-        uR = uL + Ks[2, 3] / safe
-        return ok & (uR >= 0) & (uL < width) & (uL >= 0) & (uR < width) & (vL >= 0) & (vL < height)
-    uR = Ks[2, 0] * q[:, 0] / safe + Ks[2, 2] + Ks[2, 3] / safe
-    vR = Ks[3, 1] * q[:, 1] / safe + Ks[3, 2]
+        uR, vR = uL + Ks[2, 3] / safe, vL
+    else:
+        uR = Ks[2, 0] * q[:, 0] / safe + Ks[2, 2] + Ks[2, 3] / safe
+        vR = Ks[3, 1] * q[:, 1] / safe + Ks[3, 2]
     return (ok & (uR >= 0) & (uL < width) & (uL >= 0) & (uR < width) & (vL >= 0) & (vL < height)
             & (vR >= 0) & (vR < height))
 
