@@ -64,6 +64,7 @@ def simulate_motion(config, rng):
     angular = np.stack([_rates_of(roll, t), _rates_of(pitch, t), yaw_rate], axis=1)
     return t, linear, angular
 
+
 def add_imu_noise(linear_velocity, angular_velocity, config, rng):
     """Measured IMU velocities, (T, 3) each: ``lag_samples(true, imu_lag)`` + white noise (+ ``gyro_bias``).
 

@@ -200,6 +200,7 @@ def _renumber(rows, frames, n_candidates):
     new_id[source] = np.arange(len(source))
     return source, new_id[rows]
 
+
 def simulate_tracks(world_T_imu, landmarks, K, b, imu_T_cam, config, rng, appear=None,
                     max_landmarks=None, time_stamps=None):
     """Stereo feature tracks of known landmarks seen from known poses, by the track model: :class:`SimulatedTracks`.
