@@ -270,9 +270,16 @@ def se3_exp(u):
     """
     u = _as_vectors(u, 6, "se3_exp")
     v, w = u[..., :3], u[..., 3:]
+    theta, theta2 = _angle(w)
+    A = _sin_over_theta(theta, theta2)[..., None, None]
+    B = _one_minus_cos_over_theta2(theta, theta2)[..., None, None]
+    C = _theta_minus_sin_over_theta3(theta, theta2)[..., None, None]
+    W = hat(w)
+    W2 = W @ W
     T = np.zeros(u.shape[:-1] + (4, 4))
-    T[..., :3, :3] = so3_exp(w)
-    T[..., :3, 3] = np.einsum("...ij,...j->...i", so3_left_jacobian(w), v)
+    T[..., :3, :3] = np.eye(3) + A * W + B * W2
+    V = np.eye(3) + B * W + C * W2
+    T[..., :3, 3] = np.einsum("...ij,...j->...i", V, v)
     T[..., 3, 3] = 1.0
     return T
 

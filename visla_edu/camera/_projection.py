@@ -24,7 +24,9 @@ __all__ = ["projection", "projection_jacobian", "project_points", "stereo_projec
 
 def projection(q):
     """Perspective division ``pi(q) = q / q3`` of homogeneous camera points, (..., 4) -> (..., 4)."""
-    q = lie._as_vectors(q, 4, "projection")
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 0 or q.shape[-1] != 4:
+        raise ValueError(f"projection: expected shape (..., 4), got {q.shape}")
     return q / q[..., 2:3]
 
 
@@ -33,7 +35,9 @@ def projection_jacobian(q):
 
     ``dpi/dq = (1/q3) [[1, 0, -q1/q3, 0], [0, 1, -q2/q3, 0], [0, 0, 0, 0], [0, 0, -q4/q3, 1]]``
     """
-    q = lie._as_vectors(q, 4, "projection_jacobian")
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 0 or q.shape[-1] != 4:
+        raise ValueError(f"projection_jacobian: expected shape (..., 4), got {q.shape}")
     inv_q3 = 1.0 / q[..., 2]
     J = np.zeros(q.shape[:-1] + (4, 4))
     for i in (0, 1, 3):
